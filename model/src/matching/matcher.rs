@@ -1,0 +1,281 @@
+//! The matching pipeline: composition only (kiss-icp style). Each stage is its own module.
+//!
+//! 1. candidates (§IV-B, d_v > 0)           → `candidates`
+//! 2. sparse affinity U (eqs. 5–7)           → `affinity`
+//! 3. principal eigenvector x (eq. 8)        → `spectral`
+//! 4. LAP on −x, minimum score (§IV-B)       → `lap`
+//! 5. rigid hypotheses from pairs of the best associations, inlier scoring, refinement
+//!    (beyond the paper)                     → `verification`
+//! 6. refusal: too few, collinear, not significant (NFA), ambiguous → `significance`
+//! 7. weighted least-squares transform (§IV-C) → `geometry::fit_rigid` (inside refinement)
+
+use super::affinity::{self, AffinityParams};
+use super::candidates::{candidates, Candidate};
+use super::labels::LabelSimilarity;
+use super::lap::{self, CostMatrix};
+use super::outcome::*;
+use super::significance::log10_nfa;
+use super::spectral::principal_eigenvector;
+use super::verification::{max_displacement, Evaluation, Scorer};
+use super::{MatcherConfig, ObjectGraph};
+use crate::geometry::{fit_rigid, minor_axis_spread, Correspondence, RigidModel};
+use nalgebra::Point3;
+
+/// Minimum d_v for an association to enter the spectral stage; weaker (confused-label)
+/// associations only count as verification evidence.
+const SPECTRAL_MIN_LABEL_SIMILARITY: f64 = 0.5;
+/// Refinement rounds of a hypothesis.
+const REFINE_ROUNDS: usize = 5;
+/// Number of top hypotheses examined for a runner-up.
+const RUNNER_UP_CANDIDATES: usize = 64;
+
+/// Matches `remote`'s object graph against `local`'s. Never panics on any valid graphs.
+pub fn match_graphs(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSimilarity, config: &MatcherConfig) -> MatchReport {
+    let mut stats = MatchStats::default();
+    let refused = |reason, stats, spectral_matches| MatchReport {
+        outcome: MatchOutcome::Refused(Refusal { reason, best_guess: None, significance: 0.0 }),
+        spectral_matches,
+        stats,
+    };
+    if local.len() < config.min_matches || remote.len() < config.min_matches {
+        let reason = RefusalReason::TooFewObjects { local: local.len(), remote: remote.len(), required: config.min_matches };
+        return refused(reason, stats, Vec::new());
+    }
+
+    // 1–3: spectral relaxation over label-compatible candidates.
+    let strong = candidates(local, remote, labels, SPECTRAL_MIN_LABEL_SIMILARITY);
+    stats.candidates = strong.len();
+    if strong.is_empty() {
+        return refused(RefusalReason::NoCandidates, stats, Vec::new());
+    }
+    let params = AffinityParams {
+        edge_sharpness: config.edge_sharpness,
+        edge_tolerance_m: config.edge_tolerance_m,
+        max_edge_length_m: config.max_edge_length_m,
+    };
+    let u = affinity::build(local, remote, &strong, params);
+    stats.affinity_nonzeros = u.nonzeros();
+    let eigen = principal_eigenvector(&u, config.power_tolerance, config.max_power_iterations);
+    stats.power_iterations = eigen.iterations;
+    stats.power_converged = eigen.converged;
+
+    // 4: the paper's assignment.
+    let spectral = spectral_assignment(local.len(), remote.len(), &strong, &eigen.vector, config.min_assignment_score);
+    let spectral_matches = spectral
+        .iter()
+        .map(|&k| (local.objects()[strong[k].local as usize].id, remote.objects()[strong[k].remote as usize].id))
+        .collect();
+
+    // 5: hypotheses from pairs of the strongest associations.
+    let mut pool: Vec<usize> = (0..strong.len()).collect();
+    pool.sort_by(|&a, &b| eigen.vector[b].total_cmp(&eigen.vector[a]).then(a.cmp(&b)));
+    pool.truncate(config.hypothesis_pool);
+    for k in spectral {
+        if !pool.contains(&k) {
+            pool.push(k);
+        }
+    }
+    let scorer = Scorer::new(local, remote, labels, config.inlier_distance_m, config.inlier_height_m);
+    let mut hypotheses: Vec<Evaluation> = Vec::new();
+    for (x, &a) in pool.iter().enumerate() {
+        for &b in &pool[x + 1..] {
+            if let Some(pose) = seed_transform(local, remote, &strong[a], &strong[b], config) {
+                hypotheses.push(scorer.evaluate(&pose));
+            }
+        }
+    }
+    stats.hypotheses = hypotheses.len();
+    if hypotheses.is_empty() {
+        return refused(RefusalReason::NoConsistentPair, stats, spectral_matches);
+    }
+    hypotheses.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let best = scorer.refine(hypotheses[0].clone(), config.model, REFINE_ROUNDS);
+
+    // 6: refusals.
+    let null = NullModel::new(local, remote, labels, config.inlier_distance_m);
+    let significance = null.significance(&best, hypotheses.len(), remote);
+    let required = -config.max_false_alarms.log10();
+    let refuse = |reason| MatchReport {
+        outcome: MatchOutcome::Refused(Refusal { reason, best_guess: Some(best.local_from_remote), significance }),
+        spectral_matches: Vec::new(),
+        stats: stats.clone(),
+    };
+    if best.inliers.len() < config.min_matches {
+        let reason = RefusalReason::TooFewVerified { verified: best.inliers.len(), required: config.min_matches };
+        return MatchReport { spectral_matches, ..refuse(reason) };
+    }
+    let matched_local: Vec<Point3<f64>> =
+        best.inliers.iter().map(|i| local.objects()[i.local as usize].centroid).collect();
+    let spread_m = minor_axis_spread(&matched_local, config.model);
+    if spread_m < config.min_spread_m {
+        let reason = RefusalReason::Collinear { spread_m, required_m: config.min_spread_m };
+        return MatchReport { spectral_matches, ..refuse(reason) };
+    }
+    if significance < required {
+        return MatchReport { spectral_matches, ..refuse(RefusalReason::NotSignificant { significance, required }) };
+    }
+    let remote_points = || best.inliers.iter().map(|i| remote.objects()[i.remote as usize].centroid);
+    for other in hypotheses.iter().take(RUNNER_UP_CANDIDATES) {
+        let displacement = max_displacement(&best.local_from_remote, &other.local_from_remote, remote_points());
+        if displacement <= 2.0 * config.inlier_distance_m {
+            continue;
+        }
+        let runner_up = scorer.refine(other.clone(), config.model, REFINE_ROUNDS);
+        let displacement = max_displacement(&best.local_from_remote, &runner_up.local_from_remote, remote_points());
+        let ratio = runner_up.score / best.score;
+        if displacement > 2.0 * config.inlier_distance_m
+            && ratio >= config.ambiguity_ratio
+            && null.significance(&runner_up, hypotheses.len(), remote) >= required
+        {
+            let reason = RefusalReason::Ambiguous { runner_up_displacement_m: displacement, score_ratio: ratio };
+            return MatchReport { spectral_matches, ..refuse(reason) };
+        }
+    }
+
+    // 7: final estimate from the verified matches.
+    let local_from_remote = fit_rigid(
+        &best
+            .inliers
+            .iter()
+            .map(|i| Correspondence {
+                in_local: local.objects()[i.local as usize].centroid,
+                in_remote: remote.objects()[i.remote as usize].centroid,
+                weight: i.weight,
+            })
+            .collect::<Vec<_>>(),
+        config.model,
+    )
+    .unwrap_or(best.local_from_remote);
+    let mut matches: Vec<VerifiedMatch> = best
+        .inliers
+        .iter()
+        .map(|i| {
+            let (p, q) = (&local.objects()[i.local as usize], &remote.objects()[i.remote as usize]);
+            VerifiedMatch {
+                local: p.id,
+                remote: q.id,
+                residual_m: (p.centroid - local_from_remote * q.centroid).norm(),
+                same_label: i.same_label,
+            }
+        })
+        .collect();
+    matches.sort_by_key(|m| (m.local, m.remote));
+    let rmse_m = (matches.iter().map(|m| m.residual_m * m.residual_m).sum::<f64>() / matches.len() as f64).sqrt();
+    MatchReport {
+        outcome: MatchOutcome::Aligned(Alignment { local_from_remote, matches, significance, rmse_m }),
+        spectral_matches,
+        stats,
+    }
+}
+
+/// LAP on −x over the n × m assignment matrix; keeps assignments with x ≥ min_score · max x.
+/// Returns candidate indices.
+fn spectral_assignment(n_local: usize, n_remote: usize, cands: &[Candidate], x: &[f64], min_score: f64) -> Vec<usize> {
+    let max = x.iter().copied().fold(0.0, f64::max);
+    if !(max > 0.0) {
+        return Vec::new();
+    }
+    let mut costs = CostMatrix::filled(n_local, n_remote, 0.0);
+    let mut which = vec![usize::MAX; n_local * n_remote];
+    for (k, c) in cands.iter().enumerate() {
+        costs.set(c.local as usize, c.remote as usize, -x[k]);
+        which[c.local as usize * n_remote + c.remote as usize] = k;
+    }
+    let mut out: Vec<usize> = lap::solve(&costs)
+        .into_iter()
+        .enumerate()
+        .filter_map(|(i, m)| m.map(|m| which[i * n_remote + m]))
+        .filter(|&k| k != usize::MAX && x[k] >= min_score * max)
+        .collect();
+    out.sort_unstable();
+    out
+}
+
+/// The planar transform fixed by two associations whose horizontal edges agree, or `None`.
+fn seed_transform(
+    local: &ObjectGraph,
+    remote: &ObjectGraph,
+    a: &Candidate,
+    b: &Candidate,
+    config: &MatcherConfig,
+) -> Option<crate::geometry::Pose3> {
+    if a.local == b.local || a.remote == b.remote {
+        return None;
+    }
+    let (pi, pj) = (local.objects()[a.local as usize].centroid, local.objects()[b.local as usize].centroid);
+    let (qm, qn) = (remote.objects()[a.remote as usize].centroid, remote.objects()[b.remote as usize].centroid);
+    let (h_local, h_remote) = ((pi - pj).xy().norm(), (qm - qn).xy().norm());
+    let r = config.inlier_distance_m;
+    if h_local < r || h_remote < r || (h_local - h_remote).abs() > 2.0 * r {
+        return None;
+    }
+    if ((pi.z - pj.z) - (qm.z - qn.z)).abs() > 2.0 * config.inlier_height_m {
+        return None;
+    }
+    let pair = |p, q| Correspondence { in_local: p, in_remote: q, weight: 1.0 };
+    fit_rigid(&[pair(pi, qm), pair(pj, qn)], RigidModel::Planar)
+}
+
+/// The chance model of `significance`: per remote object, how many local objects it may match.
+struct NullModel {
+    area_m2: f64,
+    disc_m2: f64,
+    min: Point3<f64>,
+    max: Point3<f64>,
+    same_label: Vec<f64>,
+    any_label: Vec<f64>,
+    soft: bool,
+}
+
+impl NullModel {
+    fn new(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSimilarity, radius: f64) -> Self {
+        let (mut min, mut max) = (Point3::new(f64::MAX, f64::MAX, 0.0), Point3::new(f64::MIN, f64::MIN, 0.0));
+        for o in local.objects() {
+            min.x = min.x.min(o.centroid.x - radius);
+            min.y = min.y.min(o.centroid.y - radius);
+            max.x = max.x.max(o.centroid.x + radius);
+            max.y = max.y.max(o.centroid.y + radius);
+        }
+        let count = |q: &super::GraphObject, same: bool| {
+            local
+                .objects()
+                .iter()
+                .filter(|p| if same { p.label == q.label } else { labels.get(p.label, q.label) > 0.0 })
+                .count() as f64
+        };
+        Self {
+            area_m2: ((max.x - min.x) * (max.y - min.y)).max(1e-9),
+            disc_m2: std::f64::consts::PI * radius * radius,
+            min,
+            max,
+            same_label: remote.objects().iter().map(|q| count(q, true)).collect(),
+            any_label: remote.objects().iter().map(|q| count(q, false)).collect(),
+            soft: labels.is_soft(),
+        }
+    }
+
+    /// −log10 NFA of an evaluation (with soft labels: the better of the same-label and any-label
+    /// tests, Bonferroni-corrected by 2).
+    fn significance(&self, e: &Evaluation, tests: usize, remote: &ObjectGraph) -> f64 {
+        let (mut trials, mut p_same, mut p_any) = (0usize, 0.0, 0.0);
+        for (m, q) in remote.objects().iter().enumerate() {
+            let p = e.local_from_remote * q.centroid;
+            if p.x >= self.min.x && p.x <= self.max.x && p.y >= self.min.y && p.y <= self.max.y {
+                trials += 1;
+                p_same += (self.same_label[m] * self.disc_m2 / self.area_m2).min(1.0);
+                p_any += (self.any_label[m] * self.disc_m2 / self.area_m2).min(1.0);
+            }
+        }
+        if trials == 0 {
+            return 0.0;
+        }
+        let same = log10_nfa(tests, trials, e.same_label_inliers(), p_same / trials as f64);
+        let nfa = if self.soft {
+            let any = log10_nfa(tests, trials, e.inliers.len(), p_any / trials as f64);
+            same.min(any) + 2f64.log10()
+        } else {
+            same
+        };
+        -nfa
+    }
+}

@@ -1,0 +1,27 @@
+//! Object-graph matching (paper §IV-B, §IV-C, eqs. 5–8) and the transform it implies.
+//!
+//! [`match_graphs`] runs the pipeline in [`matcher`](self::matcher): candidates → sparse affinity →
+//! principal eigenvector → LAP (the paper), then geometric verification and explicit refusal
+//! (beyond the paper). [`paper_baseline`] is the paper's dense formulation, kept to measure the
+//! difference.
+
+mod affinity;
+mod candidates;
+mod config;
+mod graph;
+mod labels;
+pub mod lap;
+mod matcher;
+mod outcome;
+pub mod paper_baseline;
+pub mod significance;
+mod spectral;
+mod verification;
+
+pub use config::{ConfigError, LabelConfusion, MatcherConfig};
+pub use graph::{GraphError, GraphObject, ObjectGraph};
+pub use labels::LabelSimilarity;
+pub use matcher::match_graphs;
+pub use outcome::{Alignment, MatchOutcome, MatchReport, MatchStats, Refusal, RefusalReason, VerifiedMatch};
+pub use spectral::{principal_eigenvector, Eigen};
+pub use affinity::SparseAffinity;

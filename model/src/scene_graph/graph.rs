@@ -1,0 +1,393 @@
+//! The scene graph: the three layers and their cross-layer links, changed only through methods
+//! that keep every link consistent. Maps are ordered (`BTreeMap`) so that iteration, and so every
+//! output derived from it, is deterministic.
+
+use super::{
+    KeyframeEdge, KeyframeId, KeyframeRef, LabelId, Object, ObjectEdge, ObjectId, SceneGraphError,
+    SemanticScan, Stamp,
+};
+use crate::geometry::Pose3;
+use crate::scene_graph::Keyframe;
+use nalgebra::{Point3, Vector3};
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, BTreeSet};
+
+/// One robot's scene graph.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SceneGraph {
+    keyframes: BTreeMap<KeyframeId, Keyframe>,
+    edges: Vec<KeyframeEdge>,
+    objects: BTreeMap<ObjectId, Object>,
+    /// Cross-layer index: the objects each keyframe observed.
+    objects_by_keyframe: BTreeMap<KeyframeId, BTreeSet<ObjectId>>,
+    semantic: BTreeMap<KeyframeId, SemanticScan>,
+    next_object_id: u32,
+}
+
+fn finite_pose(pose: &Pose3) -> bool {
+    pose.translation.vector.iter().all(|v| v.is_finite()) && pose.rotation.coords.iter().all(|v| v.is_finite())
+}
+
+fn finite_point(p: &Point3<f64>) -> bool {
+    p.coords.iter().all(|v| v.is_finite())
+}
+
+impl SceneGraph {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    // ----- keyframe layer -------------------------------------------------------------------
+
+    /// Adds a keyframe. Stamps must not go backwards; ids must be new.
+    pub fn add_keyframe(&mut self, keyframe: Keyframe) -> Result<(), SceneGraphError> {
+        if self.keyframes.contains_key(&keyframe.id) {
+            return Err(SceneGraphError::DuplicateKeyframe(keyframe.id));
+        }
+        if !keyframe.stamp.is_finite() {
+            return Err(SceneGraphError::NonFinite { what: "keyframe stamp" });
+        }
+        if !finite_pose(&keyframe.world_from_body) {
+            return Err(SceneGraphError::NonFinite { what: "keyframe pose" });
+        }
+        if let Some(latest) = self.latest_keyframe() {
+            if keyframe.stamp < latest.stamp {
+                return Err(SceneGraphError::StampNotIncreasing {
+                    id: keyframe.id,
+                    stamp: keyframe.stamp,
+                    latest: latest.stamp,
+                });
+            }
+        }
+        self.keyframes.insert(keyframe.id, keyframe);
+        Ok(())
+    }
+
+    pub fn keyframe(&self, id: KeyframeId) -> Option<&Keyframe> {
+        self.keyframes.get(&id)
+    }
+
+    pub fn keyframes(&self) -> impl Iterator<Item = &Keyframe> {
+        self.keyframes.values()
+    }
+
+    pub fn keyframe_count(&self) -> usize {
+        self.keyframes.len()
+    }
+
+    /// The keyframe with the latest stamp (ties: the largest id).
+    pub fn latest_keyframe(&self) -> Option<&Keyframe> {
+        self.keyframes.values().max_by(|a, b| a.stamp.total_cmp(&b.stamp).then(a.id.cmp(&b.id)))
+    }
+
+    /// Adds an odometry, loop or inter-robot edge. Its local endpoints must exist.
+    pub fn add_edge(&mut self, edge: KeyframeEdge) -> Result<(), SceneGraphError> {
+        if !self.keyframes.contains_key(&edge.from) {
+            return Err(SceneGraphError::UnknownKeyframe(edge.from));
+        }
+        if let KeyframeRef::Local(to) = edge.to {
+            if !self.keyframes.contains_key(&to) {
+                return Err(SceneGraphError::UnknownKeyframe(to));
+            }
+        }
+        if !finite_pose(&edge.from_from_to) || edge.information.iter().any(|v| !v.is_finite()) {
+            return Err(SceneGraphError::NonFinite { what: "edge measurement" });
+        }
+        self.edges.push(edge);
+        Ok(())
+    }
+
+    pub fn edges(&self) -> &[KeyframeEdge] {
+        &self.edges
+    }
+
+    /// Replaces keyframe poses (e.g. after pose-graph optimisation). All-or-nothing: if any id is
+    /// unknown or any pose is not finite, nothing changes. Objects follow their anchor keyframes.
+    pub fn update_keyframe_poses<'a>(
+        &mut self,
+        poses: impl IntoIterator<Item = (KeyframeId, &'a Pose3)>,
+    ) -> Result<(), SceneGraphError> {
+        let poses: Vec<(KeyframeId, Pose3)> = poses.into_iter().map(|(id, p)| (id, *p)).collect();
+        for (id, pose) in &poses {
+            if !self.keyframes.contains_key(id) {
+                return Err(SceneGraphError::UnknownKeyframe(*id));
+            }
+            if !finite_pose(pose) {
+                return Err(SceneGraphError::NonFinite { what: "keyframe pose" });
+            }
+        }
+        for (id, pose) in poses {
+            if let Some(kf) = self.keyframes.get_mut(&id) {
+                kf.world_from_body = pose;
+            }
+        }
+        Ok(())
+    }
+
+    // ----- object layer ---------------------------------------------------------------------
+
+    /// Adds a new object seen from `keyframe` at `centroid_in_world`; returns its id.
+    pub fn add_object(
+        &mut self,
+        label: LabelId,
+        centroid_in_world: Point3<f64>,
+        size: Vector3<f64>,
+        keyframe: KeyframeId,
+    ) -> Result<ObjectId, SceneGraphError> {
+        let world_from_body = self.checked_observation(keyframe, &centroid_in_world, &size)?;
+        let id = ObjectId(self.next_object_id);
+        self.next_object_id += 1;
+        let object = Object {
+            id,
+            label,
+            anchor: keyframe,
+            centroid_in_anchor: world_from_body.inverse_transform_point(&centroid_in_world),
+            size,
+            observed_in: BTreeSet::from([keyframe]),
+        };
+        self.objects.insert(id, object);
+        self.objects_by_keyframe.entry(keyframe).or_default().insert(id);
+        Ok(id)
+    }
+
+    /// Records a new sighting of an existing object from `keyframe`. If `keyframe` is at least as
+    /// recent as the object's anchor, it becomes the anchor and the centroid and size are replaced
+    /// by the new estimate; an older sighting only adds the cross-layer link.
+    pub fn observe_object(
+        &mut self,
+        id: ObjectId,
+        centroid_in_world: Point3<f64>,
+        size: Vector3<f64>,
+        keyframe: KeyframeId,
+    ) -> Result<(), SceneGraphError> {
+        let world_from_body = self.checked_observation(keyframe, &centroid_in_world, &size)?;
+        let new_stamp = self.stamp_of(keyframe)?;
+        let anchor = self.objects.get(&id).ok_or(SceneGraphError::UnknownObject(id))?.anchor;
+        let anchor_stamp = self.stamp_of(anchor)?;
+        let object = self.objects.get_mut(&id).ok_or(SceneGraphError::UnknownObject(id))?;
+        if (new_stamp, keyframe) >= (anchor_stamp, anchor) || !new_stamp.is_finite() {
+            object.anchor = keyframe;
+            object.centroid_in_anchor = world_from_body.inverse_transform_point(&centroid_in_world);
+            object.size = size;
+        }
+        object.observed_in.insert(keyframe);
+        self.objects_by_keyframe.entry(keyframe).or_default().insert(id);
+        Ok(())
+    }
+
+    fn stamp_of(&self, keyframe: KeyframeId) -> Result<Stamp, SceneGraphError> {
+        self.keyframes.get(&keyframe).map(|k| k.stamp).ok_or(SceneGraphError::UnknownKeyframe(keyframe))
+    }
+
+    fn checked_observation(
+        &self,
+        keyframe: KeyframeId,
+        centroid: &Point3<f64>,
+        size: &Vector3<f64>,
+    ) -> Result<Pose3, SceneGraphError> {
+        if !finite_point(centroid) {
+            return Err(SceneGraphError::NonFinite { what: "object centroid" });
+        }
+        if size.iter().any(|v| !v.is_finite()) {
+            return Err(SceneGraphError::NonFinite { what: "object size" });
+        }
+        self.keyframes.get(&keyframe).map(|k| k.world_from_body).ok_or(SceneGraphError::UnknownKeyframe(keyframe))
+    }
+
+    pub fn object(&self, id: ObjectId) -> Option<&Object> {
+        self.objects.get(&id)
+    }
+
+    pub fn objects(&self) -> impl Iterator<Item = &Object> {
+        self.objects.values()
+    }
+
+    pub fn object_count(&self) -> usize {
+        self.objects.len()
+    }
+
+    /// Current centroid of an object in this robot's world frame: the anchor keyframe's pose
+    /// applied to the stored body-frame centroid.
+    pub fn centroid_in_world(&self, id: ObjectId) -> Option<Point3<f64>> {
+        let object = self.objects.get(&id)?;
+        let anchor = self.keyframes.get(&object.anchor)?;
+        Some(anchor.world_from_body * object.centroid_in_anchor)
+    }
+
+    /// Object-layer edges: every pair of objects (a < b) with the distance between their current
+    /// centroids. Fully connected as in the paper; `max_distance_m` keeps only shorter edges.
+    pub fn object_edges(&self, max_distance_m: f64) -> Vec<ObjectEdge> {
+        let placed: Vec<(ObjectId, Point3<f64>)> =
+            self.objects.keys().filter_map(|&id| self.centroid_in_world(id).map(|p| (id, p))).collect();
+        let mut edges = Vec::new();
+        for (k, (a, pa)) in placed.iter().enumerate() {
+            for (b, pb) in &placed[k + 1..] {
+                let distance_m = (pa - pb).norm();
+                if distance_m <= max_distance_m {
+                    edges.push(ObjectEdge { a: *a, b: *b, distance_m });
+                }
+            }
+        }
+        edges
+    }
+
+    // ----- cross-layer links and semantic layer ---------------------------------------------
+
+    /// Objects observed in a keyframe.
+    pub fn objects_observed_in(&self, keyframe: KeyframeId) -> impl Iterator<Item = ObjectId> + '_ {
+        self.objects_by_keyframe.get(&keyframe).into_iter().flat_map(|s| s.iter().copied())
+    }
+
+    /// Keyframes that observed an object.
+    pub fn keyframes_observing(&self, id: ObjectId) -> impl Iterator<Item = KeyframeId> + '_ {
+        self.objects.get(&id).into_iter().flat_map(|o| o.observed_in.iter().copied())
+    }
+
+    /// Attaches the labelled scan captured at `keyframe` (replacing any previous one).
+    pub fn set_semantic_scan(&mut self, keyframe: KeyframeId, scan: SemanticScan) -> Result<(), SceneGraphError> {
+        if !self.keyframes.contains_key(&keyframe) {
+            return Err(SceneGraphError::UnknownKeyframe(keyframe));
+        }
+        if scan.points_in_body.len() != scan.labels.len() {
+            return Err(SceneGraphError::LabelCountMismatch {
+                points: scan.points_in_body.len(),
+                labels: scan.labels.len(),
+            });
+        }
+        if scan.points_in_body.iter().any(|p| p.coords.iter().any(|v| !v.is_finite())) {
+            return Err(SceneGraphError::NonFinite { what: "semantic point" });
+        }
+        self.semantic.insert(keyframe, scan);
+        Ok(())
+    }
+
+    pub fn semantic_scan(&self, keyframe: KeyframeId) -> Option<&SemanticScan> {
+        self.semantic.get(&keyframe)
+    }
+
+    /// The semantic points of every keyframe with `label`, in the world frame (at the keyframes'
+    /// current poses).
+    pub fn semantic_points_in_world(&self, label: LabelId) -> Vec<Point3<f64>> {
+        let mut out = Vec::new();
+        for (id, scan) in &self.semantic {
+            let Some(kf) = self.keyframes.get(id) else { continue };
+            for (p, l) in scan.points_in_body.iter().zip(&scan.labels) {
+                if *l == label {
+                    out.push(kf.world_from_body * p.cast::<f64>());
+                }
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::pose_from_yaw_translation;
+    use crate::scene_graph::{KeyframeEdgeKind, RobotId};
+    use nalgebra::Matrix6;
+
+    fn kf(id: u32, stamp: f64, x: f64, yaw: f64) -> Keyframe {
+        Keyframe { id: KeyframeId(id), stamp, world_from_body: pose_from_yaw_translation(yaw, Vector3::new(x, 0.0, 0.0)) }
+    }
+
+    fn graph_with_three_keyframes() -> SceneGraph {
+        let mut g = SceneGraph::new();
+        for (i, x) in [0.0, 5.0, 10.0].into_iter().enumerate() {
+            g.add_keyframe(kf(i as u32, i as f64, x, 0.0)).unwrap();
+        }
+        g
+    }
+
+    #[test]
+    fn objects_follow_their_latest_observing_keyframe_when_poses_change() {
+        let mut g = graph_with_three_keyframes();
+        let chair = LabelId(1);
+        let id = g.add_object(chair, Point3::new(6.0, 2.0, 0.5), Vector3::new(0.5, 0.5, 1.0), KeyframeId(0)).unwrap();
+        g.observe_object(id, Point3::new(6.2, 2.0, 0.5), Vector3::new(0.5, 0.5, 1.0), KeyframeId(2)).unwrap();
+        assert_eq!(g.object(id).unwrap().anchor, KeyframeId(2));
+        // An older sighting adds the link but does not move the anchor.
+        g.observe_object(id, Point3::new(9.0, 9.0, 9.0), Vector3::new(1.0, 1.0, 1.0), KeyframeId(1)).unwrap();
+        assert_eq!(g.object(id).unwrap().anchor, KeyframeId(2));
+        assert_eq!(g.keyframes_observing(id).collect::<Vec<_>>(), vec![KeyframeId(0), KeyframeId(1), KeyframeId(2)]);
+        assert!((g.centroid_in_world(id).unwrap() - Point3::new(6.2, 2.0, 0.5)).norm() < 1e-12);
+
+        // A loop closure rotates keyframe 2 by 90° about its own origin and shifts it by (0, 1).
+        let corrected = pose_from_yaw_translation(std::f64::consts::FRAC_PI_2, Vector3::new(10.0, 1.0, 0.0));
+        g.update_keyframe_poses([(KeyframeId(2), &corrected)]).unwrap();
+        // In keyframe 2's body the object was at (-3.8, 2.0, 0.5); now world = R·p + t.
+        let expected = Point3::new(10.0 - 2.0, 1.0 - 3.8, 0.5);
+        assert!((g.centroid_in_world(id).unwrap() - expected).norm() < 1e-12);
+    }
+
+    #[test]
+    fn failed_pose_update_changes_nothing() {
+        let mut g = graph_with_three_keyframes();
+        let before = g.clone();
+        let good = pose_from_yaw_translation(0.3, Vector3::new(1.0, 1.0, 0.0));
+        let err = g.update_keyframe_poses([(KeyframeId(0), &good), (KeyframeId(9), &good)]).unwrap_err();
+        assert_eq!(err, SceneGraphError::UnknownKeyframe(KeyframeId(9)));
+        assert_eq!(g, before);
+        let mut nan = good;
+        nan.translation.vector.x = f64::NAN;
+        assert!(g.update_keyframe_poses([(KeyframeId(0), &nan)]).is_err());
+        assert_eq!(g, before);
+    }
+
+    #[test]
+    fn keyframe_layer_rejects_bad_input() {
+        let mut g = graph_with_three_keyframes();
+        assert_eq!(g.add_keyframe(kf(1, 5.0, 0.0, 0.0)), Err(SceneGraphError::DuplicateKeyframe(KeyframeId(1))));
+        assert!(matches!(g.add_keyframe(kf(7, 0.5, 0.0, 0.0)), Err(SceneGraphError::StampNotIncreasing { .. })));
+        assert!(g.add_keyframe(kf(8, f64::NAN, 0.0, 0.0)).is_err());
+        let edge = |from, to| KeyframeEdge {
+            kind: KeyframeEdgeKind::Odometry,
+            from: KeyframeId(from),
+            to,
+            from_from_to: Pose3::identity(),
+            information: Matrix6::identity(),
+        };
+        assert!(g.add_edge(edge(0, KeyframeRef::Local(KeyframeId(1)))).is_ok());
+        assert_eq!(g.add_edge(edge(0, KeyframeRef::Local(KeyframeId(5)))), Err(SceneGraphError::UnknownKeyframe(KeyframeId(5))));
+        let inter = edge(2, KeyframeRef::Remote { robot: RobotId(1), keyframe: KeyframeId(40) });
+        assert!(g.add_edge(KeyframeEdge { kind: KeyframeEdgeKind::InterRobot, ..inter }).is_ok());
+        assert_eq!(g.edges().len(), 2);
+        assert_eq!(g.keyframe_count(), 3);
+    }
+
+    #[test]
+    fn object_edges_are_centroid_distances_and_cross_links_are_kept() {
+        let mut g = graph_with_three_keyframes();
+        let a = g.add_object(LabelId(0), Point3::new(0.0, 0.0, 0.0), Vector3::repeat(1.0), KeyframeId(0)).unwrap();
+        let b = g.add_object(LabelId(0), Point3::new(3.0, 4.0, 0.0), Vector3::repeat(1.0), KeyframeId(1)).unwrap();
+        let c = g.add_object(LabelId(2), Point3::new(30.0, 40.0, 0.0), Vector3::repeat(1.0), KeyframeId(1)).unwrap();
+        let edges = g.object_edges(f64::INFINITY);
+        assert_eq!(edges.len(), 3);
+        assert_eq!((edges[0].a, edges[0].b), (a, b));
+        assert!((edges[0].distance_m - 5.0).abs() < 1e-12);
+        assert_eq!(g.object_edges(10.0).len(), 1);
+        assert_eq!(g.objects_observed_in(KeyframeId(1)).collect::<Vec<_>>(), vec![b, c]);
+        assert!(g.add_object(LabelId(0), Point3::new(f64::NAN, 0.0, 0.0), Vector3::repeat(1.0), KeyframeId(0)).is_err());
+        assert!(g.add_object(LabelId(0), Point3::origin(), Vector3::repeat(1.0), KeyframeId(42)).is_err());
+        assert_eq!(g.object_count(), 3);
+    }
+
+    #[test]
+    fn semantic_layer_is_linked_to_keyframes_and_moves_with_them() {
+        let mut g = graph_with_three_keyframes();
+        let scan = SemanticScan {
+            points_in_body: vec![Point3::new(1.0, 0.0, 0.0), Point3::new(2.0, 0.0, 0.0)],
+            labels: vec![LabelId(3), LabelId(4)],
+        };
+        g.set_semantic_scan(KeyframeId(1), scan.clone()).unwrap();
+        assert_eq!(g.semantic_points_in_world(LabelId(3)), vec![Point3::new(6.0, 0.0, 0.0)]);
+        let moved = pose_from_yaw_translation(0.0, Vector3::new(5.0, 2.0, 0.0));
+        g.update_keyframe_poses([(KeyframeId(1), &moved)]).unwrap();
+        assert_eq!(g.semantic_points_in_world(LabelId(3)), vec![Point3::new(6.0, 2.0, 0.0)]);
+        let bad = SemanticScan { labels: vec![LabelId(1)], ..scan };
+        assert!(matches!(g.set_semantic_scan(KeyframeId(1), bad), Err(SceneGraphError::LabelCountMismatch { .. })));
+        assert!(g.set_semantic_scan(KeyframeId(9), SemanticScan::default()).is_err());
+        assert_eq!(g.semantic_scan(KeyframeId(1)).map(|s| s.len()), Some(2));
+    }
+}
