@@ -6,9 +6,10 @@
 //! Only candidate rows and columns exist (a pair with d_v = 0 has u = 0 everywhere), conflicting
 //! pairs (i = j or m = n, which no one-to-one assignment can hold together) are 0 as in Leordeanu
 //! & Hebert 2005, and entries with |w_ij − w_mn| > `edge_tolerance_m` (where d_e is negligible)
-//! or edges longer than `max_edge_length_m` are left out. The diagonal holds d_v². Per row, the
-//! compatible remote edges are found by binary search in distance-sorted neighbour lists, so the
-//! cost is proportional to the entries kept, never to (n·m)².
+//! edges longer than `max_edge_length_m`, and local edges beyond each object's `max_neighbours`
+//! nearest are left out. The diagonal holds d_v². Per row, the
+//! compatible remote edges are found by a sliding window over distance-sorted neighbour lists, so
+//! the cost is proportional to the entries kept, never to (n·m)².
 
 use super::candidates::Candidate;
 use super::ObjectGraph;
@@ -45,6 +46,7 @@ pub struct AffinityParams {
     pub edge_sharpness: f64,
     pub edge_tolerance_m: f64,
     pub max_edge_length_m: f64,
+    pub max_neighbours: usize,
 }
 
 /// Builds U over `candidates`.
@@ -52,11 +54,15 @@ pub fn build(local: &ObjectGraph, remote: &ObjectGraph, candidates: &[Candidate]
     const NONE: u32 = u32::MAX;
     let (nl, nr) = (local.len(), remote.len());
     let mut index = vec![NONE; nl * nr];
+    // Remote objects that some local object of each label may be: only their edges can count.
+    let mut candidate_remote = vec![false; nr];
     for (k, c) in candidates.iter().enumerate() {
         index[c.local as usize * nr + c.remote as usize] = k as u32;
+        candidate_remote[c.remote as usize] = true;
     }
-    let local_neighbours = neighbour_lists(local, params.max_edge_length_m);
-    let remote_neighbours = neighbour_lists(remote, params.max_edge_length_m + params.edge_tolerance_m);
+    let local_neighbours = nearest_symmetric(neighbour_lists(local, params.max_edge_length_m, |_| true), params.max_neighbours);
+    let remote_neighbours =
+        neighbour_lists(remote, params.max_edge_length_m + params.edge_tolerance_m, |n| candidate_remote[n]);
 
     let mut out = SparseAffinity { row_start: Vec::with_capacity(candidates.len() + 1), ..Default::default() };
     out.row_start.push(0);
@@ -64,13 +70,18 @@ pub fn build(local: &ObjectGraph, remote: &ObjectGraph, candidates: &[Candidate]
         out.cols.push(out.row_start.len() as u32 - 1);
         out.values.push(a.label_similarity * a.label_similarity);
         let sorted = &remote_neighbours[a.remote as usize];
+        let mut lo = 0;
+        // Local neighbours come by increasing w_ij, so the window start only moves forward.
         for &(w_ij, j) in &local_neighbours[a.local as usize] {
-            let lo = sorted.partition_point(|&(w, _)| w < w_ij - params.edge_tolerance_m);
+            let row = &index[j as usize * nr..(j as usize + 1) * nr];
+            while lo < sorted.len() && sorted[lo].0 < w_ij - params.edge_tolerance_m {
+                lo += 1;
+            }
             for &(w_mn, n) in &sorted[lo..] {
                 if w_mn > w_ij + params.edge_tolerance_m {
                     break;
                 }
-                let b = index[j as usize * nr + n as usize];
+                let b = row[n as usize];
                 if b != NONE {
                     let c = &candidates[b as usize];
                     let d_e = (-params.edge_sharpness * (w_ij - w_mn).abs()).exp();
@@ -84,16 +95,21 @@ pub fn build(local: &ObjectGraph, remote: &ObjectGraph, candidates: &[Candidate]
     out
 }
 
-/// For each object, the other objects within `max_length` as (distance, index), by distance.
-fn neighbour_lists(graph: &ObjectGraph, max_length: f64) -> Vec<Vec<(f64, u32)>> {
+/// For each object, the other objects (accepted by `keep`) within `max_length` as
+/// (distance, index), by distance.
+fn neighbour_lists(graph: &ObjectGraph, max_length: f64, keep: impl Fn(usize) -> bool) -> Vec<Vec<(f64, u32)>> {
     let objects = graph.objects();
     let mut lists = vec![Vec::new(); objects.len()];
     for i in 0..objects.len() {
         for j in (i + 1)..objects.len() {
             let w = (objects[i].centroid - objects[j].centroid).norm();
             if w <= max_length {
-                lists[i].push((w, j as u32));
-                lists[j].push((w, i as u32));
+                if keep(j) {
+                    lists[i].push((w, j as u32));
+                }
+                if keep(i) {
+                    lists[j].push((w, i as u32));
+                }
             }
         }
     }
@@ -101,4 +117,21 @@ fn neighbour_lists(graph: &ObjectGraph, max_length: f64) -> Vec<Vec<(f64, u32)>>
         list.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     }
     lists
+}
+
+/// Keeps edge (i, j) when j is among i's `k` nearest or i among j's, so U stays symmetric.
+fn nearest_symmetric(full: Vec<Vec<(f64, u32)>>, k: usize) -> Vec<Vec<(f64, u32)>> {
+    let mut kept: Vec<Vec<(f64, u32)>> = full.iter().map(|l| l[..l.len().min(k)].to_vec()).collect();
+    for (i, list) in full.iter().enumerate() {
+        for &(w, j) in list.iter().take(k) {
+            let back = &mut kept[j as usize];
+            if back.len() >= k && !back.iter().any(|&(_, x)| x == i as u32) {
+                back.push((w, i as u32));
+            }
+        }
+    }
+    for list in &mut kept {
+        list.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    }
+    kept
 }

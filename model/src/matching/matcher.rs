@@ -14,7 +14,7 @@ use super::candidates::{candidates, Candidate};
 use super::labels::LabelSimilarity;
 use super::lap::{self, CostMatrix};
 use super::outcome::*;
-use super::significance::log10_nfa;
+use super::significance::log10_nfa_adaptive;
 use super::spectral::principal_eigenvector;
 use super::verification::{max_displacement, Evaluation, Scorer};
 use super::{MatcherConfig, ObjectGraph};
@@ -26,6 +26,8 @@ use nalgebra::Point3;
 const SPECTRAL_MIN_LABEL_SIMILARITY: f64 = 0.5;
 /// Refinement rounds of a hypothesis.
 const REFINE_ROUNDS: usize = 5;
+/// Smallest radius of the significance test, as a fraction of the inlier distance.
+const MIN_RADIUS_FRACTION: f64 = 0.1;
 /// Number of top hypotheses examined for a runner-up.
 const RUNNER_UP_CANDIDATES: usize = 64;
 
@@ -52,6 +54,7 @@ pub fn match_graphs(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSim
         edge_sharpness: config.edge_sharpness,
         edge_tolerance_m: config.edge_tolerance_m,
         max_edge_length_m: config.max_edge_length_m,
+        max_neighbours: config.max_neighbours,
     };
     let u = affinity::build(local, remote, &strong, params);
     stats.affinity_nonzeros = u.nonzeros();
@@ -67,24 +70,44 @@ pub fn match_graphs(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSim
         .collect();
 
     // 5: hypotheses from pairs of the strongest associations.
-    let mut pool: Vec<usize> = (0..strong.len()).collect();
-    pool.sort_by(|&a, &b| eigen.vector[b].total_cmp(&eigen.vector[a]).then(a.cmp(&b)));
-    pool.truncate(config.hypothesis_pool);
-    for k in spectral {
-        if !pool.contains(&k) {
-            pool.push(k);
-        }
+    // The pool: the LAP's assignments first, then the other candidates, each by eigenvector value.
+    let mut in_assignment = vec![false; strong.len()];
+    for &k in &spectral {
+        in_assignment[k] = true;
     }
+    let mut pool: Vec<usize> = (0..strong.len()).collect();
+    pool.sort_by(|&a, &b| {
+        in_assignment[b].cmp(&in_assignment[a]).then(eigen.vector[b].total_cmp(&eigen.vector[a])).then(a.cmp(&b))
+    });
+    pool.truncate(config.hypothesis_pool);
     let scorer = Scorer::new(local, remote, labels, config.inlier_distance_m, config.inlier_height_m);
+    // A seed pair already explained by the best hypothesis so far would reproduce it: it counts
+    // as a test but is not evaluated again.
     let mut hypotheses: Vec<Evaluation> = Vec::new();
+    let mut best_score = f64::NEG_INFINITY;
+    // remote index explained for each local object by the best hypothesis so far.
+    let mut explained = vec![u32::MAX; local.len()];
+    let mut tests = 0usize;
     for (x, &a) in pool.iter().enumerate() {
         for &b in &pool[x + 1..] {
-            if let Some(pose) = seed_transform(local, remote, &strong[a], &strong[b], config) {
-                hypotheses.push(scorer.evaluate(&pose));
+            let (ca, cb) = (&strong[a], &strong[b]);
+            let Some(pose) = seed_transform(local, remote, ca, cb, config) else { continue };
+            tests += 1;
+            if explained[ca.local as usize] == ca.remote && explained[cb.local as usize] == cb.remote {
+                continue;
             }
+            let e = scorer.evaluate(&pose);
+            if e.score > best_score {
+                best_score = e.score;
+                explained.fill(u32::MAX);
+                for i in &e.inliers {
+                    explained[i.local as usize] = i.remote;
+                }
+            }
+            hypotheses.push(e);
         }
     }
-    stats.hypotheses = hypotheses.len();
+    stats.hypotheses = tests;
     if hypotheses.is_empty() {
         return refused(RefusalReason::NoConsistentPair, stats, spectral_matches);
     }
@@ -93,7 +116,7 @@ pub fn match_graphs(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSim
 
     // 6: refusals.
     let null = NullModel::new(local, remote, labels, config.inlier_distance_m);
-    let significance = null.significance(&best, hypotheses.len(), remote);
+    let significance = null.significance(&best, tests, remote);
     let required = -config.max_false_alarms.log10();
     let refuse = |reason| MatchReport {
         outcome: MatchOutcome::Refused(Refusal { reason, best_guess: Some(best.local_from_remote), significance }),
@@ -115,7 +138,10 @@ pub fn match_graphs(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSim
         return MatchReport { spectral_matches, ..refuse(RefusalReason::NotSignificant { significance, required }) };
     }
     let remote_points = || best.inliers.iter().map(|i| remote.objects()[i.remote as usize].centroid);
-    for other in hypotheses.iter().take(RUNNER_UP_CANDIDATES) {
+    // Refinement at most doubles a hypothesis' score in practice, so weaker ones cannot be
+    // a runner-up within the ambiguity ratio.
+    let floor = 0.5 * config.ambiguity_ratio * best.score;
+    for other in hypotheses.iter().take(RUNNER_UP_CANDIDATES).take_while(|h| h.score >= floor) {
         let displacement = max_displacement(&best.local_from_remote, &other.local_from_remote, remote_points());
         if displacement <= 2.0 * config.inlier_distance_m {
             continue;
@@ -125,14 +151,15 @@ pub fn match_graphs(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSim
         let ratio = runner_up.score / best.score;
         if displacement > 2.0 * config.inlier_distance_m
             && ratio >= config.ambiguity_ratio
-            && null.significance(&runner_up, hypotheses.len(), remote) >= required
+            && null.significance(&runner_up, tests, remote) >= required
         {
             let reason = RefusalReason::Ambiguous { runner_up_displacement_m: displacement, score_ratio: ratio };
             return MatchReport { spectral_matches, ..refuse(reason) };
         }
     }
 
-    // 7: final estimate from the verified matches.
+    // 7: final estimate from the verified matches: least squares weighted by label similarity
+    // only (every verified centroid carries the same noise; MSAC weights served verification).
     let local_from_remote = fit_rigid(
         &best
             .inliers
@@ -140,7 +167,7 @@ pub fn match_graphs(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSim
             .map(|i| Correspondence {
                 in_local: local.objects()[i.local as usize].centroid,
                 in_remote: remote.objects()[i.remote as usize].centroid,
-                weight: i.weight,
+                weight: labels.get(local.objects()[i.local as usize].label, remote.objects()[i.remote as usize].label),
             })
             .collect::<Vec<_>>(),
         config.model,
@@ -191,7 +218,8 @@ fn spectral_assignment(n_local: usize, n_remote: usize, cands: &[Candidate], x: 
     out
 }
 
-/// The planar transform fixed by two associations whose horizontal edges agree, or `None`.
+/// The planar transform fixed by two associations whose horizontal edges agree within the edge
+/// tolerance and that are at least r apart (a stable yaw), or `None`.
 fn seed_transform(
     local: &ObjectGraph,
     remote: &ObjectGraph,
@@ -206,7 +234,7 @@ fn seed_transform(
     let (qm, qn) = (remote.objects()[a.remote as usize].centroid, remote.objects()[b.remote as usize].centroid);
     let (h_local, h_remote) = ((pi - pj).xy().norm(), (qm - qn).xy().norm());
     let r = config.inlier_distance_m;
-    if h_local < r || h_remote < r || (h_local - h_remote).abs() > 2.0 * r {
+    if h_local < r || h_remote < r || (h_local - h_remote).abs() > config.edge_tolerance_m {
         return None;
     }
     if ((pi.z - pj.z) - (qm.z - qn.z)).abs() > 2.0 * config.inlier_height_m {
@@ -219,7 +247,8 @@ fn seed_transform(
 /// The chance model of `significance`: per remote object, how many local objects it may match.
 struct NullModel {
     area_m2: f64,
-    disc_m2: f64,
+    /// Residuals below this count as this (centroids are never exact).
+    min_radius_m: f64,
     min: Point3<f64>,
     max: Point3<f64>,
     same_label: Vec<f64>,
@@ -245,7 +274,7 @@ impl NullModel {
         };
         Self {
             area_m2: ((max.x - min.x) * (max.y - min.y)).max(1e-9),
-            disc_m2: std::f64::consts::PI * radius * radius,
+            min_radius_m: MIN_RADIUS_FRACTION * radius,
             min,
             max,
             same_label: remote.objects().iter().map(|q| count(q, true)).collect(),
@@ -257,25 +286,29 @@ impl NullModel {
     /// −log10 NFA of an evaluation (with soft labels: the better of the same-label and any-label
     /// tests, Bonferroni-corrected by 2).
     fn significance(&self, e: &Evaluation, tests: usize, remote: &ObjectGraph) -> f64 {
-        let (mut trials, mut p_same, mut p_any) = (0usize, 0.0, 0.0);
+        let (mut trials, mut c_same, mut c_any) = (0usize, 0.0, 0.0);
         for (m, q) in remote.objects().iter().enumerate() {
             let p = e.local_from_remote * q.centroid;
             if p.x >= self.min.x && p.x <= self.max.x && p.y >= self.min.y && p.y <= self.max.y {
                 trials += 1;
-                p_same += (self.same_label[m] * self.disc_m2 / self.area_m2).min(1.0);
-                p_any += (self.any_label[m] * self.disc_m2 / self.area_m2).min(1.0);
+                c_same += self.same_label[m];
+                c_any += self.any_label[m];
             }
         }
         if trials == 0 {
             return 0.0;
         }
-        let same = log10_nfa(tests, trials, e.same_label_inliers(), p_same / trials as f64);
-        let nfa = if self.soft {
-            let any = log10_nfa(tests, trials, e.inliers.len(), p_any / trials as f64);
-            same.min(any) + 2f64.log10()
-        } else {
-            same
+        let floor = self.min_radius_m;
+        let chance = |count: f64| {
+            let per_object = count / trials as f64 / self.area_m2;
+            move |r: f64| (per_object * std::f64::consts::PI * r.max(floor).powi(2)).min(1.0)
         };
-        -nfa
+        let mut same: Vec<f64> = e.inliers.iter().filter(|i| i.same_label).map(|i| i.residual_xy_m).collect();
+        let mut nfa = log10_nfa_adaptive(tests, trials, &mut same, chance(c_same));
+        if self.soft {
+            let mut any: Vec<f64> = e.inliers.iter().map(|i| i.residual_xy_m).collect();
+            nfa = nfa.min(log10_nfa_adaptive(tests, trials, &mut any, chance(c_any))) + 2f64.log10();
+        }
+        (-nfa).clamp(-1e3, 1e3)
     }
 }

@@ -2,14 +2,17 @@
 //! Moisan & Stival 2004): how many hypotheses this good would chance produce?
 //!
 //! Null model: the remote objects land uniformly in the local graph's horizontal bounding box,
-//! expanded by the inlier radius r (area A). A remote object of label l then becomes an inlier
-//! with probability p_m = min(1, c(l) · π r² / A), c(l) the number of local objects it may match.
-//! A hypothesis is fitted to 2 matches, so with n remote objects inside the box and k inliers,
+//! expanded by the inlier radius (area A). A remote object of label l then falls within radius r
+//! of a local object it may match with probability p_m(r) = min(1, c(l) · π r² / A), c(l) the
+//! number of such local objects. A hypothesis is fitted to 2 matches; with n remote objects inside
+//! the box and the inliers' horizontal residuals sorted, r_(1) ≤ … ≤ r_(k), the radius is chosen
+//! adaptively as in ORSA: for each j ≥ 3,
 //!
-//!   NFA = N_tests · P[Bin(n − 2, p̄) ≥ k − 2],
+//!   NFA_j = N_tests · (n − 2) · P[Bin(n − 2, p̄(r_(j))) ≥ j − 2],
 //!
-//! N_tests the number of hypotheses scored. NFA ≤ ε (`max_false_alarms`) means fewer than ε such
-//! coincidences are expected over the whole search: the transform is accepted as significant.
+//! the factor n − 2 paying for the choice of j, N_tests the number of hypotheses scored, and
+//! NFA = min_j NFA_j. NFA ≤ ε (`max_false_alarms`) means fewer than ε such coincidences are
+//! expected over the whole search: the transform is accepted as significant.
 
 /// ln P[Bin(n, p) ≥ k].
 pub fn ln_binomial_tail(n: usize, k: usize, p: f64) -> f64 {
@@ -46,6 +49,18 @@ pub fn log10_nfa(tests: usize, trials: usize, inliers: usize, p: f64) -> f64 {
     (tests.max(1) as f64).log10() + tail / std::f64::consts::LN_10
 }
 
+/// Adaptive-radius log10 NFA: `residuals` are the inliers' horizontal residuals (any order),
+/// `p_at` gives the chance probability at a radius. Minimum over j of NFA_j (see module doc).
+pub fn log10_nfa_adaptive(tests: usize, trials: usize, residuals: &mut [f64], p_at: impl Fn(f64) -> f64) -> f64 {
+    residuals.sort_by(f64::total_cmp);
+    let choices = (trials.saturating_sub(2).max(1) as f64).log10();
+    let mut best = (tests.max(1) as f64).log10();
+    for j in 3..=residuals.len() {
+        best = best.min(log10_nfa(tests, trials, j, p_at(residuals[j - 1])) + choices);
+    }
+    best
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -73,5 +88,20 @@ mod tests {
         assert!(log10_nfa(1000, 30, 8, 0.05) > a);
         assert!(log10_nfa(100, 30, 12, 0.05) < a);
         assert_eq!(log10_nfa(10, 30, 2, 0.05), 1.0);
+    }
+
+    #[test]
+    fn adaptive_radius_rewards_tight_inliers() {
+        let p = |r: f64| 0.01 * r * r;
+        let mut tight = [0.1, 0.2, 0.1, 0.3, 0.2];
+        let mut loose = [2.0, 2.1, 1.9, 2.4, 2.2];
+        let a = log10_nfa_adaptive(50, 20, &mut tight, p);
+        let b = log10_nfa_adaptive(50, 20, &mut loose, p);
+        assert!(a < b - 3.0, "{a} {b}");
+        // Never better than the fixed-radius test at the largest residual, minus the choice factor.
+        let fixed = log10_nfa(50, 20, 5, p(2.4)) + (18f64).log10();
+        assert!((b - fixed).abs() < 1e-9 || b < fixed);
+        // Too few inliers: no evidence, NFA = number of tests.
+        assert_eq!(log10_nfa_adaptive(50, 20, &mut [0.1, 0.2], p), 50f64.log10());
     }
 }

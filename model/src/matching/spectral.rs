@@ -1,7 +1,7 @@
 //! Spectral relaxation of the QAP (paper eq. 8, Leordeanu & Hebert 2005): with a ∈ [0, 1], the
 //! maximiser of vec(A)ᵀ U vec(A) / ‖vec(A)‖² is the principal eigenvector of U, positive because
 //! U is non-negative (Perron–Frobenius). Found by power iteration x ← U x / ‖U x‖ from the uniform
-//! vector until max_k |x_k − x_k^prev| < tolerance.
+//! vector until max_k |x_k − x_k^prev| < tolerance · max_k x_k.
 
 use super::affinity::SparseAffinity;
 
@@ -29,13 +29,14 @@ pub fn principal_eigenvector(u: &SparseAffinity, tolerance: f64, max_iterations:
             return Eigen { vector: x, eigenvalue: 0.0, iterations: iteration, converged: false };
         }
         eigenvalue = norm;
-        let mut change: f64 = 0.0;
+        let (mut change, mut largest): (f64, f64) = (0.0, 0.0);
         for (xi, yi) in x.iter_mut().zip(&y) {
             let next = yi / norm;
             change = change.max((next - *xi).abs());
+            largest = largest.max(next);
             *xi = next;
         }
-        if change < tolerance {
+        if change < tolerance * largest {
             return Eigen { vector: x, eigenvalue, iterations: iteration, converged: true };
         }
     }

@@ -12,6 +12,7 @@ use super::labels::LabelSimilarity;
 use super::ObjectGraph;
 use crate::geometry::{fit_rigid, Correspondence, Pose3, RigidModel};
 use nalgebra::Point3;
+use std::cell::RefCell;
 
 /// An inlier association under a hypothesis.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -20,6 +21,8 @@ pub struct Inlier {
     pub remote: u32,
     pub weight: f64,
     pub residual_m: f64,
+    /// Horizontal part of the residual, m.
+    pub residual_xy_m: f64,
     pub same_label: bool,
 }
 
@@ -31,76 +34,136 @@ pub struct Evaluation {
     pub score: f64,
 }
 
-impl Evaluation {
-    pub fn same_label_inliers(&self) -> usize {
-        self.inliers.iter().filter(|i| i.same_label).count()
-    }
-}
-
-/// Scores transforms against the local graph through a horizontal grid of cell size r.
+/// Scores transforms against the local graph through a dense horizontal grid (CSR) whose cells
+/// are at least r wide, so an inlier is always in the 3 × 3 cells around a prediction.
 pub struct Scorer<'a> {
     local: &'a ObjectGraph,
     remote: &'a ObjectGraph,
     labels: &'a LabelSimilarity,
     radius: f64,
     height: f64,
-    /// (cell x, cell y, local index), sorted.
-    cells: Vec<(i64, i64, u32)>,
+    grid: Grid,
+    /// Best claim per local object, reused between evaluations.
+    claims: RefCell<Vec<Option<Inlier>>>,
+}
+
+struct Grid {
+    origin_x: f64,
+    origin_y: f64,
+    cell: f64,
+    nx: i64,
+    ny: i64,
+    /// Local indices of cell c are `members[start[c]..start[c + 1]]`.
+    start: Vec<u32>,
+    members: Vec<u32>,
+}
+
+impl Grid {
+    fn new(graph: &ObjectGraph, radius: f64) -> Self {
+        let objects = graph.objects();
+        let (mut min_x, mut min_y, mut max_x, mut max_y) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        for o in objects {
+            min_x = min_x.min(o.centroid.x);
+            min_y = min_y.min(o.centroid.y);
+            max_x = max_x.max(o.centroid.x);
+            max_y = max_y.max(o.centroid.y);
+        }
+        if objects.is_empty() {
+            (min_x, min_y, max_x, max_y) = (0.0, 0.0, 0.0, 0.0);
+        }
+        // Cells ≥ r, and no more than ~4 per object (bounded memory for sparse, wide graphs).
+        let budget = (4 * objects.len() + 64) as f64;
+        let area = (max_x - min_x + radius) * (max_y - min_y + radius);
+        let cell = radius.max((area / budget).sqrt());
+        let nx = ((max_x - min_x) / cell).floor() as i64 + 1;
+        let ny = ((max_y - min_y) / cell).floor() as i64 + 1;
+        let index = |x: f64, y: f64| (((y - min_y) / cell).floor() as i64 * nx + ((x - min_x) / cell).floor() as i64) as usize;
+        let mut counts = vec![0u32; (nx * ny) as usize + 1];
+        for o in objects {
+            counts[index(o.centroid.x, o.centroid.y) + 1] += 1;
+        }
+        for c in 1..counts.len() {
+            counts[c] += counts[c - 1];
+        }
+        let mut fill = counts.clone();
+        let mut members = vec![0u32; objects.len()];
+        for (k, o) in objects.iter().enumerate() {
+            let c = index(o.centroid.x, o.centroid.y);
+            members[fill[c] as usize] = k as u32;
+            fill[c] += 1;
+        }
+        Self { origin_x: min_x, origin_y: min_y, cell, nx, ny, start: counts, members }
+    }
+
+    /// Calls `f` with every member of the 3 × 3 cells around (x, y).
+    fn around(&self, x: f64, y: f64, mut f: impl FnMut(u32)) {
+        let (u, v) = ((x - self.origin_x) / self.cell, (y - self.origin_y) / self.cell);
+        if !(u >= -1.0 && v >= -1.0 && u < (self.nx + 1) as f64 && v < (self.ny + 1) as f64) {
+            return;
+        }
+        // u + 1 ≥ 0 here, so truncation is floor.
+        let (cx, cy) = ((u + 1.0) as i64 - 1, (v + 1.0) as i64 - 1);
+        for y in (cy - 1).max(0)..=(cy + 1).min(self.ny - 1) {
+            let row = y * self.nx;
+            let (x0, x1) = ((cx - 1).max(0), (cx + 1).min(self.nx - 1));
+            if x0 > x1 {
+                continue;
+            }
+            let (a, b) = (self.start[(row + x0) as usize], self.start[(row + x1) as usize + 1]);
+            for &m in &self.members[a as usize..b as usize] {
+                f(m);
+            }
+        }
+    }
 }
 
 impl<'a> Scorer<'a> {
     pub fn new(local: &'a ObjectGraph, remote: &'a ObjectGraph, labels: &'a LabelSimilarity, radius: f64, height: f64) -> Self {
-        let mut cells: Vec<(i64, i64, u32)> = local
-            .objects()
-            .iter()
-            .enumerate()
-            .map(|(k, o)| {
-                let (cx, cy) = cell_of(&o.centroid, radius);
-                (cx, cy, k as u32)
-            })
-            .collect();
-        cells.sort_unstable();
-        Self { local, remote, labels, radius, height, cells }
+        Self {
+            local,
+            remote,
+            labels,
+            radius,
+            height,
+            grid: Grid::new(local, radius),
+            claims: RefCell::new(vec![None; local.len()]),
+        }
     }
 
     /// Inliers and score of `local_from_remote`.
     pub fn evaluate(&self, local_from_remote: &Pose3) -> Evaluation {
         let local = self.local.objects();
-        // best claim per local object: (weight, inlier)
-        let mut claims: Vec<Option<Inlier>> = vec![None; local.len()];
+        let mut claims = self.claims.borrow_mut();
+        let (r2, h) = (self.radius * self.radius, self.height);
+        // p = R q + t with the rotation as a matrix (cheaper than a quaternion per point).
+        let rotation = local_from_remote.rotation.to_rotation_matrix();
+        let translation = local_from_remote.translation.vector;
         for (m, q) in self.remote.objects().iter().enumerate() {
-            let predicted = local_from_remote * q.centroid;
-            let (cx, cy) = cell_of(&predicted, self.radius);
+            let predicted = Point3::from(rotation * q.centroid.coords + translation);
             let mut best: Option<Inlier> = None;
-            for y in cy - 1..=cy + 1 {
-                let start = self.cells.partition_point(|&(a, b, _)| (a, b) < (cx - 1, y));
-                for &(a, b, i) in &self.cells[start..] {
-                    if (a, b) > (cx + 1, y) {
-                        break;
-                    }
-                    let p = &local[i as usize];
-                    let d = p.centroid - predicted;
-                    let dxy2 = d.x * d.x + d.y * d.y;
-                    if dxy2 > self.radius * self.radius || d.z.abs() > self.height {
-                        continue;
-                    }
-                    let similarity = self.labels.get(p.label, q.label);
-                    if similarity <= 0.0 {
-                        continue;
-                    }
-                    let rho2 = dxy2 / (self.radius * self.radius) + (d.z / self.height).powi(2);
-                    let weight = similarity * (1.0 - rho2).max(0.0);
-                    if best.is_none_or(|b| weight > b.weight) {
-                        best = Some(Inlier {
-                            local: i,
-                            remote: m as u32,
-                            weight,
-                            residual_m: d.norm(),
-                            same_label: p.label == q.label,
-                        });
-                    }
+            self.grid.around(predicted.x, predicted.y, |i| {
+                let p = &local[i as usize];
+                let d = p.centroid - predicted;
+                let dxy2 = d.x * d.x + d.y * d.y;
+                if dxy2 > r2 || d.z.abs() > h {
+                    return;
                 }
-            }
+                let similarity = self.labels.get(p.label, q.label);
+                if similarity <= 0.0 {
+                    return;
+                }
+                let weight = similarity * (1.0 - dxy2 / r2 - (d.z / h).powi(2)).max(0.0);
+                if best.is_none_or(|b| weight > b.weight) {
+                    best = Some(Inlier {
+                        local: i,
+                        remote: m as u32,
+                        weight,
+                        residual_m: d.norm(),
+                        residual_xy_m: dxy2.sqrt(),
+                        same_label: p.label == q.label,
+                    });
+                }
+            });
             if let Some(b) = best {
                 let slot = &mut claims[b.local as usize];
                 if slot.is_none_or(|s| b.weight > s.weight) {
@@ -108,7 +171,7 @@ impl<'a> Scorer<'a> {
                 }
             }
         }
-        let inliers: Vec<Inlier> = claims.into_iter().flatten().filter(|i| i.weight > 0.0).collect();
+        let inliers: Vec<Inlier> = claims.iter_mut().filter_map(Option::take).filter(|i| i.weight > 0.0).collect();
         let score = inliers.iter().map(|i| i.weight).sum();
         Evaluation { local_from_remote: *local_from_remote, inliers, score }
     }
@@ -143,10 +206,6 @@ impl<'a> Scorer<'a> {
         }
         best
     }
-}
-
-fn cell_of(p: &Point3<f64>, size: f64) -> (i64, i64) {
-    ((p.x / size).floor() as i64, (p.y / size).floor() as i64)
 }
 
 /// Largest horizontal displacement, over `points`, between two transforms of them.

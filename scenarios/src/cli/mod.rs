@@ -1,0 +1,1 @@
+pub mod match_cmd;

@@ -1,0 +1,5 @@
+//! `sgm-scenarios`: configuration loading, the object-graph file format, benchmarks and (with
+//! later issues) simulated scenarios. The `sgm` binary is a thin shell over this library.
+
+pub mod object_file;
+pub mod settings;
