@@ -18,18 +18,12 @@ pub type Pose3 = Isometry3<f64>;
 
 /// Builds `a_from_b` from a yaw angle (radians, about +z) and a translation.
 pub fn pose_from_yaw_translation(yaw: f64, translation: Vector3<f64>) -> Pose3 {
-    Isometry3::from_parts(
-        Translation3::from(translation),
-        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
-    )
+    Isometry3::from_parts(Translation3::from(translation), UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw))
 }
 
 /// Builds a pose from roll, pitch, yaw (radians, extrinsic x-y-z as nalgebra) and a translation.
 pub fn pose_from_rpy_translation(roll: f64, pitch: f64, yaw: f64, translation: Vector3<f64>) -> Pose3 {
-    Isometry3::from_parts(
-        Translation3::from(translation),
-        UnitQuaternion::from_euler_angles(roll, pitch, yaw),
-    )
+    Isometry3::from_parts(Translation3::from(translation), UnitQuaternion::from_euler_angles(roll, pitch, yaw))
 }
 
 /// Yaw of a pose's rotation (radians in (−π, π]).
@@ -69,7 +63,7 @@ pub struct Correspondence {
 /// Weighted means of both sides; `None` when the total weight is not positive.
 fn weighted_centroids(pairs: &[Correspondence]) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
     let total: f64 = pairs.iter().map(|c| c.weight).sum();
-    if !(total > 0.0) || !total.is_finite() {
+    if !total.is_finite() || total <= 0.0 {
         return None;
     }
     let (mut local, mut remote) = (Vector3::zeros(), Vector3::zeros());
@@ -186,16 +180,13 @@ mod tests {
     use proptest::prelude::*;
 
     fn pairs_from(truth: &Pose3, remote: &[Point3<f64>]) -> Vec<Correspondence> {
-        remote
-            .iter()
-            .map(|q| Correspondence { in_local: truth * q, in_remote: *q, weight: 1.0 })
-            .collect()
+        remote.iter().map(|q| Correspondence { in_local: truth * q, in_remote: *q, weight: 1.0 }).collect()
     }
 
     proptest! {
         #[test]
         fn planar_fit_recovers_any_yaw_translation(
-            yaw in -3.14f64..3.14, tx in -200.0f64..200.0, ty in -200.0f64..200.0, tz in -5.0f64..5.0,
+            yaw in -std::f64::consts::PI..std::f64::consts::PI, tx in -200.0f64..200.0, ty in -200.0f64..200.0, tz in -5.0f64..5.0,
             pts in prop::collection::vec((-50.0f64..50.0, -50.0f64..50.0, 0.0f64..3.0), 3..20),
         ) {
             let remote: Vec<Point3<f64>> = pts.iter().map(|&(x, y, z)| Point3::new(x, y, z)).collect();
@@ -244,7 +235,12 @@ mod tests {
         let pts: Vec<_> = (0..5).map(|i| Point3::new(i as f64, 2.0 * i as f64, 0.3)).collect();
         assert!(minor_axis_spread(&pts, RigidModel::Planar) < 1e-9);
         assert!(minor_axis_spread(&pts, RigidModel::Full3d) < 1e-9);
-        let square = [Point3::new(0.0, 0.0, 0.0), Point3::new(2.0, 0.0, 0.0), Point3::new(0.0, 2.0, 0.0), Point3::new(2.0, 2.0, 0.0)];
+        let square = [
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(2.0, 0.0, 0.0),
+            Point3::new(0.0, 2.0, 0.0),
+            Point3::new(2.0, 2.0, 0.0),
+        ];
         assert!((minor_axis_spread(&square, RigidModel::Planar) - 1.0).abs() < 1e-12);
     }
 

@@ -20,8 +20,10 @@ pub fn load_matcher_config(path: Option<&Path>) -> Result<MatcherConfig, Setting
     if let Some(path) = path {
         builder = builder.add_source(config::File::from(path).format(config::FileFormat::Toml).required(true));
     }
-    builder = builder.add_source(config::Environment::with_prefix("SGM").prefix_separator("__").separator("__").try_parsing(true));
-    let merged = builder.build().map_err(|e| SettingsError::Load { path: source_name.clone(), message: e.to_string() })?;
+    builder = builder
+        .add_source(config::Environment::with_prefix("SGM").prefix_separator("__").separator("__").try_parsing(true));
+    let merged =
+        builder.build().map_err(|e| SettingsError::Load { path: source_name.clone(), message: e.to_string() })?;
     let matcher: MatcherConfig = match merged.get::<MatcherConfig>("matcher") {
         Ok(m) => m,
         Err(config::ConfigError::NotFound(_)) => MatcherConfig::default(),

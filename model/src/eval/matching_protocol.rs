@@ -75,7 +75,11 @@ fn world(spec: &WorldSpec, rng: &mut ChaCha8Rng) -> Vec<WorldObject> {
             let size = Vector3::new(rng.random_range(0.4..2.0), rng.random_range(0.4..2.0), rng.random_range(0.4..2.0));
             WorldObject {
                 label: LabelId(rng.random_range(0..spec.classes)),
-                centroid: Point3::new(rng.random_range(0.0..spec.side_m), rng.random_range(0.0..spec.side_m), size.z / 2.0),
+                centroid: Point3::new(
+                    rng.random_range(0.0..spec.side_m),
+                    rng.random_range(0.0..spec.side_m),
+                    size.z / 2.0,
+                ),
                 yaw: rng.random_range(-PI..PI),
                 size,
             }
@@ -108,7 +112,8 @@ fn make_graph(
         let o = objects[w];
         let (mut centroid, mut roll, mut pitch, mut yaw) = (o.centroid, 0.0, 0.0, o.yaw);
         if noisy {
-            centroid += Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-0.5..0.5));
+            centroid +=
+                Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-0.5..0.5));
             roll = rng.random_range(-2.5f64..2.5).to_radians();
             pitch = rng.random_range(-2.5f64..2.5).to_radians();
             yaw += rng.random_range(-10.0f64..10.0).to_radians();
@@ -129,7 +134,11 @@ fn make_graph(
 }
 
 fn random_frame(spec: &WorldSpec, rng: &mut ChaCha8Rng) -> Pose3 {
-    let origin = Vector3::new(rng.random_range(0.0..spec.side_m), rng.random_range(0.0..spec.side_m), rng.random_range(-1.0..1.0));
+    let origin = Vector3::new(
+        rng.random_range(0.0..spec.side_m),
+        rng.random_range(0.0..spec.side_m),
+        rng.random_range(-1.0..1.0),
+    );
     pose_from_yaw_translation(rng.random_range(-PI..PI), origin)
 }
 
@@ -165,7 +174,8 @@ pub fn generate_pair(world_spec: &WorldSpec, spec: &PairSpec, seed: u64) -> Tria
 
     let world_from_local = random_frame(world_spec, &mut rng);
     let world_from_remote = random_frame(world_spec, &mut rng);
-    let (local, local_ids) = make_graph(&objects, &local_chosen, &world_from_local.inverse(), spec.noisy, &[], &mut rng);
+    let (local, local_ids) =
+        make_graph(&objects, &local_chosen, &world_from_local.inverse(), spec.noisy, &[], &mut rng);
     let (remote, remote_ids) =
         make_graph(&remote_objects, &remote_chosen, &world_from_remote.inverse(), spec.noisy, &relabel, &mut rng);
     let true_pairs = if overlap == 0 {
@@ -198,7 +208,11 @@ pub struct TrialScore {
     pub true_pairs: usize,
 }
 
-pub fn score_trial(pair: &TrialPair, local_from_remote: Option<&Pose3>, matches: &[(ObjectId, ObjectId)]) -> TrialScore {
+pub fn score_trial(
+    pair: &TrialPair,
+    local_from_remote: Option<&Pose3>,
+    matches: &[(ObjectId, ObjectId)],
+) -> TrialScore {
     let success = local_from_remote.is_some_and(|t| {
         let e = pose_error(t, &pair.local_from_remote);
         e.translation_m < 2.0 && e.max_axis_rotation_deg() < 20.0

@@ -50,7 +50,12 @@ pub struct AffinityParams {
 }
 
 /// Builds U over `candidates`.
-pub fn build(local: &ObjectGraph, remote: &ObjectGraph, candidates: &[Candidate], params: AffinityParams) -> SparseAffinity {
+pub fn build(
+    local: &ObjectGraph,
+    remote: &ObjectGraph,
+    candidates: &[Candidate],
+    params: AffinityParams,
+) -> SparseAffinity {
     const NONE: u32 = u32::MAX;
     let (nl, nr) = (local.len(), remote.len());
     let mut index = vec![NONE; nl * nr];
@@ -60,7 +65,8 @@ pub fn build(local: &ObjectGraph, remote: &ObjectGraph, candidates: &[Candidate]
         index[c.local as usize * nr + c.remote as usize] = k as u32;
         candidate_remote[c.remote as usize] = true;
     }
-    let local_neighbours = nearest_symmetric(neighbour_lists(local, params.max_edge_length_m, |_| true), params.max_neighbours);
+    let local_neighbours =
+        nearest_symmetric(neighbour_lists(local, params.max_edge_length_m, |_| true), params.max_neighbours);
     let remote_neighbours =
         neighbour_lists(remote, params.max_edge_length_m + params.edge_tolerance_m, |n| candidate_remote[n]);
 

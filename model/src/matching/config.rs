@@ -117,18 +117,48 @@ impl MatcherConfig {
         check(self.max_edge_length_m > 0.0, "max_edge_length_m", self.max_edge_length_m, "> 0 (inf allowed)")?;
         check((2..=100_000).contains(&self.max_neighbours), "max_neighbours", self.max_neighbours, "2..=100000")?;
         check(positive(self.power_tolerance), "power_tolerance", self.power_tolerance, "finite and > 0")?;
-        check((1..=100_000).contains(&self.max_power_iterations), "max_power_iterations", self.max_power_iterations, "1..=100000")?;
-        check((0.0..1.0).contains(&self.min_assignment_score), "min_assignment_score", self.min_assignment_score, "0 <= x < 1")?;
+        check(
+            (1..=100_000).contains(&self.max_power_iterations),
+            "max_power_iterations",
+            self.max_power_iterations,
+            "1..=100000",
+        )?;
+        check(
+            (0.0..1.0).contains(&self.min_assignment_score),
+            "min_assignment_score",
+            self.min_assignment_score,
+            "0 <= x < 1",
+        )?;
         check((2..=1024).contains(&self.hypothesis_pool), "hypothesis_pool", self.hypothesis_pool, "2..=1024")?;
         check(positive(self.inlier_distance_m), "inlier_distance_m", self.inlier_distance_m, "finite and > 0")?;
         check(positive(self.inlier_height_m), "inlier_height_m", self.inlier_height_m, "finite and > 0")?;
         check(positive(self.max_false_alarms), "max_false_alarms", self.max_false_alarms, "finite and > 0")?;
-        check(self.ambiguity_ratio > 0.0 && self.ambiguity_ratio <= 1.0, "ambiguity_ratio", self.ambiguity_ratio, "0 < x <= 1")?;
+        check(
+            self.ambiguity_ratio > 0.0 && self.ambiguity_ratio <= 1.0,
+            "ambiguity_ratio",
+            self.ambiguity_ratio,
+            "0 < x <= 1",
+        )?;
         check((3..=1000).contains(&self.min_matches), "min_matches", self.min_matches, "3..=1000")?;
-        check(self.min_spread_m.is_finite() && self.min_spread_m >= 0.0, "min_spread_m", self.min_spread_m, "finite and >= 0")?;
-        check((0.0..1.0).contains(&self.mislabel_similarity), "mislabel_similarity", self.mislabel_similarity, "0 <= x < 1")?;
+        check(
+            self.min_spread_m.is_finite() && self.min_spread_m >= 0.0,
+            "min_spread_m",
+            self.min_spread_m,
+            "finite and >= 0",
+        )?;
+        check(
+            (0.0..1.0).contains(&self.mislabel_similarity),
+            "mislabel_similarity",
+            self.mislabel_similarity,
+            "0 <= x < 1",
+        )?;
         for (k, c) in self.label_confusion.iter().enumerate() {
-            check((0.0..=1.0).contains(&c.similarity), &format!("label_confusion[{k}].similarity"), c.similarity, "0 <= x <= 1")?;
+            check(
+                (0.0..=1.0).contains(&c.similarity),
+                &format!("label_confusion[{k}].similarity"),
+                c.similarity,
+                "0 <= x <= 1",
+            )?;
         }
         check((3..=1_000_000).contains(&self.max_objects), "max_objects", self.max_objects, "3..=1000000")?;
         Ok(())

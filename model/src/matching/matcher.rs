@@ -32,7 +32,12 @@ const MIN_RADIUS_FRACTION: f64 = 0.1;
 const RUNNER_UP_CANDIDATES: usize = 64;
 
 /// Matches `remote`'s object graph against `local`'s. Never panics on any valid graphs.
-pub fn match_graphs(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSimilarity, config: &MatcherConfig) -> MatchReport {
+pub fn match_graphs(
+    local: &ObjectGraph,
+    remote: &ObjectGraph,
+    labels: &LabelSimilarity,
+    config: &MatcherConfig,
+) -> MatchReport {
     let mut stats = MatchStats::default();
     let refused = |reason, stats, spectral_matches| MatchReport {
         outcome: MatchOutcome::Refused(Refusal { reason, best_guess: None, significance: 0.0 }),
@@ -40,7 +45,8 @@ pub fn match_graphs(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSim
         stats,
     };
     if local.len() < config.min_matches || remote.len() < config.min_matches {
-        let reason = RefusalReason::TooFewObjects { local: local.len(), remote: remote.len(), required: config.min_matches };
+        let reason =
+            RefusalReason::TooFewObjects { local: local.len(), remote: remote.len(), required: config.min_matches };
         return refused(reason, stats, Vec::new());
     }
 
@@ -199,7 +205,7 @@ pub fn match_graphs(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSim
 /// Returns candidate indices.
 fn spectral_assignment(n_local: usize, n_remote: usize, cands: &[Candidate], x: &[f64], min_score: f64) -> Vec<usize> {
     let max = x.iter().copied().fold(0.0, f64::max);
-    if !(max > 0.0) {
+    if max.is_nan() || max <= 0.0 {
         return Vec::new();
     }
     let mut costs = CostMatrix::filled(n_local, n_remote, 0.0);

@@ -18,10 +18,10 @@ pub mod significance;
 mod spectral;
 mod verification;
 
+pub use affinity::SparseAffinity;
 pub use config::{ConfigError, LabelConfusion, MatcherConfig};
 pub use graph::{GraphError, GraphObject, ObjectGraph};
 pub use labels::LabelSimilarity;
 pub use matcher::match_graphs;
 pub use outcome::{Alignment, MatchOutcome, MatchReport, MatchStats, Refusal, RefusalReason, VerifiedMatch};
 pub use spectral::{principal_eigenvector, Eigen};
-pub use affinity::SparseAffinity;

@@ -52,7 +52,7 @@ pub fn match_dense(
             *out = u[r * dim..(r + 1) * dim].iter().zip(&x).map(|(a, b)| a * b).sum();
         }
         let norm = y.iter().map(|v| v * v).sum::<f64>().sqrt();
-        if !(norm > 0.0) {
+        if norm.is_nan() || norm <= 0.0 {
             break;
         }
         let mut change: f64 = 0.0;
@@ -75,7 +75,9 @@ pub fn match_dense(
         .into_iter()
         .enumerate()
         .filter_map(|(i, a)| a.map(|a| (i, a)))
-        .filter(|&(i, a)| max > 0.0 && x[i * m + a] >= min_assignment_score * max && labels.get(p[i].label, q[a].label) > 0.0)
+        .filter(|&(i, a)| {
+            max > 0.0 && x[i * m + a] >= min_assignment_score * max && labels.get(p[i].label, q[a].label) > 0.0
+        })
         .collect();
     let matches = kept.iter().map(|&(i, a)| (p[i].id, q[a].id)).collect();
     let local_from_remote = if kept.len() >= 3 {

@@ -75,7 +75,10 @@ mod tests {
         for &(n, k, p) in &[(10, 3, 0.1), (30, 12, 0.18), (6, 2, 0.013), (50, 50, 0.5), (20, 1, 0.3)] {
             let got = ln_binomial_tail(n, k, p).exp();
             let want = exact_tail(n, k, p);
-            assert!((got - want).abs() < 1e-12 * want.max(1e-300).max(1.0) && (got / want - 1.0).abs() < 1e-9, "{n} {k} {p}: {got} vs {want}");
+            assert!(
+                (got - want).abs() < 1e-12 * want.max(1e-300).max(1.0) && (got / want - 1.0).abs() < 1e-9,
+                "{n} {k} {p}: {got} vs {want}"
+            );
         }
         assert_eq!(ln_binomial_tail(5, 0, 0.2), 0.0);
         assert_eq!(ln_binomial_tail(5, 6, 0.2), f64::NEG_INFINITY);

@@ -25,7 +25,7 @@ pub fn principal_eigenvector(u: &SparseAffinity, tolerance: f64, max_iterations:
     for iteration in 1..=max_iterations {
         u.multiply(&x, &mut y);
         let norm = y.iter().map(|v| v * v).sum::<f64>().sqrt();
-        if !(norm > 0.0) || !norm.is_finite() {
+        if !norm.is_finite() || norm <= 0.0 {
             return Eigen { vector: x, eigenvalue: 0.0, iterations: iteration, converged: false };
         }
         eigenvalue = norm;

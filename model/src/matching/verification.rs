@@ -77,7 +77,8 @@ impl Grid {
         let cell = radius.max((area / budget).sqrt());
         let nx = ((max_x - min_x) / cell).floor() as i64 + 1;
         let ny = ((max_y - min_y) / cell).floor() as i64 + 1;
-        let index = |x: f64, y: f64| (((y - min_y) / cell).floor() as i64 * nx + ((x - min_x) / cell).floor() as i64) as usize;
+        let index =
+            |x: f64, y: f64| (((y - min_y) / cell).floor() as i64 * nx + ((x - min_x) / cell).floor() as i64) as usize;
         let mut counts = vec![0u32; (nx * ny) as usize + 1];
         for o in objects {
             counts[index(o.centroid.x, o.centroid.y) + 1] += 1;
@@ -118,7 +119,13 @@ impl Grid {
 }
 
 impl<'a> Scorer<'a> {
-    pub fn new(local: &'a ObjectGraph, remote: &'a ObjectGraph, labels: &'a LabelSimilarity, radius: f64, height: f64) -> Self {
+    pub fn new(
+        local: &'a ObjectGraph,
+        remote: &'a ObjectGraph,
+        labels: &'a LabelSimilarity,
+        radius: f64,
+        height: f64,
+    ) -> Self {
         Self {
             local,
             remote,
@@ -195,7 +202,8 @@ impl<'a> Scorer<'a> {
             }
             let Some(pose) = fit_rigid(&pairs, model) else { break };
             let next = self.evaluate(&pose);
-            let same_set = next.inliers.iter().map(|i| (i.local, i.remote)).eq(best.inliers.iter().map(|i| (i.local, i.remote)));
+            let same_set =
+                next.inliers.iter().map(|i| (i.local, i.remote)).eq(best.inliers.iter().map(|i| (i.local, i.remote)));
             if next.score + 1e-12 < best.score && !same_set {
                 break;
             }

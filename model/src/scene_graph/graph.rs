@@ -3,8 +3,7 @@
 //! output derived from it, is deterministic.
 
 use super::{
-    KeyframeEdge, KeyframeId, KeyframeRef, LabelId, Object, ObjectEdge, ObjectId, SceneGraphError,
-    SemanticScan, Stamp,
+    KeyframeEdge, KeyframeId, KeyframeRef, LabelId, Object, ObjectEdge, ObjectId, SceneGraphError, SemanticScan, Stamp,
 };
 use crate::geometry::Pose3;
 use crate::scene_graph::Keyframe;
@@ -165,7 +164,7 @@ impl SceneGraph {
         let anchor = self.objects.get(&id).ok_or(SceneGraphError::UnknownObject(id))?.anchor;
         let anchor_stamp = self.stamp_of(anchor)?;
         let object = self.objects.get_mut(&id).ok_or(SceneGraphError::UnknownObject(id))?;
-        if (new_stamp, keyframe) >= (anchor_stamp, anchor) || !new_stamp.is_finite() {
+        if (new_stamp, keyframe) >= (anchor_stamp, anchor) {
             object.anchor = keyframe;
             object.centroid_in_anchor = world_from_body.inverse_transform_point(&centroid_in_world);
             object.size = size;
@@ -289,7 +288,11 @@ mod tests {
     use nalgebra::Matrix6;
 
     fn kf(id: u32, stamp: f64, x: f64, yaw: f64) -> Keyframe {
-        Keyframe { id: KeyframeId(id), stamp, world_from_body: pose_from_yaw_translation(yaw, Vector3::new(x, 0.0, 0.0)) }
+        Keyframe {
+            id: KeyframeId(id),
+            stamp,
+            world_from_body: pose_from_yaw_translation(yaw, Vector3::new(x, 0.0, 0.0)),
+        }
     }
 
     fn graph_with_three_keyframes() -> SceneGraph {
@@ -349,7 +352,10 @@ mod tests {
             information: Matrix6::identity(),
         };
         assert!(g.add_edge(edge(0, KeyframeRef::Local(KeyframeId(1)))).is_ok());
-        assert_eq!(g.add_edge(edge(0, KeyframeRef::Local(KeyframeId(5)))), Err(SceneGraphError::UnknownKeyframe(KeyframeId(5))));
+        assert_eq!(
+            g.add_edge(edge(0, KeyframeRef::Local(KeyframeId(5)))),
+            Err(SceneGraphError::UnknownKeyframe(KeyframeId(5)))
+        );
         let inter = edge(2, KeyframeRef::Remote { robot: RobotId(1), keyframe: KeyframeId(40) });
         assert!(g.add_edge(KeyframeEdge { kind: KeyframeEdgeKind::InterRobot, ..inter }).is_ok());
         assert_eq!(g.edges().len(), 2);
@@ -368,7 +374,9 @@ mod tests {
         assert!((edges[0].distance_m - 5.0).abs() < 1e-12);
         assert_eq!(g.object_edges(10.0).len(), 1);
         assert_eq!(g.objects_observed_in(KeyframeId(1)).collect::<Vec<_>>(), vec![b, c]);
-        assert!(g.add_object(LabelId(0), Point3::new(f64::NAN, 0.0, 0.0), Vector3::repeat(1.0), KeyframeId(0)).is_err());
+        assert!(g
+            .add_object(LabelId(0), Point3::new(f64::NAN, 0.0, 0.0), Vector3::repeat(1.0), KeyframeId(0))
+            .is_err());
         assert!(g.add_object(LabelId(0), Point3::origin(), Vector3::repeat(1.0), KeyframeId(42)).is_err());
         assert_eq!(g.object_count(), 3);
     }

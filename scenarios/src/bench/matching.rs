@@ -74,7 +74,14 @@ impl Accumulator {
     }
 }
 
-fn run_cell(spec: PairSpec, reps: usize, seed: u64, cell: u64, config: &MatcherConfig, progress: &ProgressBar) -> (CellResult, CellResult) {
+fn run_cell(
+    spec: PairSpec,
+    reps: usize,
+    seed: u64,
+    cell: u64,
+    config: &MatcherConfig,
+    progress: &ProgressBar,
+) -> (CellResult, CellResult) {
     let world = WorldSpec::default();
     let labels = LabelSimilarity::uniform(world.classes as usize, config.mislabel_similarity);
     let hard = LabelSimilarity::hard(world.classes as usize);
@@ -86,7 +93,9 @@ fn run_cell(spec: PairSpec, reps: usize, seed: u64, cell: u64, config: &MatcherC
         let report = match_graphs(&pair.local, &pair.remote, &labels, config);
         sgm.times_ms.push(start.elapsed().as_secs_f64() * 1e3);
         let (pose, matches) = match &report.outcome {
-            MatchOutcome::Aligned(a) => (Some(a.local_from_remote), a.matches.iter().map(|m| (m.local, m.remote)).collect()),
+            MatchOutcome::Aligned(a) => {
+                (Some(a.local_from_remote), a.matches.iter().map(|m| (m.local, m.remote)).collect())
+            }
             MatchOutcome::Refused(_) => (None, Vec::new()),
         };
         sgm.scores.push(score_trial(&pair, pose.as_ref(), &matches));
@@ -117,7 +126,10 @@ pub fn run(reps: usize, seed: u64, json: Option<&Path>) -> anyhow::Result<()> {
     let false_claim_specs = [(8, 8), (15, 15), (35, 32)];
     let cells = (table1_specs.len() * 2 + table2_specs.len() * 2 + false_claim_specs.len() * 2) as u64;
     let progress = ProgressBar::new(cells * reps as u64);
-    progress.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} trials ({eta})").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    progress.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} trials ({eta})")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
 
     let mut cell = 0u64;
     let mut row = |local, remote, overlap, mislabels, paper| {
