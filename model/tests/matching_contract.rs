@@ -136,14 +136,15 @@ fn refuses_pairs_that_share_nothing() {
     let config = MatcherConfig::default();
     let labels = LabelSimilarity::uniform(6, config.mislabel_similarity);
     let mut claims = 0;
-    for seed in 0..40 {
+    for seed in 0..200 {
         let spec = PairSpec { local: 35, remote: 32, overlap: 0, noisy: true, mislabels: 0 };
         let pair = generate_pair(&WorldSpec::default(), &spec, seed);
         if match_graphs(&pair.local, &pair.remote, &labels, &config).outcome.alignment().is_some() {
             claims += 1;
         }
     }
-    assert!(claims <= 1, "{claims} false claims in 40 non-overlapping pairs");
+    // Measured rate ~1% (`sgm bench matching --reps 1000`); fixed seeds make this deterministic.
+    assert!(claims <= 6, "{claims} false claims in 200 non-overlapping pairs");
 }
 
 #[test]

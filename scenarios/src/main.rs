@@ -49,6 +49,12 @@ enum BenchCommand {
         /// Also write the tables as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Matcher configuration (TOML, section [matcher]); SGM__MATCHER__* variables override it.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Do not run the dense paper formulation (its columns then read "-").
+        #[arg(long)]
+        skip_dense: bool,
     },
 }
 
@@ -56,8 +62,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Match { local, remote, config } => cli::match_cmd::run(&local, &remote, config.as_deref()),
-        Command::Bench { which: BenchCommand::Matching { reps, seed, json } } => {
-            match bench::matching::run(reps, seed, json.as_deref()) {
+        Command::Bench { which: BenchCommand::Matching { reps, seed, json, config, skip_dense } } => {
+            match bench::matching::run(bench::matching::Options { reps, seed, json, config, skip_dense }) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("sgm bench matching: {e:#}");

@@ -1,7 +1,7 @@
-//! Candidate associations (i, m): local object i may be remote object m only if their labels are
-//! compatible, d_v(l_i, l_m) > threshold (paper §IV-B: d_v = 0 removes the association).
+//! Candidate associations (i, m): local object i may be remote object m only if they are
+//! compatible, d_v(v_i, v_m) > threshold (paper §IV-B: d_v = 0 removes the association).
 
-use super::labels::LabelSimilarity;
+use super::vertex::VertexCompare;
 use super::ObjectGraph;
 
 /// One candidate association between local object `local` and remote object `remote` (indices
@@ -17,13 +17,13 @@ pub struct Candidate {
 pub fn candidates(
     local: &ObjectGraph,
     remote: &ObjectGraph,
-    labels: &LabelSimilarity,
+    vertices: &VertexCompare,
     min_similarity: f64,
 ) -> Vec<Candidate> {
     let mut out = Vec::new();
     for (i, a) in local.objects().iter().enumerate() {
         for (m, b) in remote.objects().iter().enumerate() {
-            let s = labels.get(a.label, b.label);
+            let s = vertices.similarity(a, b);
             if s > 0.0 && s >= min_similarity {
                 out.push(Candidate { local: i as u32, remote: m as u32, label_similarity: s });
             }

@@ -16,7 +16,8 @@ pub struct MatcherConfig {
     /// drift), m. Default 60.0.
     pub max_edge_length_m: f64,
     /// Each local object's edges in the affinity are limited to its this-many nearest neighbours
-    /// (keeps large graphs sparse; the paper's graphs are fully connected). Default 24.
+    /// (keeps large graphs sparse and the eigenvector informative; the paper's graphs are fully
+    /// connected). Default 12.
     pub max_neighbours: usize,
     /// Power-iteration stop: largest change of any eigenvector entry, relative to the largest
     /// entry. Default 1e-5.
@@ -29,6 +30,9 @@ pub struct MatcherConfig {
     /// Candidate associations, best eigenvector entries first, that seed rigid hypotheses.
     /// Default 40.
     pub hypothesis_pool: usize,
+    /// Seed pairs sampled along the affinity rows when the pool yields no significant transform
+    /// (large graphs). 0 disables the second stage. Default 1024.
+    pub hypothesis_samples: usize,
     /// A match is an inlier of a transform when the transformed remote centroid lies within this
     /// horizontal distance of the local one, m. Default 3.0 (the paper's ±1 m error on both
     /// graphs puts true pairs up to 2.8 m apart).
@@ -50,6 +54,10 @@ pub struct MatcherConfig {
     /// Similarity of two different labels (0 = hard labels as in the paper; > 0 lets mislabelled
     /// objects count as evidence). Default 0.3.
     pub mislabel_similarity: f64,
+    /// Compare objects' heights (vertical extent of `size`) when both report one. Default true.
+    pub compare_heights: bool,
+    /// Largest height difference of two views of one object, m. Default 0.5.
+    pub height_tolerance_m: f64,
     /// Per-pair overrides of label similarity, e.g. chair/sofa 0.6.
     pub label_confusion: Vec<LabelConfusion>,
     /// Rigid model of the final estimate. Default planar (x, y, yaw + z offset, paper §IV-C).
@@ -73,11 +81,12 @@ impl Default for MatcherConfig {
             edge_sharpness: 1.0,
             edge_tolerance_m: 3.0,
             max_edge_length_m: 60.0,
-            max_neighbours: 24,
+            max_neighbours: 12,
             power_tolerance: 1e-5,
             max_power_iterations: 200,
             min_assignment_score: 0.1,
             hypothesis_pool: 40,
+            hypothesis_samples: 1024,
             inlier_distance_m: 3.0,
             inlier_height_m: 1.5,
             max_false_alarms: 0.1,
@@ -85,6 +94,8 @@ impl Default for MatcherConfig {
             min_matches: 3,
             min_spread_m: 0.5,
             mislabel_similarity: 0.3,
+            compare_heights: true,
+            height_tolerance_m: 0.5,
             label_confusion: Vec::new(),
             model: RigidModel::Planar,
             max_objects: 4096,
@@ -130,6 +141,7 @@ impl MatcherConfig {
             "0 <= x < 1",
         )?;
         check((2..=1024).contains(&self.hypothesis_pool), "hypothesis_pool", self.hypothesis_pool, "2..=1024")?;
+        check(self.hypothesis_samples <= 1_000_000, "hypothesis_samples", self.hypothesis_samples, "0..=1000000")?;
         check(positive(self.inlier_distance_m), "inlier_distance_m", self.inlier_distance_m, "finite and > 0")?;
         check(positive(self.inlier_height_m), "inlier_height_m", self.inlier_height_m, "finite and > 0")?;
         check(positive(self.max_false_alarms), "max_false_alarms", self.max_false_alarms, "finite and > 0")?;
@@ -152,6 +164,7 @@ impl MatcherConfig {
             self.mislabel_similarity,
             "0 <= x < 1",
         )?;
+        check(positive(self.height_tolerance_m), "height_tolerance_m", self.height_tolerance_m, "finite and > 0")?;
         for (k, c) in self.label_confusion.iter().enumerate() {
             check(
                 (0.0..=1.0).contains(&c.similarity),

@@ -1,11 +1,12 @@
 //! The matching pipeline: composition only (kiss-icp style). Each stage is its own module.
 //!
-//! 1. candidates (§IV-B, d_v > 0)           → `candidates`
+//! 1. candidates (§IV-B, d_v > 0, `vertex`)  → `candidates`
 //! 2. sparse affinity U (eqs. 5–7)           → `affinity`
 //! 3. principal eigenvector x (eq. 8)        → `spectral`
 //! 4. LAP on −x, minimum score (§IV-B)       → `lap`
-//! 5. rigid hypotheses from pairs of the best associations, inlier scoring, refinement
-//!    (beyond the paper)                     → `verification`
+//! 5. rigid hypotheses from pairs of the best associations (then, if none is significant, from
+//!    pairs sampled along the affinity rows), inlier scoring, refinement (beyond the paper):
+//!    `verification`
 //! 6. refusal: too few, collinear, not significant (NFA), ambiguous → `significance`
 //! 7. weighted least-squares transform (§IV-C) → `geometry::fit_rigid` (inside refinement)
 
@@ -17,9 +18,13 @@ use super::outcome::*;
 use super::significance::log10_nfa_adaptive;
 use super::spectral::principal_eigenvector;
 use super::verification::{max_displacement, Evaluation, Scorer};
+use super::vertex::VertexCompare;
 use super::{MatcherConfig, ObjectGraph};
 use crate::geometry::{fit_rigid, minor_axis_spread, Correspondence, RigidModel};
 use nalgebra::Point3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::collections::HashSet;
 
 /// Minimum d_v for an association to enter the spectral stage; weaker (confused-label)
 /// associations only count as verification evidence.
@@ -28,6 +33,8 @@ const SPECTRAL_MIN_LABEL_SIMILARITY: f64 = 0.5;
 const REFINE_ROUNDS: usize = 5;
 /// Smallest radius of the significance test, as a fraction of the inlier distance.
 const MIN_RADIUS_FRACTION: f64 = 0.1;
+/// Seed of the generator that samples stage-2 hypotheses (fixed: same input, same output).
+const SAMPLING_SEED: u64 = 0x5347_4d5f_7365_6564;
 /// Number of top hypotheses examined for a runner-up.
 const RUNNER_UP_CANDIDATES: usize = 64;
 
@@ -51,7 +58,8 @@ pub fn match_graphs(
     }
 
     // 1–3: spectral relaxation over label-compatible candidates.
-    let strong = candidates(local, remote, labels, SPECTRAL_MIN_LABEL_SIMILARITY);
+    let vertices = VertexCompare::new(labels, config);
+    let strong = candidates(local, remote, &vertices, SPECTRAL_MIN_LABEL_SIMILARITY);
     stats.candidates = strong.len();
     if strong.is_empty() {
         return refused(RefusalReason::NoCandidates, stats, Vec::new());
@@ -86,33 +94,40 @@ pub fn match_graphs(
         in_assignment[b].cmp(&in_assignment[a]).then(eigen.vector[b].total_cmp(&eigen.vector[a])).then(a.cmp(&b))
     });
     pool.truncate(config.hypothesis_pool);
-    let scorer = Scorer::new(local, remote, labels, config.inlier_distance_m, config.inlier_height_m);
-    // A seed pair already explained by the best hypothesis so far would reproduce it: it counts
-    // as a test but is not evaluated again.
-    let mut hypotheses: Vec<Evaluation> = Vec::new();
-    let mut best_score = f64::NEG_INFINITY;
-    // remote index explained for each local object by the best hypothesis so far.
-    let mut explained = vec![u32::MAX; local.len()];
-    let mut tests = 0usize;
+    // Stage 1: every pair of the pool. Stage 2, only when stage 1 found nothing significant (large
+    // graphs, where spurious associations collect as much affinity as true ones and the
+    // eigenvector ranks poorly): seed pairs sampled from the affinity rows — a candidate and one
+    // of its consistent partners — with a fixed-seed generator.
+    let scorer = Scorer::new(local, remote, &vertices, config.inlier_distance_m, config.inlier_height_m);
+    let null = NullModel::new(local, remote, &vertices, config.inlier_distance_m);
+    let required = -config.max_false_alarms.log10();
+    let mut search = Search::new(local.len());
     for (x, &a) in pool.iter().enumerate() {
         for &b in &pool[x + 1..] {
-            let (ca, cb) = (&strong[a], &strong[b]);
-            let Some(pose) = seed_transform(local, remote, ca, cb, config) else { continue };
-            tests += 1;
-            if explained[ca.local as usize] == ca.remote && explained[cb.local as usize] == cb.remote {
-                continue;
-            }
-            let e = scorer.evaluate(&pose);
-            if e.score > best_score {
-                best_score = e.score;
-                explained.fill(u32::MAX);
-                for i in &e.inliers {
-                    explained[i.local as usize] = i.remote;
-                }
-            }
-            hypotheses.push(e);
+            search.try_seed(local, remote, &strong, (a, b), config, &scorer);
         }
     }
+    let stage_one_significant = search
+        .best()
+        .map(|b| {
+            null.significance(&scorer.refine(b.clone(), config.model, REFINE_ROUNDS), search.tests, remote) >= required
+        })
+        .unwrap_or(false);
+    if !stage_one_significant && config.hypothesis_samples > 0 {
+        let mut rng = ChaCha8Rng::seed_from_u64(SAMPLING_SEED);
+        for _ in 0..config.hypothesis_samples {
+            let a = rng.random_range(0..strong.len());
+            let row = &u.cols[u.row_start[a]..u.row_start[a + 1]];
+            if row.len() < 2 {
+                continue;
+            }
+            let b = row[rng.random_range(0..row.len())] as usize;
+            if b != a {
+                search.try_seed(local, remote, &strong, (a, b), config, &scorer);
+            }
+        }
+    }
+    let (mut hypotheses, tests) = (search.hypotheses, search.tests);
     stats.hypotheses = tests;
     if hypotheses.is_empty() {
         return refused(RefusalReason::NoConsistentPair, stats, spectral_matches);
@@ -121,9 +136,7 @@ pub fn match_graphs(
     let best = scorer.refine(hypotheses[0].clone(), config.model, REFINE_ROUNDS);
 
     // 6: refusals.
-    let null = NullModel::new(local, remote, labels, config.inlier_distance_m);
     let significance = null.significance(&best, tests, remote);
-    let required = -config.max_false_alarms.log10();
     let refuse = |reason| MatchReport {
         outcome: MatchOutcome::Refused(Refusal { reason, best_guess: Some(best.local_from_remote), significance }),
         spectral_matches: Vec::new(),
@@ -173,7 +186,7 @@ pub fn match_graphs(
             .map(|i| Correspondence {
                 in_local: local.objects()[i.local as usize].centroid,
                 in_remote: remote.objects()[i.remote as usize].centroid,
-                weight: labels.get(local.objects()[i.local as usize].label, remote.objects()[i.remote as usize].label),
+                weight: vertices.similarity(&local.objects()[i.local as usize], &remote.objects()[i.remote as usize]),
             })
             .collect::<Vec<_>>(),
         config.model,
@@ -198,6 +211,65 @@ pub fn match_graphs(
         outcome: MatchOutcome::Aligned(Alignment { local_from_remote, matches, significance, rmse_m }),
         spectral_matches,
         stats,
+    }
+}
+
+/// Hypotheses tried so far. A seed pair already explained by the best hypothesis so far would
+/// reproduce it: it counts as a test but is not evaluated again.
+struct Search {
+    hypotheses: Vec<Evaluation>,
+    /// Distinct seed pairs tried (N_tests of the significance test).
+    tests: usize,
+    /// Candidate pairs (smaller index first) already tried.
+    tried: HashSet<(u32, u32)>,
+    best: Option<usize>,
+    /// Remote index explained for each local object by the best hypothesis so far.
+    explained: Vec<u32>,
+}
+
+impl Search {
+    fn new(local_len: usize) -> Self {
+        Self {
+            hypotheses: Vec::new(),
+            tests: 0,
+            tried: HashSet::new(),
+            best: None,
+            explained: vec![u32::MAX; local_len],
+        }
+    }
+
+    fn best(&self) -> Option<&Evaluation> {
+        self.best.map(|k| &self.hypotheses[k])
+    }
+
+    /// Tries the seed pair of candidates `ia`, `ib` (indices into `cands`), once.
+    fn try_seed(
+        &mut self,
+        local: &ObjectGraph,
+        remote: &ObjectGraph,
+        cands: &[Candidate],
+        (ia, ib): (usize, usize),
+        config: &MatcherConfig,
+        scorer: &Scorer,
+    ) {
+        if !self.tried.insert((ia.min(ib) as u32, ia.max(ib) as u32)) {
+            return;
+        }
+        let (a, b) = (&cands[ia], &cands[ib]);
+        let Some(pose) = seed_transform(local, remote, a, b, config) else { return };
+        self.tests += 1;
+        if self.explained[a.local as usize] == a.remote && self.explained[b.local as usize] == b.remote {
+            return;
+        }
+        let e = scorer.evaluate(&pose);
+        if self.best().is_none_or(|best| e.score > best.score) {
+            self.best = Some(self.hypotheses.len());
+            self.explained.fill(u32::MAX);
+            for i in &e.inliers {
+                self.explained[i.local as usize] = i.remote;
+            }
+        }
+        self.hypotheses.push(e);
     }
 }
 
@@ -263,7 +335,7 @@ struct NullModel {
 }
 
 impl NullModel {
-    fn new(local: &ObjectGraph, remote: &ObjectGraph, labels: &LabelSimilarity, radius: f64) -> Self {
+    fn new(local: &ObjectGraph, remote: &ObjectGraph, vertices: &VertexCompare, radius: f64) -> Self {
         let (mut min, mut max) = (Point3::new(f64::MAX, f64::MAX, 0.0), Point3::new(f64::MIN, f64::MIN, 0.0));
         for o in local.objects() {
             min.x = min.x.min(o.centroid.x - radius);
@@ -272,11 +344,8 @@ impl NullModel {
             max.y = max.y.max(o.centroid.y + radius);
         }
         let count = |q: &super::GraphObject, same: bool| {
-            local
-                .objects()
-                .iter()
-                .filter(|p| if same { p.label == q.label } else { labels.get(p.label, q.label) > 0.0 })
-                .count() as f64
+            local.objects().iter().filter(|p| vertices.similarity(p, q) > 0.0 && (!same || p.label == q.label)).count()
+                as f64
         };
         Self {
             area_m2: ((max.x - min.x) * (max.y - min.y)).max(1e-9),
@@ -285,7 +354,7 @@ impl NullModel {
             max,
             same_label: remote.objects().iter().map(|q| count(q, true)).collect(),
             any_label: remote.objects().iter().map(|q| count(q, false)).collect(),
-            soft: labels.is_soft(),
+            soft: vertices.labels.is_soft(),
         }
     }
 

@@ -17,6 +17,7 @@ pub mod paper_baseline;
 pub mod significance;
 mod spectral;
 mod verification;
+mod vertex;
 
 pub use affinity::SparseAffinity;
 pub use config::{ConfigError, LabelConfusion, MatcherConfig};
@@ -25,3 +26,4 @@ pub use labels::LabelSimilarity;
 pub use matcher::match_graphs;
 pub use outcome::{Alignment, MatchOutcome, MatchReport, MatchStats, Refusal, RefusalReason, VerifiedMatch};
 pub use spectral::{principal_eigenvector, Eigen};
+pub use vertex::VertexCompare;

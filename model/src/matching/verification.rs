@@ -8,7 +8,7 @@
 //! (MSAC) d_v(l_i, l_m) · (1 − ρ²), ρ² = (d_xy / r)² + (d_z / r_z)². Each object is used once
 //! (the heavier claim wins). The score is the sum of weights.
 
-use super::labels::LabelSimilarity;
+use super::vertex::VertexCompare;
 use super::ObjectGraph;
 use crate::geometry::{fit_rigid, Correspondence, Pose3, RigidModel};
 use nalgebra::Point3;
@@ -39,7 +39,7 @@ pub struct Evaluation {
 pub struct Scorer<'a> {
     local: &'a ObjectGraph,
     remote: &'a ObjectGraph,
-    labels: &'a LabelSimilarity,
+    vertices: &'a VertexCompare<'a>,
     radius: f64,
     height: f64,
     grid: Grid,
@@ -122,14 +122,14 @@ impl<'a> Scorer<'a> {
     pub fn new(
         local: &'a ObjectGraph,
         remote: &'a ObjectGraph,
-        labels: &'a LabelSimilarity,
+        vertices: &'a VertexCompare<'a>,
         radius: f64,
         height: f64,
     ) -> Self {
         Self {
             local,
             remote,
-            labels,
+            vertices,
             radius,
             height,
             grid: Grid::new(local, radius),
@@ -155,7 +155,7 @@ impl<'a> Scorer<'a> {
                 if dxy2 > r2 || d.z.abs() > h {
                     return;
                 }
-                let similarity = self.labels.get(p.label, q.label);
+                let similarity = self.vertices.similarity(p, q);
                 if similarity <= 0.0 {
                     return;
                 }

@@ -8,7 +8,8 @@ use serde::Serialize;
 use sgm_model::eval::matching_protocol::{generate_pair, score_trial, PairSpec, TrialScore, WorldSpec};
 use sgm_model::matching::paper_baseline::match_dense;
 use sgm_model::matching::{match_graphs, LabelSimilarity, MatchOutcome, MatcherConfig};
-use std::path::Path;
+use sgm_scenarios::settings::load_matcher_config;
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// The paper's published figure for a cell (success NoErr, Err; recall NoErr, Err; time ms).
@@ -37,7 +38,7 @@ struct Row {
     paper: Option<PaperFigures>,
     /// [NoErr, Err]
     sgm: [CellResult; 2],
-    dense_paper_formulation: [CellResult; 2],
+    dense_paper_formulation: Option<[CellResult; 2]>,
 }
 
 #[derive(Serialize)]
@@ -80,8 +81,9 @@ fn run_cell(
     seed: u64,
     cell: u64,
     config: &MatcherConfig,
+    skip_dense: bool,
     progress: &ProgressBar,
-) -> (CellResult, CellResult) {
+) -> (CellResult, Option<CellResult>) {
     let world = WorldSpec::default();
     let labels = LabelSimilarity::uniform(world.classes as usize, config.mislabel_similarity);
     let hard = LabelSimilarity::hard(world.classes as usize);
@@ -100,18 +102,36 @@ fn run_cell(
         };
         sgm.scores.push(score_trial(&pair, pose.as_ref(), &matches));
 
+        if skip_dense {
+            progress.inc(1);
+            continue;
+        }
         let start = Instant::now();
         let paper = match_dense(&pair.local, &pair.remote, &hard, config.edge_sharpness, config.min_assignment_score);
         dense.times_ms.push(start.elapsed().as_secs_f64() * 1e3);
         dense.scores.push(score_trial(&pair, paper.local_from_remote.as_ref(), &paper.matches));
         progress.inc(1);
     }
-    (sgm.finish(), dense.finish())
+    (sgm.finish(), (!skip_dense).then(|| dense.finish()))
 }
 
-pub fn run(reps: usize, seed: u64, json: Option<&Path>) -> anyhow::Result<()> {
+/// What `sgm bench matching` was asked for.
+pub struct Options {
+    pub reps: usize,
+    pub seed: u64,
+    pub json: Option<PathBuf>,
+    pub config: Option<PathBuf>,
+    pub skip_dense: bool,
+}
+
+pub fn run(options: Options) -> anyhow::Result<()> {
+    let Options { reps, seed, json, config: config_path, skip_dense } = options;
     anyhow::ensure!(reps > 0, "--reps must be at least 1");
-    let config = MatcherConfig::default();
+    let config_path = config_path.as_deref();
+    let json = json.as_deref();
+    let config = load_matcher_config(config_path)?;
+    let overrides: Vec<String> =
+        std::env::vars().filter(|(k, _)| k.starts_with("SGM__")).map(|(k, v)| format!("{k}={v} ")).collect();
     let table1_specs: [(usize, usize, usize, PaperFigures); 3] = [
         (8, 8, 4, PaperFigures { success: [100.0, 65.0], recall: [100.0, 100.0], time_ms: 7.0 }),
         (15, 15, 7, PaperFigures { success: [100.0, 100.0], recall: [100.0, 100.0], time_ms: 14.0 }),
@@ -137,17 +157,26 @@ pub fn run(reps: usize, seed: u64, json: Option<&Path>) -> anyhow::Result<()> {
         let mut dense = [CellResult::default(); 2];
         for (k, noisy) in [false, true].into_iter().enumerate() {
             let spec = PairSpec { local, remote, overlap, noisy, mislabels };
-            (sgm[k], dense[k]) = run_cell(spec, reps, seed, cell, &config, &progress);
+            let (s, d) = run_cell(spec, reps, seed, cell, &config, skip_dense, &progress);
+            sgm[k] = s;
+            dense[k] = d.unwrap_or(CellResult {
+                success_pct: f64::NAN,
+                recall_pct: f64::NAN,
+                claims_pct: f64::NAN,
+                median_ms: f64::NAN,
+            });
             cell += 1;
         }
-        Row { local, remote, overlap, mislabels, paper, sgm, dense_paper_formulation: dense }
+        Row { local, remote, overlap, mislabels, paper, sgm, dense_paper_formulation: (!skip_dense).then_some(dense) }
     };
     let table1: Vec<Row> = table1_specs.iter().map(|&(l, r, o, p)| row(l, r, o, 0, Some(p))).collect();
     let table2: Vec<Row> = table2_specs.iter().map(|&(m, p)| row(35, 32, 17, m, Some(p))).collect();
     let false_claims: Vec<Row> = false_claim_specs.iter().map(|&(l, r)| row(l, r, 0, 0, None)).collect();
     progress.finish_and_clear();
 
-    let command = format!("sgm bench matching --reps {reps} --seed {seed}");
+    let config_arg = config_path.map(|p| format!(" --config {}", p.display())).unwrap_or_default();
+    let skip_arg = if skip_dense { " --skip-dense" } else { "" };
+    let command = format!("{}sgm bench matching --reps {reps} --seed {seed}{config_arg}{skip_arg}", overrides.concat());
     print_tables(&command, reps, &table1, &table2, &false_claims);
     if let Some(path) = json {
         let report = Report { command, reps, seed, table1, table2, false_claims };
@@ -177,7 +206,7 @@ fn print_tables(command: &str, reps: usize, table1: &[Row], table2: &[Row], fals
     println!("| G1 | G2 | claims NoErr % (dense / SGM) | claims Err % (dense / SGM) |");
     println!("|---|---|---|---|");
     for r in false_claims {
-        let d = &r.dense_paper_formulation;
+        let d = dense_or_nan(r);
         println!(
             "| {} | {} | {:.0} / {:.1} | {:.0} / {:.1} |",
             r.local, r.remote, d[0].claims_pct, r.sgm[0].claims_pct, d[1].claims_pct, r.sgm[1].claims_pct
@@ -187,7 +216,7 @@ fn print_tables(command: &str, reps: usize, table1: &[Row], table2: &[Row], fals
 
 fn cells(r: &Row) -> String {
     let paper = r.paper.unwrap_or(PaperFigures { success: [f64::NAN; 2], recall: [f64::NAN; 2], time_ms: f64::NAN });
-    let (s, d) = (&r.sgm, &r.dense_paper_formulation);
+    let (s, d) = (&r.sgm, dense_or_nan(r));
     format!(
         "{:.0} / {:.0} / **{:.0}** | {:.0} / {:.0} / **{:.0}** | {:.0} / **{:.0}** | {:.0} / **{:.0}** | {:.0} / {:.2} / **{:.3}**",
         paper.success[0], d[0].success_pct, s[0].success_pct,
@@ -196,4 +225,9 @@ fn cells(r: &Row) -> String {
         paper.recall[1], s[1].recall_pct,
         paper.time_ms, d[1].median_ms, s[1].median_ms,
     )
+}
+
+fn dense_or_nan(r: &Row) -> [CellResult; 2] {
+    let nan = CellResult { success_pct: f64::NAN, recall_pct: f64::NAN, claims_pct: f64::NAN, median_ms: f64::NAN };
+    r.dense_paper_formulation.unwrap_or([nan; 2])
 }
