@@ -171,3 +171,28 @@ fn same_input_gives_identical_output() {
     let b = match_graphs(&pair.local, &pair.remote, &labels, &config);
     assert_eq!(a, b);
 }
+
+#[test]
+fn large_graphs_match_at_the_paper_density() {
+    // 200 / 200 objects, half shared, noisy: the eigenvector ranks poorly at this size (stage-2
+    // seed sampling and the Lanczos solver are exercised); every pair must still align.
+    let config = MatcherConfig::default();
+    let labels = LabelSimilarity::uniform(6, config.mislabel_similarity);
+    for seed in 0..3 {
+        let spec = PairSpec { local: 200, remote: 200, overlap: 100, noisy: true, mislabels: 0 };
+        let pair = generate_pair(&WorldSpec::with_density_for(300), &spec, seed);
+        let report = match_graphs(&pair.local, &pair.remote, &labels, &config);
+        let a = report.outcome.alignment().unwrap_or_else(|| panic!("seed {seed}: {:?}", report.outcome));
+        let e = pose_error(&a.local_from_remote, &pair.local_from_remote);
+        assert!(e.translation_m < 2.0 && e.max_axis_rotation_deg() < 20.0, "seed {seed}: {e:?}");
+        let correct = a.matches.iter().filter(|m| pair.true_pairs.contains(&(m.local, m.remote))).count();
+        assert!(
+            correct * 10 >= pair.true_pairs.len() * 9,
+            "seed {seed}: {correct} of {} shared objects",
+            pair.true_pairs.len()
+        );
+        // Unshared objects that happen to lie within the inlier radius of a compatible local
+        // object are indistinguishable by geometry: measured precision 91–98% here.
+        assert!(correct * 10 >= a.matches.len() * 9, "seed {seed}: precision {correct} of {}", a.matches.len());
+    }
+}

@@ -208,9 +208,23 @@ fn print_tables(command: &str, reps: usize, table1: &[Row], table2: &[Row], fals
     for r in false_claims {
         let d = dense_or_nan(r);
         println!(
-            "| {} | {} | {:.0} / {:.1} | {:.0} / {:.1} |",
-            r.local, r.remote, d[0].claims_pct, r.sgm[0].claims_pct, d[1].claims_pct, r.sgm[1].claims_pct
+            "| {} | {} | {} / {} | {} / {} |",
+            r.local,
+            r.remote,
+            num(d[0].claims_pct, 0),
+            num(r.sgm[0].claims_pct, 1),
+            num(d[1].claims_pct, 0),
+            num(r.sgm[1].claims_pct, 1)
         );
+    }
+}
+
+/// A percentage or time with `decimals`, "–" where not measured.
+fn num(v: f64, decimals: usize) -> String {
+    if v.is_nan() {
+        "–".to_string()
+    } else {
+        format!("{v:.decimals$}")
     }
 }
 
@@ -218,12 +232,20 @@ fn cells(r: &Row) -> String {
     let paper = r.paper.unwrap_or(PaperFigures { success: [f64::NAN; 2], recall: [f64::NAN; 2], time_ms: f64::NAN });
     let (s, d) = (&r.sgm, dense_or_nan(r));
     format!(
-        "{:.0} / {:.0} / **{:.0}** | {:.0} / {:.0} / **{:.0}** | {:.0} / **{:.0}** | {:.0} / **{:.0}** | {:.0} / {:.2} / **{:.3}**",
-        paper.success[0], d[0].success_pct, s[0].success_pct,
-        paper.success[1], d[1].success_pct, s[1].success_pct,
-        paper.recall[0], s[0].recall_pct,
-        paper.recall[1], s[1].recall_pct,
-        paper.time_ms, d[1].median_ms, s[1].median_ms,
+        "{} / {} / **{}** | {} / {} / **{}** | {} / **{}** | {} / **{}** | {} / {} / **{}**",
+        num(paper.success[0], 0),
+        num(d[0].success_pct, 0),
+        num(s[0].success_pct, 1),
+        num(paper.success[1], 0),
+        num(d[1].success_pct, 0),
+        num(s[1].success_pct, 1),
+        num(paper.recall[0], 0),
+        num(s[0].recall_pct, 1),
+        num(paper.recall[1], 0),
+        num(s[1].recall_pct, 1),
+        num(paper.time_ms, 0),
+        num(d[1].median_ms, 2),
+        num(s[1].median_ms, 3),
     )
 }
 
