@@ -52,9 +52,12 @@ enum BenchCommand {
         /// Matcher configuration (TOML, section [matcher]); SGM__MATCHER__* variables override it.
         #[arg(long)]
         config: Option<PathBuf>,
-        /// Do not run the dense paper formulation (its columns then read "-").
+        /// Do not run the dense paper formulation (its columns then read "–").
         #[arg(long)]
         skip_dense: bool,
+        /// Which graphs carry the "Err" position error (the paper does not say).
+        #[arg(long, value_enum, default_value_t = bench::matching::ErrorOnArg::Both)]
+        error_on: bench::matching::ErrorOnArg,
     },
 }
 
@@ -62,8 +65,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Match { local, remote, config } => cli::match_cmd::run(&local, &remote, config.as_deref()),
-        Command::Bench { which: BenchCommand::Matching { reps, seed, json, config, skip_dense } } => {
-            match bench::matching::run(bench::matching::Options { reps, seed, json, config, skip_dense }) {
+        Command::Bench { which: BenchCommand::Matching { reps, seed, json, config, skip_dense, error_on } } => {
+            match bench::matching::run(bench::matching::Options { reps, seed, json, config, skip_dense, error_on }) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("sgm bench matching: {e:#}");

@@ -5,7 +5,7 @@
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
-use sgm_model::eval::matching_protocol::{generate_pair, score_trial, PairSpec, TrialScore, WorldSpec};
+use sgm_model::eval::matching_protocol::{generate_pair, score_trial, ErrorOn, PairSpec, TrialScore, WorldSpec};
 use sgm_model::matching::paper_baseline::match_dense;
 use sgm_model::matching::{match_graphs, LabelSimilarity, MatchOutcome, MatcherConfig};
 use sgm_scenarios::settings::load_matcher_config;
@@ -75,16 +75,18 @@ impl Accumulator {
     }
 }
 
-fn run_cell(
-    spec: PairSpec,
+/// What every cell of one run shares.
+struct Setup<'a> {
     reps: usize,
     seed: u64,
-    cell: u64,
-    config: &MatcherConfig,
+    world: WorldSpec,
+    config: &'a MatcherConfig,
     skip_dense: bool,
-    progress: &ProgressBar,
-) -> (CellResult, Option<CellResult>) {
-    let world = WorldSpec::default();
+    progress: &'a ProgressBar,
+}
+
+fn run_cell(spec: PairSpec, cell: u64, setup: &Setup) -> (CellResult, Option<CellResult>) {
+    let Setup { reps, seed, world, config, skip_dense, progress } = *setup;
     let labels = LabelSimilarity::uniform(world.classes as usize, config.mislabel_similarity);
     let hard = LabelSimilarity::hard(world.classes as usize);
     let (mut sgm, mut dense) = (Accumulator::new(), Accumulator::new());
@@ -115,6 +117,13 @@ fn run_cell(
     (sgm.finish(), (!skip_dense).then(|| dense.finish()))
 }
 
+/// `--error-on`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ErrorOnArg {
+    Both,
+    Remote,
+}
+
 /// What `sgm bench matching` was asked for.
 pub struct Options {
     pub reps: usize,
@@ -122,10 +131,18 @@ pub struct Options {
     pub json: Option<PathBuf>,
     pub config: Option<PathBuf>,
     pub skip_dense: bool,
+    pub error_on: ErrorOnArg,
 }
 
 pub fn run(options: Options) -> anyhow::Result<()> {
-    let Options { reps, seed, json, config: config_path, skip_dense } = options;
+    let Options { reps, seed, json, config: config_path, skip_dense, error_on } = options;
+    let world = WorldSpec {
+        error_on: match error_on {
+            ErrorOnArg::Both => ErrorOn::Both,
+            ErrorOnArg::Remote => ErrorOn::RemoteOnly,
+        },
+        ..WorldSpec::default()
+    };
     anyhow::ensure!(reps > 0, "--reps must be at least 1");
     let config_path = config_path.as_deref();
     let json = json.as_deref();
@@ -151,13 +168,14 @@ pub fn run(options: Options) -> anyhow::Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
 
+    let setup = Setup { reps, seed, world, config: &config, skip_dense, progress: &progress };
     let mut cell = 0u64;
     let mut row = |local, remote, overlap, mislabels, paper| {
         let mut sgm = [CellResult::default(); 2];
         let mut dense = [CellResult::default(); 2];
         for (k, noisy) in [false, true].into_iter().enumerate() {
             let spec = PairSpec { local, remote, overlap, noisy, mislabels };
-            let (s, d) = run_cell(spec, reps, seed, cell, &config, skip_dense, &progress);
+            let (s, d) = run_cell(spec, cell, &setup);
             sgm[k] = s;
             dense[k] = d.unwrap_or(CellResult {
                 success_pct: f64::NAN,
@@ -176,6 +194,10 @@ pub fn run(options: Options) -> anyhow::Result<()> {
 
     let config_arg = config_path.map(|p| format!(" --config {}", p.display())).unwrap_or_default();
     let skip_arg = if skip_dense { " --skip-dense" } else { "" };
+    let skip_arg = match error_on {
+        ErrorOnArg::Both => skip_arg.to_string(),
+        ErrorOnArg::Remote => format!("{skip_arg} --error-on remote"),
+    };
     let command = format!("{}sgm bench matching --reps {reps} --seed {seed}{config_arg}{skip_arg}", overrides.concat());
     print_tables(&command, reps, &table1, &table2, &false_claims);
     if let Some(path) = json {
