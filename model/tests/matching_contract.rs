@@ -24,6 +24,16 @@ fn graph(points: &[(f64, f64, f64, u16)], remote_from_local: &Pose3, id_offset: 
     ObjectGraph::new(objects, 10_000).unwrap()
 }
 
+/// Eight objects on a circle of radius 20 m, labelled by `label(k)`.
+fn ring_of_eight(label: impl Fn(usize) -> u16) -> Vec<(f64, f64, f64, u16)> {
+    (0..8)
+        .map(|k| {
+            let a = k as f64 * std::f64::consts::TAU / 8.0;
+            (20.0 * a.cos(), 20.0 * a.sin(), 0.5, label(k))
+        })
+        .collect()
+}
+
 fn refusal(outcome: &MatchOutcome) -> Option<&RefusalReason> {
     match outcome {
         MatchOutcome::Refused(r) => Some(&r.reason),
@@ -89,12 +99,7 @@ fn refuses_collinear_objects() {
 #[test]
 fn refuses_symmetric_layouts() {
     // Eight identical chairs on a circle: every rotation by 45° explains the data equally well.
-    let ring: Vec<(f64, f64, f64, u16)> = (0..8)
-        .map(|k| {
-            let a = k as f64 * std::f64::consts::TAU / 8.0;
-            (20.0 * a.cos(), 20.0 * a.sin(), 0.5, 0)
-        })
-        .collect();
+    let ring = ring_of_eight(|_| 0);
     let remote_from_local = pose_from_yaw_translation(1.1, Vector3::new(30.0, 5.0, 0.0));
     let local = graph(&ring, &Pose3::identity(), 0);
     let remote = graph(&ring, &remote_from_local, 100);
@@ -104,23 +109,15 @@ fn refuses_symmetric_layouts() {
 
 #[test]
 fn breaking_the_symmetry_with_labels_allows_the_match() {
-    let ring: Vec<(f64, f64, f64, u16)> = (0..8)
-        .map(|k| {
-            let a = k as f64 * std::f64::consts::TAU / 8.0;
-            (
-                20.0 * a.cos(),
-                20.0 * a.sin(),
-                0.5,
-                if k == 0 {
-                    1
-                } else if k == 3 {
-                    2
-                } else {
-                    0
-                },
-            )
-        })
-        .collect();
+    let ring = ring_of_eight(|k| {
+        if k == 0 {
+            1
+        } else if k == 3 {
+            2
+        } else {
+            0
+        }
+    });
     let remote_from_local = pose_from_yaw_translation(1.1, Vector3::new(30.0, 5.0, 0.0));
     let local = graph(&ring, &Pose3::identity(), 0);
     let remote = graph(&ring, &remote_from_local, 100);
