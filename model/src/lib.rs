@@ -13,4 +13,5 @@
 pub mod eval;
 pub mod geometry;
 pub mod matching;
+pub mod optim;
 pub mod scene_graph;

@@ -1,0 +1,4 @@
+//! Pose-graph optimisation (paper §III, eq. 1): the local step, where every robot optimises its
+//! keyframes together with the neighbour keyframes tied to them.
+
+pub mod lie;
