@@ -1,4 +1,6 @@
 //! Pose-graph optimisation (paper §III, eq. 1): the local step, where every robot optimises its
 //! keyframes together with the neighbour keyframes tied to them.
 
+pub mod factors;
 pub mod lie;
+pub mod manifold;
