@@ -70,7 +70,11 @@ mod tests {
     use proptest::prelude::*;
 
     /// Central differences of the whitened error through the retraction.
-    fn numeric<G: Manifold<D>, const D: usize>(f: &Between<G, D>, a: &G, b: &G) -> (SMatrix<f64, D, D>, SMatrix<f64, D, D>) {
+    fn numeric<G: Manifold<D>, const D: usize>(
+        f: &Between<G, D>,
+        a: &G,
+        b: &G,
+    ) -> (SMatrix<f64, D, D>, SMatrix<f64, D, D>) {
         let h = 1e-6;
         let (mut da, mut db) = (SMatrix::<f64, D, D>::zeros(), SMatrix::<f64, D, D>::zeros());
         for k in 0..D {

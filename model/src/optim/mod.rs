@@ -2,5 +2,8 @@
 //! keyframes together with the neighbour keyframes tied to them.
 
 pub mod factors;
+pub mod g2o;
+pub mod graph;
 pub mod lie;
 pub mod manifold;
+pub mod solver;
