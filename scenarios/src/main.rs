@@ -1,6 +1,7 @@
 //! `sgm`: the SGM command line.
 //!
 //! * `sgm match LOCAL.json REMOTE.json [--config FILE]`: match two object graphs (stable contract).
+//! * `sgm optimize IN.g2o … [-o OUT] [--robust …] [--json]`: pose-graph optimisation.
 //! * `sgm bench matching [--reps N] [--seed S]`: the paper's Tables 1–2 protocol.
 
 use clap::{Parser, Subcommand};
@@ -29,11 +30,37 @@ enum Command {
         #[arg(long)]
         config: Option<PathBuf>,
     },
+    /// Optimise a pose graph (g2o); several files load as one multi-robot graph.
+    Optimize {
+        /// g2o file(s).
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// Write the optimised graph here (g2o).
+        #[arg(short = 'o', long = "output")]
+        output: Option<PathBuf>,
+        /// Robust kernel on the between factors.
+        #[arg(long, value_enum, default_value_t = RobustArg::None)]
+        robust: RobustArg,
+        /// Print exactly one JSON object.
+        #[arg(long)]
+        json: bool,
+        /// Gauss–Newton instead of Levenberg–Marquardt.
+        #[arg(long)]
+        gauss_newton: bool,
+    },
     /// Benchmarks that reproduce the paper's experiments.
     Bench {
         #[command(subcommand)]
         which: BenchCommand,
     },
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum RobustArg {
+    None,
+    Huber,
+    Cauchy,
+    Gnc,
 }
 
 #[derive(Subcommand)]
@@ -65,6 +92,16 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Match { local, remote, config } => cli::match_cmd::run(&local, &remote, config.as_deref()),
+        Command::Optimize { inputs, output, robust, json, gauss_newton } => {
+            use sgm_model::optim::robust::RobustKernel;
+            let robust = match robust {
+                RobustArg::None => RobustKernel::None,
+                RobustArg::Huber => RobustKernel::Huber,
+                RobustArg::Cauchy => RobustKernel::Cauchy,
+                RobustArg::Gnc => RobustKernel::Gnc,
+            };
+            cli::optimize_cmd::run(cli::optimize_cmd::Options { inputs, output, robust, json, gauss_newton })
+        }
         Command::Bench { which: BenchCommand::Matching { reps, seed, json, config, skip_dense, error_on } } => {
             match bench::matching::run(bench::matching::Options { reps, seed, json, config, skip_dense, error_on }) {
                 Ok(()) => ExitCode::SUCCESS,

@@ -6,4 +6,5 @@ pub mod g2o;
 pub mod graph;
 pub mod lie;
 pub mod manifold;
+pub mod robust;
 pub mod solver;

@@ -150,11 +150,34 @@ impl<const D: usize> Structure<D> {
     }
 }
 
-/// H (upper values) and g at `values`.
+/// A robust kernel on between factors: for factor `k` with squared whitened residual `s`,
+/// returns (ρ(s), w) — its cost and its iteratively-reweighted-least-squares weight ρ'(s)·2.
+/// Least squares: (s / 2, 1).
+pub type Kernel<'a> = &'a dyn Fn(usize, f64) -> (f64, f64);
+
+/// Least squares.
+pub fn least_squares(_: usize, s: f64) -> (f64, f64) {
+    (0.5 * s, 1.0)
+}
+
+/// Σ ρ over between factors plus ½ ‖r‖² over priors.
+pub fn cost_at<G: Manifold<D>, const D: usize>(graph: &PoseGraph<G, D>, values: &[G], kernel: Kernel) -> f64 {
+    let between: f64 = graph
+        .betweens
+        .iter()
+        .enumerate()
+        .map(|(k, f)| kernel(k, f.whitened_error(&values[f.from], &values[f.to]).norm_squared()).0)
+        .sum();
+    let prior: f64 = graph.priors.iter().map(|p| 0.5 * p.whitened_error(&values[p.variable]).norm_squared()).sum();
+    between + prior
+}
+
+/// H (upper values) and g at `values`, each between factor weighted by its kernel weight.
 fn assemble<G: Manifold<D>, const D: usize>(
     graph: &PoseGraph<G, D>,
     values: &[G],
     s: &Structure<D>,
+    kernel: Kernel,
     h: &mut Vec<f64>,
     g: &mut Vec<f64>,
 ) {
@@ -167,8 +190,19 @@ fn assemble<G: Manifold<D>, const D: usize>(
             g[block * D + k] += v[k];
         }
     };
-    for f in &graph.betweens {
-        let lin = f.linearize(&values[f.from], &values[f.to]);
+    for (k, f) in graph.betweens.iter().enumerate() {
+        let mut lin = f.linearize(&values[f.from], &values[f.to]);
+        let (_, w) = kernel(k, lin.residual.norm_squared());
+        if w <= 0.0 {
+            continue;
+        }
+        if w != 1.0 {
+            // √w scales r and J, so Jᵀ J and Jᵀ r carry w.
+            let root = w.sqrt();
+            lin.residual *= root;
+            lin.d_from *= root;
+            lin.d_to *= root;
+        }
         let (bi, bj) = (s.block_of[f.from], s.block_of[f.to]);
         if let Some(a) = bi {
             s.add_block(h, a, a, &(lin.d_from.transpose() * lin.d_from));
@@ -228,16 +262,27 @@ fn retract_all<G: Manifold<D>, const D: usize>(values: &[G], s: &Structure<D>, d
         .collect()
 }
 
-/// Optimises `graph.values` in place.
+/// Optimises `graph.values` in place by least squares.
 pub fn optimize<G: Manifold<D>, const D: usize>(
     graph: &mut PoseGraph<G, D>,
     params: &LmParams,
 ) -> Result<Summary, SolveError> {
+    let structure = Structure::new(graph)?;
+    optimize_with(graph, params, &structure, &least_squares)
+}
+
+/// Optimises `graph.values` in place under a robust kernel, reusing a symbolic `structure`
+/// (which must have been built for this graph's factors).
+pub fn optimize_with<G: Manifold<D>, const D: usize>(
+    graph: &mut PoseGraph<G, D>,
+    params: &LmParams,
+    structure: &Structure<D>,
+    kernel: Kernel,
+) -> Result<Summary, SolveError> {
     if graph.values.iter().any(|v| !v.is_finite()) {
         return Err(SolveError::NonFinite);
     }
-    let structure = Structure::new(graph)?;
-    let initial_error = graph.error();
+    let initial_error = cost_at(graph, &graph.values, kernel);
     let mut error = initial_error;
     let mut lambda = if params.gauss_newton { 0.0 } else { params.lambda_initial };
     let (mut h, mut g, mut damped) = (Vec::new(), Vec::new(), Vec::new());
@@ -245,18 +290,18 @@ pub fn optimize<G: Manifold<D>, const D: usize>(
     let mut converged = false;
     while iterations < params.max_iterations {
         iterations += 1;
-        assemble(graph, &graph.values, &structure, &mut h, &mut g);
+        assemble(graph, &graph.values, structure, kernel, &mut h, &mut g);
         // Inner loop: raise λ until a step lowers the error.
         let accepted = loop {
-            let Some(delta) = solve_damped(&structure, &h, &g, lambda, &mut damped) else {
+            let Some(delta) = solve_damped(structure, &h, &g, lambda, &mut damped) else {
                 if params.gauss_newton || lambda >= params.lambda_max {
                     return Err(SolveError::Singular);
                 }
                 lambda = (lambda * params.lambda_factor).max(1e-12);
                 continue;
             };
-            let candidate = retract_all(&graph.values, &structure, &delta);
-            let new_error = graph.error_at(&candidate);
+            let candidate = retract_all(&graph.values, structure, &delta);
+            let new_error = cost_at(graph, &candidate, kernel);
             if params.gauss_newton || new_error < error {
                 if !params.gauss_newton {
                     lambda /= params.lambda_factor;

@@ -1,1 +1,2 @@
 pub mod match_cmd;
+pub mod optimize_cmd;

@@ -1,0 +1,141 @@
+//! Robust estimation against wrong loop closures and wrong inter-robot factors.
+//!
+//! * Huber: ρ(s) = s/2 for e = √s ≤ k, else k e − k²/2; weight 1 or k/e.
+//! * Cauchy: ρ(s) = k²/2 · ln(1 + s/k²); weight 1/(1 + s/k²).
+//! * GNC-TLS (Yang, Antonante, Tzoumas, Carlone, *Graduated Non-Convexity for Robust Spatial
+//!   Perception*, RA-L 2020): truncated least squares ρ(s) = min(s, c̄²)/2, reached through the
+//!   surrogate family ρ_μ, convex for small μ and TLS as μ → ∞. With weights fixed, solve the
+//!   weighted least squares; then update each candidate's weight in closed form,
+//!     w = 1 if s ≤ μ/(μ+1) c̄²,  0 if s ≥ (μ+1)/μ c̄²,  else c̄ √(μ(μ+1)) / √s − μ,
+//!   raise μ ← 1.4 μ, until the weights are binary. μ₀ = c̄² / (2 max s − c̄²).
+//!   Candidates are the loop-closure edges (keys not consecutive); odometry and priors are
+//!   trusted. Rejected: final weight < ½.
+//!
+//! Default scales are the 99% χ² quantile of the factor's dimension: a correct factor's
+//! squared whitened residual is χ²_D distributed.
+
+use super::graph::PoseGraph;
+use super::manifold::Manifold;
+use super::solver::{cost_at, optimize_with, LmParams, SolveError, Structure, Summary};
+
+/// The kernel of `sgm optimize --robust`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum RobustKernel {
+    #[default]
+    None,
+    Huber,
+    Cauchy,
+    Gnc,
+}
+
+/// 99% quantile of χ² with D degrees of freedom (D = 3, 6).
+pub fn chi2_99(d: usize) -> f64 {
+    match d {
+        1 => 6.635,
+        2 => 9.210,
+        3 => 11.345,
+        6 => 16.812,
+        _ => d as f64 + 2.33 * (2.0 * d as f64).sqrt(),
+    }
+}
+
+/// Largest number of graduated steps of GNC.
+const GNC_MAX_STEPS: usize = 200;
+/// μ growth per GNC step (the paper's 1.4).
+const GNC_MU_GROWTH: f64 = 1.4;
+
+/// Whether a between factor is a loop closure (its keys are not consecutive), i.e. a GNC
+/// candidate.
+fn is_loop_closure<G: Manifold<D>, const D: usize>(graph: &PoseGraph<G, D>, k: usize) -> bool {
+    let f = &graph.betweens[k];
+    graph.keys[f.from].abs_diff(graph.keys[f.to]) != 1
+}
+
+/// Optimises under `kernel`; returns the summary and, for GNC, the rejected between factors
+/// (indices into `graph.betweens`, i.e. edge order in the file).
+pub fn optimize_robust<G: Manifold<D>, const D: usize>(
+    graph: &mut PoseGraph<G, D>,
+    params: &LmParams,
+    kernel: RobustKernel,
+) -> Result<(Summary, Vec<usize>), SolveError> {
+    let structure = Structure::new(graph)?;
+    let k2 = chi2_99(D);
+    let k = k2.sqrt();
+    match kernel {
+        RobustKernel::None => {
+            Ok((optimize_with(graph, params, &structure, &super::solver::least_squares)?, Vec::new()))
+        }
+        RobustKernel::Huber => {
+            let huber = move |_: usize, s: f64| {
+                let e = s.sqrt();
+                if e <= k {
+                    (0.5 * s, 1.0)
+                } else {
+                    (k * e - 0.5 * k2, k / e)
+                }
+            };
+            Ok((optimize_with(graph, params, &structure, &huber)?, Vec::new()))
+        }
+        RobustKernel::Cauchy => {
+            let cauchy = move |_: usize, s: f64| (0.5 * k2 * (s / k2).ln_1p(), 1.0 / (1.0 + s / k2));
+            Ok((optimize_with(graph, params, &structure, &cauchy)?, Vec::new()))
+        }
+        RobustKernel::Gnc => gnc_tls(graph, params, &structure, k2),
+    }
+}
+
+fn gnc_tls<G: Manifold<D>, const D: usize>(
+    graph: &mut PoseGraph<G, D>,
+    params: &LmParams,
+    structure: &Structure<D>,
+    c2: f64,
+) -> Result<(Summary, Vec<usize>), SolveError> {
+    let candidates: Vec<bool> = (0..graph.betweens.len()).map(|k| is_loop_closure(graph, k)).collect();
+    let tls = |weights: &[f64]| {
+        let w = weights.to_vec();
+        move |k: usize, s: f64| (w[k] * 0.5 * s, w[k])
+    };
+    let truncated = |_: usize, s: f64| (0.5 * s.min(c2), if s <= c2 { 1.0 } else { 0.0 });
+    let initial_error = cost_at(graph, &graph.values, &truncated);
+    let mut weights = vec![1.0; graph.betweens.len()];
+    let mut iterations = optimize_with(graph, params, structure, &tls(&weights))?.iterations;
+    let squared = |graph: &PoseGraph<G, D>| -> Vec<f64> {
+        graph
+            .betweens
+            .iter()
+            .map(|f| f.whitened_error(&graph.values[f.from], &graph.values[f.to]).norm_squared())
+            .collect()
+    };
+    let residuals = squared(graph);
+    let max_s = residuals.iter().zip(&candidates).filter(|(_, c)| **c).map(|(s, _)| *s).fold(0.0, f64::max);
+    let mut converged = true;
+    if max_s > c2 {
+        let mut mu = c2 / (2.0 * max_s - c2).max(1e-12);
+        converged = false;
+        for _ in 0..GNC_MAX_STEPS {
+            let residuals = squared(graph);
+            let c = c2.sqrt();
+            for (k, s) in residuals.iter().enumerate() {
+                if !candidates[k] {
+                    continue;
+                }
+                weights[k] = if *s <= mu / (mu + 1.0) * c2 {
+                    1.0
+                } else if *s >= (mu + 1.0) / mu * c2 {
+                    0.0
+                } else {
+                    (c * (mu * (mu + 1.0)).sqrt() / s.sqrt() - mu).clamp(0.0, 1.0)
+                };
+            }
+            iterations += optimize_with(graph, params, structure, &tls(&weights))?.iterations;
+            if weights.iter().all(|w| *w == 0.0 || *w == 1.0) {
+                converged = true;
+                break;
+            }
+            mu *= GNC_MU_GROWTH;
+        }
+    }
+    let rejected: Vec<usize> = weights.iter().enumerate().filter(|(_, w)| **w < 0.5).map(|(k, _)| k).collect();
+    let final_error = cost_at(graph, &graph.values, &truncated);
+    Ok((Summary { initial_error, final_error, iterations, converged }, rejected))
+}
