@@ -5,9 +5,9 @@
 //! * GNC-TLS (Yang, Antonante, Tzoumas, Carlone, *Graduated Non-Convexity for Robust Spatial
 //!   Perception*, RA-L 2020): truncated least squares ρ(s) = min(s, c̄²)/2, reached through the
 //!   surrogate family ρ_μ, convex for small μ and TLS as μ → ∞. With weights fixed, solve the
-//!   weighted least squares; then update each candidate's weight in closed form,
-//!     w = 1 if s ≤ μ/(μ+1) c̄²,  0 if s ≥ (μ+1)/μ c̄²,  else c̄ √(μ(μ+1)) / √s − μ,
-//!   raise μ ← 1.4 μ, until the weights are binary. μ₀ = c̄² / (2 max s − c̄²).
+//!   weighted least squares; then update each candidate's weight in closed form —
+//!   w = 1 if s ≤ μ/(μ+1) c̄², 0 if s ≥ (μ+1)/μ c̄², else c̄ √(μ(μ+1)) / √s − μ — and raise
+//!   μ ← 1.4 μ, until the weights are binary. μ₀ = c̄² / (2 max s − c̄²).
 //!   Candidates are the loop-closure edges (keys not consecutive); odometry and priors are
 //!   trusted. Rejected: final weight < ½.
 //!
