@@ -9,7 +9,8 @@
 //!   w = 1 if s ≤ μ/(μ+1) c̄², 0 if s ≥ (μ+1)/μ c̄², else c̄ √(μ(μ+1)) / √s − μ — and raise
 //!   μ ← 1.4 μ, until the weights are binary. μ₀ = c̄² / (2 max s − c̄²).
 //!   Candidates are the loop-closure edges (keys not consecutive); odometry and priors are
-//!   trusted. Rejected: final weight < ½.
+//!   trusted. Rejected: final weight < ½. The reported final error is the least-squares error
+//!   of the factors kept; the initial one, of all factors.
 //!
 //! Default scales are the 99% χ² quantile of the factor's dimension: a correct factor's
 //! squared whitened residual is χ²_D distributed.
@@ -95,8 +96,7 @@ fn gnc_tls<G: Manifold<D>, const D: usize>(
         let w = weights.to_vec();
         move |k: usize, s: f64| (w[k] * 0.5 * s, w[k])
     };
-    let truncated = |_: usize, s: f64| (0.5 * s.min(c2), if s <= c2 { 1.0 } else { 0.0 });
-    let initial_error = cost_at(graph, &graph.values, &truncated);
+    let initial_error = cost_at(graph, &graph.values, &super::solver::least_squares);
     let mut weights = vec![1.0; graph.betweens.len()];
     let mut iterations = optimize_with(graph, params, structure, &tls(&weights))?.iterations;
     let squared = |graph: &PoseGraph<G, D>| -> Vec<f64> {
@@ -136,6 +136,7 @@ fn gnc_tls<G: Manifold<D>, const D: usize>(
         }
     }
     let rejected: Vec<usize> = weights.iter().enumerate().filter(|(_, w)| **w < 0.5).map(|(k, _)| k).collect();
-    let final_error = cost_at(graph, &graph.values, &truncated);
+    // Least-squares error of the factors kept (weights are binary at convergence).
+    let final_error = cost_at(graph, &graph.values, &tls(&weights));
     Ok((Summary { initial_error, final_error, iterations, converged }, rejected))
 }
