@@ -7,7 +7,9 @@
 //!   surrogate family ρ_μ, convex for small μ and TLS as μ → ∞. With weights fixed, solve the
 //!   weighted least squares; then update each candidate's weight in closed form —
 //!   w = 1 if s ≤ μ/(μ+1) c̄², 0 if s ≥ (μ+1)/μ c̄², else c̄ √(μ(μ+1)) / √s − μ — and raise
-//!   μ ← 1.4 μ, until the weights are binary. μ₀ = c̄² / (2 max s − c̄²).
+//!   μ ← 1.4 μ, until the weights are binary. μ₀ = c̄² / (2 max s − c̄²) with s at the initial
+//!   values, and every weighted solve restarts from the initial values (as GTSAM's
+//!   `GncOptimizer`): an early estimate distorted by outliers cannot trap the later ones.
 //!   Candidates are the loop-closure edges (keys not consecutive); odometry and priors are
 //!   trusted. Rejected: final weight < ½. The reported final error is the least-squares error
 //!   of the factors kept; the initial one, of all factors.
@@ -97,8 +99,8 @@ fn gnc_tls<G: Manifold<D>, const D: usize>(
         move |k: usize, s: f64| (w[k] * 0.5 * s, w[k])
     };
     let initial_error = cost_at(graph, &graph.values, &super::solver::least_squares);
+    let initial_values = graph.values.clone();
     let mut weights = vec![1.0; graph.betweens.len()];
-    let mut iterations = optimize_with(graph, params, structure, &tls(&weights))?.iterations;
     let squared = |graph: &PoseGraph<G, D>| -> Vec<f64> {
         graph
             .betweens
@@ -106,16 +108,17 @@ fn gnc_tls<G: Manifold<D>, const D: usize>(
             .map(|f| f.whitened_error(&graph.values[f.from], &graph.values[f.to]).norm_squared())
             .collect()
     };
-    let residuals = squared(graph);
-    let max_s = residuals.iter().zip(&candidates).filter(|(_, c)| **c).map(|(s, _)| *s).fold(0.0, f64::max);
+    // μ₀ from the largest candidate residual at the initial values (as GTSAM's GncOptimizer).
+    let max_s = squared(graph).iter().zip(&candidates).filter(|(_, c)| **c).map(|(s, _)| *s).fold(0.0, f64::max);
+    let mut iterations = optimize_with(graph, params, structure, &tls(&weights))?.iterations;
     let mut converged = true;
     if max_s > c2 {
         let mut mu = c2 / (2.0 * max_s - c2).max(1e-12);
         converged = false;
+        let c = c2.sqrt();
         for _ in 0..GNC_MAX_STEPS {
-            let residuals = squared(graph);
-            let c = c2.sqrt();
-            for (k, s) in residuals.iter().enumerate() {
+            // Weights from the current estimate ...
+            for (k, s) in squared(graph).iter().enumerate() {
                 if !candidates[k] {
                     continue;
                 }
@@ -127,6 +130,9 @@ fn gnc_tls<G: Manifold<D>, const D: usize>(
                     (c * (mu * (mu + 1.0)).sqrt() / s.sqrt() - mu).clamp(0.0, 1.0)
                 };
             }
+            // ... and the weighted problem solved again from the initial values, so that an
+            // early, distorted estimate cannot trap the later ones.
+            graph.values.clone_from(&initial_values);
             iterations += optimize_with(graph, params, structure, &tls(&weights))?.iterations;
             if weights.iter().all(|w| *w == 0.0 || *w == 1.0) {
                 converged = true;
