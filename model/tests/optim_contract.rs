@@ -217,3 +217,117 @@ fn m_estimators_downweight_outliers() {
         assert!(distance(&g) < 0.5 * distance(&plain), "{kernel:?}: {} vs plain {}", distance(&g), distance(&plain));
     }
 }
+
+mod marginals_and_incremental {
+    use super::*;
+    use nalgebra::{DMatrix, Isometry3};
+    use sgm_model::optim::g2o::read_g2o;
+    use sgm_model::optim::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
+    use sgm_model::optim::marginals::marginal_covariances;
+    use sgm_model::optim::solver::{Optimizer, Structure};
+
+    fn tiny_grid() -> Graph3 {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/posegraph/3d/tinyGrid3D.g2o");
+        let text = std::fs::read_to_string(path).expect("shared data beside the repo");
+        let G2oGraph::Spatial(mut g) = read_g2o(&[&text]).unwrap() else { panic!("3-D") };
+        g.add_prior_at_current(0, GTSAM_PRIOR_SIGMAS_3D);
+        g
+    }
+
+    #[test]
+    fn marginals_equal_the_dense_inverse_of_the_stacked_jacobian() {
+        let mut g = tiny_grid();
+        optimize(&mut g, &LmParams::default()).unwrap();
+        // Independent dense H = Jᵀ J from the factor Jacobians.
+        let n = g.values.len() * 6;
+        let rows = (g.betweens.len() + g.priors.len()) * 6;
+        let mut j = DMatrix::<f64>::zeros(rows, n);
+        for (k, f) in g.betweens.iter().enumerate() {
+            let lin = f.linearize(&g.values[f.from], &g.values[f.to]);
+            j.view_mut((k * 6, f.from * 6), (6, 6)).copy_from(&lin.d_from);
+            j.view_mut((k * 6, f.to * 6), (6, 6)).copy_from(&lin.d_to);
+        }
+        for (k, p) in g.priors.iter().enumerate() {
+            let (_, jp) = p.linearize(&g.values[p.variable]);
+            j.view_mut(((g.betweens.len() + k) * 6, p.variable * 6), (6, 6)).copy_from(&jp);
+        }
+        let dense = (j.transpose() * &j).try_inverse().expect("anchored graph");
+        let structure = Structure::new(&g).unwrap();
+        let all: Vec<usize> = (0..g.values.len()).collect();
+        let cov = marginal_covariances(&g, &structure, &all).unwrap();
+        for (k, c) in cov.iter().enumerate() {
+            let reference = dense.view((k * 6, k * 6), (6, 6));
+            assert!((c - reference).norm() < 1e-9 * reference.norm().max(1e-12), "pose {k}: {c} vs {reference}");
+            assert!(c.symmetric_eigenvalues().min() > 0.0);
+        }
+    }
+
+    #[test]
+    fn covariance_of_a_chain_adds_up_in_closed_form() {
+        // x0 with prior σ0, x1 = x0 · z with z = identity and σ1: Cov(x1) = Σ0 + Σ1 (Ad = I).
+        let sigma0 = [0.1, 0.2, 0.3, 1.0, 2.0, 3.0];
+        let sigma1 = [0.05, 0.05, 0.05, 0.5, 0.5, 0.5];
+        let mut g = Graph3 {
+            keys: vec![0, 1],
+            values: vec![Isometry3::identity(); 2],
+            fixed: vec![false; 2],
+            betweens: vec![],
+            priors: vec![],
+        };
+        g.add_prior_at_current(0, sigma0);
+        let s1 = SMatrix::<f64, 6, 6>::from_diagonal(&nalgebra::SVector::<f64, 6>::from_iterator(
+            sigma1.iter().map(|s| 1.0 / s),
+        ));
+        g.betweens.push(Between { from: 0, to: 1, measured: Isometry3::identity(), sqrt_information: s1 });
+        let structure = Structure::new(&g).unwrap();
+        let cov = marginal_covariances(&g, &structure, &[0, 1]).unwrap();
+        for k in 0..6 {
+            assert!((cov[0][(k, k)] - sigma0[k] * sigma0[k]).abs() < 1e-12);
+            assert!((cov[1][(k, k)] - (sigma0[k] * sigma0[k] + sigma1[k] * sigma1[k])).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn incremental_solves_reuse_the_symbolic_factorisation_while_the_structure_holds() {
+        let (full, _) = spiral_with_outliers(0, 9);
+        let mut reference = full.clone();
+        optimize(&mut reference, &LmParams::default()).unwrap();
+
+        // Robot's view: the first 150 poses, then everything, then one more measurement between
+        // already-joined poses and a new prior (same structure: symbolic reused).
+        let keep = |g: &Graph2, n: usize| {
+            let mut part = g.clone();
+            part.keys.truncate(n);
+            part.values.truncate(n);
+            part.fixed.truncate(n);
+            part.betweens.retain(|f| f.from < n && f.to < n);
+            part.priors.retain(|p| p.variable < n);
+            part
+        };
+        let mut optimizer = Optimizer::new();
+        let mut g = keep(&full, 150);
+        optimizer.optimize(&mut g, &LmParams::default()).unwrap();
+        let mut grown = full.clone();
+        grown.values[..150].copy_from_slice(&g.values); // warm start where known
+        optimizer.optimize(&mut grown, &LmParams::default()).unwrap();
+        assert_eq!((optimizer.symbolic_builds, optimizer.symbolic_reuses), (2, 0));
+        let repeat = grown.betweens[10].clone();
+        grown.betweens.push(repeat);
+        grown.add_prior_at_current(200, GTSAM_PRIOR_SIGMAS_2D);
+        optimizer.optimize(&mut grown, &LmParams::default()).unwrap();
+        assert_eq!((optimizer.symbolic_builds, optimizer.symbolic_reuses), (2, 1));
+        // Same optimum as a fresh solve of the same graph.
+        let mut fresh = full.clone();
+        fresh.betweens.push(grown.betweens.last().unwrap().clone());
+        fresh.priors = grown.priors.clone();
+        optimize(&mut fresh, &LmParams::default()).unwrap();
+        let worst = fresh
+            .values
+            .iter()
+            .zip(&grown.values)
+            .map(|(a, b)| (a.inverse() * b).translation.vector.norm())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-4, "{worst}");
+    }
+}

@@ -6,5 +6,6 @@ pub mod g2o;
 pub mod graph;
 pub mod lie;
 pub mod manifold;
+pub mod marginals;
 pub mod robust;
 pub mod solver;

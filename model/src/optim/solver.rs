@@ -70,8 +70,10 @@ pub enum SolveError {
 
 /// Block sparsity of H and the symbolic factorisation for it.
 pub struct Structure<const D: usize> {
+    /// What the structure was built from: variable count, fixed flags, joined block pairs.
+    fingerprint: (usize, Vec<bool>, Vec<(usize, usize)>),
     /// Block column of each variable (`None`: fixed).
-    block_of: Vec<Option<usize>>,
+    pub(crate) block_of: Vec<Option<usize>>,
     blocks: usize,
     /// Per block column, the sorted block rows above the diagonal.
     upper: Vec<Vec<usize>>,
@@ -105,6 +107,7 @@ impl<const D: usize> Structure<D> {
             list.sort_unstable();
             list.dedup();
         }
+        let fingerprint = Self::fingerprint_of(graph);
         let n = blocks * D;
         let mut col_ptr = Vec::with_capacity(n + 1);
         let mut row_idx = Vec::new();
@@ -121,10 +124,32 @@ impl<const D: usize> Structure<D> {
         let symbolic_matrix = SymbolicSparseColMat::new_checked(n, n, col_ptr.clone(), None, row_idx);
         let symbolic_llt = SymbolicLlt::try_new(symbolic_matrix.as_ref(), Side::Upper)
             .map_err(|e| SolveError::Factorisation(format!("{e:?}")))?;
-        Ok(Self { block_of, blocks, upper, col_ptr, symbolic_matrix, symbolic_llt })
+        Ok(Self { fingerprint, block_of, blocks, upper, col_ptr, symbolic_matrix, symbolic_llt })
     }
 
-    fn dim(&self) -> usize {
+    fn fingerprint_of<G: Manifold<D>>(graph: &PoseGraph<G, D>) -> (usize, Vec<bool>, Vec<(usize, usize)>) {
+        let mut pairs: Vec<(usize, usize)> =
+            graph.betweens.iter().map(|f| (f.from.min(f.to), f.from.max(f.to))).collect();
+        pairs.sort_unstable();
+        pairs.dedup();
+        (graph.values.len(), graph.fixed.clone(), pairs)
+    }
+
+    pub(crate) fn symbolic_matrix(&self) -> &SymbolicSparseColMat<usize> {
+        &self.symbolic_matrix
+    }
+
+    pub(crate) fn symbolic_llt(&self) -> &SymbolicLlt<usize> {
+        &self.symbolic_llt
+    }
+
+    /// Whether this structure still describes `graph` (same variables, fixed flags and joined
+    /// pairs): then its symbolic factorisation can be reused.
+    pub fn fits<G: Manifold<D>>(&self, graph: &PoseGraph<G, D>) -> bool {
+        self.fingerprint == Self::fingerprint_of(graph)
+    }
+
+    pub(crate) fn dim(&self) -> usize {
         self.blocks * D
     }
 
@@ -173,7 +198,7 @@ pub fn cost_at<G: Manifold<D>, const D: usize>(graph: &PoseGraph<G, D>, values: 
 }
 
 /// H (upper values) and g at `values`, each between factor weighted by its kernel weight.
-fn assemble<G: Manifold<D>, const D: usize>(
+pub(crate) fn assemble<G: Manifold<D>, const D: usize>(
     graph: &PoseGraph<G, D>,
     values: &[G],
     s: &Structure<D>,
@@ -230,7 +255,7 @@ fn assemble<G: Manifold<D>, const D: usize>(
 }
 
 /// Solves (H + λ I) δ = −g; `None` if not positive definite.
-fn solve_damped<const D: usize>(
+pub(crate) fn solve_damped<const D: usize>(
     s: &Structure<D>,
     h: &[f64],
     g: &[f64],
@@ -326,4 +351,43 @@ pub fn optimize_with<G: Manifold<D>, const D: usize>(
         }
     }
     Ok(Summary { initial_error, final_error: error, iterations, converged })
+}
+
+/// Repeated optimisation of a growing graph (robots optimise again and again as keyframes and
+/// factors arrive): values are warm-started from the graph, and the symbolic factorisation is
+/// kept while the structure is unchanged (new measurements between already-joined variables,
+/// new priors), rebuilt otherwise.
+#[derive(Default)]
+pub struct Optimizer<const D: usize> {
+    structure: Option<Structure<D>>,
+    /// How many solves reused / rebuilt the symbolic factorisation.
+    pub symbolic_reuses: usize,
+    pub symbolic_builds: usize,
+}
+
+impl<const D: usize> Optimizer<D> {
+    pub fn new() -> Self {
+        Self { structure: None, symbolic_reuses: 0, symbolic_builds: 0 }
+    }
+
+    /// The structure for `graph`, reusing the cached one when it still fits.
+    pub fn structure_for<G: Manifold<D>>(&mut self, graph: &PoseGraph<G, D>) -> Result<&Structure<D>, SolveError> {
+        let fits = self.structure.as_ref().is_some_and(|s| s.fits(graph));
+        if fits {
+            self.symbolic_reuses += 1;
+        } else {
+            self.structure = Some(Structure::new(graph)?);
+            self.symbolic_builds += 1;
+        }
+        self.structure.as_ref().ok_or(SolveError::NothingToSolve)
+    }
+
+    pub fn optimize<G: Manifold<D>>(
+        &mut self,
+        graph: &mut PoseGraph<G, D>,
+        params: &LmParams,
+    ) -> Result<Summary, SolveError> {
+        let structure = self.structure_for(graph)?;
+        optimize_with(graph, params, structure, &least_squares)
+    }
 }

@@ -1,0 +1,45 @@
+//! Marginal covariances of selected poses, from the sparse Cholesky factorisation of the
+//! information matrix H = Jᵀ J at the current estimate (Gauss–Newton approximation, as GTSAM's
+//! `Marginals`): the covariance of pose k is the k-th diagonal D × D block of H⁻¹, obtained by
+//! solving H X = E_k for the D unit columns E_k of that block — D sparse triangular solve pairs
+//! per pose, never a dense inverse. Covariances are in the tangent space of the pose's right
+//! perturbation (x ⊕ δ = x · Exp(δ)), the chart of the factors. Sent with keyframe responses.
+
+use super::graph::PoseGraph;
+use super::manifold::Manifold;
+use super::solver::{assemble, least_squares, SolveError, Structure};
+use faer::linalg::solvers::SolveCore;
+use faer::sparse::linalg::solvers::Llt;
+use faer::sparse::SparseColMatRef;
+use faer::{Conj, MatMut, Side};
+use nalgebra::SMatrix;
+
+/// Covariances of `variables` (indices into `graph.values`); a fixed variable has zero
+/// covariance. `structure` must fit `graph` (see [`Structure::fits`]).
+pub fn marginal_covariances<G: Manifold<D>, const D: usize>(
+    graph: &PoseGraph<G, D>,
+    structure: &Structure<D>,
+    variables: &[usize],
+) -> Result<Vec<SMatrix<f64, D, D>>, SolveError> {
+    let (mut h, mut g) = (Vec::new(), Vec::new());
+    assemble(graph, &graph.values, structure, &least_squares, &mut h, &mut g);
+    let matrix = SparseColMatRef::new(structure.symbolic_matrix().as_ref(), &h);
+    let llt = Llt::try_new_with_symbolic(structure.symbolic_llt().clone(), matrix, Side::Upper)
+        .map_err(|_| SolveError::Singular)?;
+    let n = g.len();
+    let mut out = Vec::with_capacity(variables.len());
+    for &v in variables {
+        let Some(block) = structure.block_of.get(v).copied().flatten() else {
+            out.push(SMatrix::zeros());
+            continue;
+        };
+        // D right-hand sides at once: the unit columns of this block.
+        let mut rhs = vec![0.0; n * D];
+        for k in 0..D {
+            rhs[k * n + block * D + k] = 1.0;
+        }
+        llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(&mut rhs, n, D));
+        out.push(SMatrix::<f64, D, D>::from_fn(|r, c| rhs[c * n + block * D + r]));
+    }
+    Ok(out)
+}
