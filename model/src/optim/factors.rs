@@ -51,6 +51,21 @@ impl<G: Manifold<D>, const D: usize> Between<G, D> {
 }
 
 impl<G: Manifold<D>, const D: usize> Prior<G, D> {
+    /// A prior from a covariance in the tangent space of `mean` (e.g. a neighbour keyframe's
+    /// marginal covariance from its keyframe response). `None` unless symmetric positive
+    /// definite and finite.
+    pub fn from_covariance(variable: usize, mean: G, covariance: &SMatrix<f64, D, D>) -> Option<Self> {
+        if covariance.iter().any(|v| !v.is_finite())
+            || (covariance - covariance.transpose()).norm() > 1e-9 * covariance.norm()
+        {
+            return None;
+        }
+        // Ω = Σ⁻¹ = Sᵀ S with S = L⁻¹ where Σ = L Lᵀ.
+        let l = covariance.cholesky()?.l();
+        let sqrt_information = l.try_inverse()?;
+        Some(Self { variable, mean, sqrt_information })
+    }
+
     pub fn whitened_error(&self, x: &G) -> SVector<f64, D> {
         self.sqrt_information * self.mean.inverse().compose(x).log()
     }
@@ -86,6 +101,18 @@ mod tests {
             db.set_column(k, &col_b);
         }
         (da, db)
+    }
+
+    #[test]
+    fn prior_from_covariance_whitens_by_its_inverse() {
+        let mut cov = SMatrix::<f64, 3, 3>::new(0.04, 0.01, 0.0, 0.01, 0.09, 0.0, 0.0, 0.0, 0.01);
+        let p = Prior::from_covariance(0, Isometry2::identity(), &cov).unwrap();
+        let omega = p.sqrt_information.transpose() * p.sqrt_information;
+        assert!((omega * cov - SMatrix::<f64, 3, 3>::identity()).norm() < 1e-12);
+        cov[(2, 2)] = -1.0;
+        assert!(Prior::from_covariance(0, Isometry2::identity(), &cov).is_none());
+        cov[(2, 2)] = f64::NAN;
+        assert!(Prior::from_covariance(0, Isometry2::identity(), &cov).is_none());
     }
 
     proptest! {
