@@ -111,12 +111,7 @@ fn se3_q(rho: &Vector3<f64>, phi: &Vector3<f64>) -> Matrix3<f64> {
 pub fn se3_right_jacobian(xi: &Tangent3) -> Matrix6 {
     let phi = -Vector3::new(xi[0], xi[1], xi[2]);
     let rho = -Vector3::new(xi[3], xi[4], xi[5]);
-    let j = so3_left_jacobian(&phi);
-    let mut out = Matrix6::zeros();
-    out.fixed_view_mut::<3, 3>(0, 0).copy_from(&j);
-    out.fixed_view_mut::<3, 3>(3, 3).copy_from(&j);
-    out.fixed_view_mut::<3, 3>(3, 0).copy_from(&se3_q(&rho, &phi));
-    out
+    lower_block(&so3_left_jacobian(&phi), &se3_q(&rho, &phi))
 }
 
 /// J_r(ξ)⁻¹ = [[J⁻¹, 0], [−J⁻¹ Q J⁻¹, J⁻¹]].
@@ -124,10 +119,15 @@ pub fn se3_right_jacobian_inverse(xi: &Tangent3) -> Matrix6 {
     let phi = -Vector3::new(xi[0], xi[1], xi[2]);
     let rho = -Vector3::new(xi[3], xi[4], xi[5]);
     let j_inv = so3_left_jacobian_inverse(&phi);
+    lower_block(&j_inv, &(-j_inv * se3_q(&rho, &phi) * j_inv))
+}
+
+/// [[diagonal, 0], [coupling, diagonal]].
+fn lower_block(diagonal: &Matrix3<f64>, coupling: &Matrix3<f64>) -> Matrix6 {
     let mut out = Matrix6::zeros();
-    out.fixed_view_mut::<3, 3>(0, 0).copy_from(&j_inv);
-    out.fixed_view_mut::<3, 3>(3, 3).copy_from(&j_inv);
-    out.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-j_inv * se3_q(&rho, &phi) * j_inv));
+    out.fixed_view_mut::<3, 3>(0, 0).copy_from(diagonal);
+    out.fixed_view_mut::<3, 3>(3, 3).copy_from(diagonal);
+    out.fixed_view_mut::<3, 3>(3, 0).copy_from(coupling);
     out
 }
 
