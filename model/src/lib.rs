@@ -14,4 +14,5 @@ pub mod eval;
 pub mod geometry;
 pub mod matching;
 pub mod optim;
+pub mod pcd;
 pub mod scene_graph;
