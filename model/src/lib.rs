@@ -16,3 +16,4 @@ pub mod matching;
 pub mod optim;
 pub mod pcd;
 pub mod scene_graph;
+pub mod wire;

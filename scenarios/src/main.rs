@@ -2,6 +2,7 @@
 //!
 //! * `sgm match LOCAL.json REMOTE.json [--config FILE]`: match two object graphs (stable contract).
 //! * `sgm optimize IN.g2o … [-o OUT] [--robust …] [--json]`: pose-graph optimisation.
+//! * `sgm encode-cloud CLOUD.pcd [--resolution M]`: keyframe cloud codec size and error.
 //! * `sgm bench matching [--reps N] [--seed S]`: the paper's Tables 1–2 protocol.
 
 use clap::{Parser, Subcommand};
@@ -47,6 +48,13 @@ enum Command {
         /// Gauss–Newton instead of Levenberg–Marquardt.
         #[arg(long)]
         gauss_newton: bool,
+    },
+    /// Encode a PCD cloud with the keyframe codec; prints its size and error as JSON.
+    EncodeCloud {
+        cloud: PathBuf,
+        /// Quantum, m.
+        #[arg(long, default_value_t = 0.01, allow_negative_numbers = true)]
+        resolution: f64,
     },
     /// Benchmarks that reproduce the paper's experiments.
     Bench {
@@ -102,6 +110,7 @@ fn main() -> ExitCode {
             };
             cli::optimize_cmd::run(cli::optimize_cmd::Options { inputs, output, robust, json, gauss_newton })
         }
+        Command::EncodeCloud { cloud, resolution } => cli::encode_cloud_cmd::run(&cloud, resolution),
         Command::Bench { which: BenchCommand::Matching { reps, seed, json, config, skip_dense, error_on } } => {
             match bench::matching::run(bench::matching::Options { reps, seed, json, config, skip_dense, error_on }) {
                 Ok(()) => ExitCode::SUCCESS,

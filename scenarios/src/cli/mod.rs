@@ -1,2 +1,3 @@
+pub mod encode_cloud_cmd;
 pub mod match_cmd;
 pub mod optimize_cmd;
