@@ -15,5 +15,6 @@ pub mod geometry;
 pub mod matching;
 pub mod optim;
 pub mod pcd;
+pub mod perception;
 pub mod scene_graph;
 pub mod wire;

@@ -1,0 +1,6 @@
+//! Perception (paper §IV-A, §IV-D): what a robot does to its own scans. So far: voxel
+//! downsampling, normals, ICP.
+
+pub mod icp;
+pub mod normals;
+pub mod voxel;
