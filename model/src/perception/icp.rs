@@ -101,7 +101,8 @@ pub fn register(
     initial: &Pose3,
     config: &IcpConfig,
 ) -> Result<IcpResult, IcpError> {
-    if !(config.max_correspondence_distance_m > 0.0) || !(config.huber_m > 0.0) || config.max_iterations == 0 {
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    if !positive(config.max_correspondence_distance_m) || !positive(config.huber_m) || config.max_iterations == 0 {
         return Err(IcpError::Parameter("max_correspondence_distance_m, huber_m or max_iterations"));
     }
     let (mut source, mut target) = (finite(source), finite(target));

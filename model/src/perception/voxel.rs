@@ -5,7 +5,7 @@ use nalgebra::Point3;
 use std::collections::HashMap;
 
 pub fn downsample(points: &[Point3<f64>], size: f64) -> Vec<Point3<f64>> {
-    if !(size > 0.0) || !size.is_finite() {
+    if !size.is_finite() || size <= 0.0 {
         return points.to_vec();
     }
     let mut index: HashMap<[i64; 3], usize> = HashMap::with_capacity(points.len() / 4 + 1);
