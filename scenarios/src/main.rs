@@ -2,6 +2,7 @@
 //!
 //! * `sgm match LOCAL.json REMOTE.json [--config FILE]`: match two object graphs (stable contract).
 //! * `sgm optimize IN.g2o … [-o OUT] [--robust …] [--json]`: pose-graph optimisation.
+//! * `sgm icp SOURCE.pcd TARGET.pcd [...]`: ICP registration.
 //! * `sgm encode-cloud CLOUD.pcd [--resolution M]`: keyframe cloud codec size and error.
 //! * `sgm bench matching [--reps N] [--seed S]`: the paper's Tables 1–2 protocol.
 
@@ -49,6 +50,22 @@ enum Command {
         #[arg(long)]
         gauss_newton: bool,
     },
+    /// Register SOURCE to TARGET (PCD files); prints one JSON object (p_target = T · p_source).
+    Icp {
+        source: PathBuf,
+        target: PathBuf,
+        #[arg(long, value_enum, default_value_t = IcpMethodArg::PointToPlane)]
+        method: IcpMethodArg,
+        /// Largest correspondence distance, m.
+        #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+        max_distance: f64,
+        /// Voxel size for downsampling both clouds (0: none), m.
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        voxel: f64,
+        /// Initial guess x,y,z,roll,pitch,yaw (m, rad).
+        #[arg(long, allow_hyphen_values = true)]
+        init: Option<String>,
+    },
     /// Encode a PCD cloud with the keyframe codec; prints its size and error as JSON.
     EncodeCloud {
         cloud: PathBuf,
@@ -61,6 +78,12 @@ enum Command {
         #[command(subcommand)]
         which: BenchCommand,
     },
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum IcpMethodArg {
+    PointToPoint,
+    PointToPlane,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -109,6 +132,14 @@ fn main() -> ExitCode {
                 RobustArg::Gnc => RobustKernel::Gnc,
             };
             cli::optimize_cmd::run(cli::optimize_cmd::Options { inputs, output, robust, json, gauss_newton })
+        }
+        Command::Icp { source, target, method, max_distance, voxel, init } => {
+            use sgm_model::perception::icp::IcpMethod;
+            let method = match method {
+                IcpMethodArg::PointToPoint => IcpMethod::PointToPoint,
+                IcpMethodArg::PointToPlane => IcpMethod::PointToPlane,
+            };
+            cli::icp_cmd::run(cli::icp_cmd::Options { source, target, method, max_distance, voxel, init })
         }
         Command::EncodeCloud { cloud, resolution } => cli::encode_cloud_cmd::run(&cloud, resolution),
         Command::Bench { which: BenchCommand::Matching { reps, seed, json, config, skip_dense, error_on } } => {

@@ -1,3 +1,4 @@
 pub mod encode_cloud_cmd;
 pub mod match_cmd;
 pub mod optimize_cmd;
+pub mod icp_cmd;
