@@ -3,6 +3,7 @@
 //! * `sgm match LOCAL.json REMOTE.json [--config FILE]`: match two object graphs (stable contract).
 //! * `sgm optimize IN.g2o … [-o OUT] [--robust …] [--json]`: pose-graph optimisation.
 //! * `sgm icp SOURCE.pcd TARGET.pcd [...]`: ICP registration.
+//! * `sgm pcd-convert IN.pcd OUT.pcd [--format ...]`: PCD format conversion.
 //! * `sgm encode-cloud CLOUD.pcd [--resolution M]`: keyframe cloud codec size and error.
 //! * `sgm bench matching [--reps N] [--seed S]`: the paper's Tables 1–2 protocol.
 
@@ -65,6 +66,19 @@ enum Command {
         /// Initial guess x,y,z,roll,pitch,yaw (m, rad).
         #[arg(long, allow_hyphen_values = true)]
         init: Option<String>,
+        /// Converged when a step rotates less than this, rad.
+        #[arg(long, default_value_t = 1e-6)]
+        rotation_epsilon: f64,
+        /// ... and translates less than this, m.
+        #[arg(long, default_value_t = 1e-6)]
+        translation_epsilon: f64,
+    },
+    /// Convert a PCD file between ascii, binary and binary_compressed.
+    PcdConvert {
+        input: PathBuf,
+        output: PathBuf,
+        #[arg(long, value_enum, default_value_t = PcdFormatArg::BinaryCompressed)]
+        format: PcdFormatArg,
     },
     /// Encode a PCD cloud with the keyframe codec; prints its size and error as JSON.
     EncodeCloud {
@@ -78,6 +92,13 @@ enum Command {
         #[command(subcommand)]
         which: BenchCommand,
     },
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum PcdFormatArg {
+    Ascii,
+    Binary,
+    BinaryCompressed,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -133,13 +154,31 @@ fn main() -> ExitCode {
             };
             cli::optimize_cmd::run(cli::optimize_cmd::Options { inputs, output, robust, json, gauss_newton })
         }
-        Command::Icp { source, target, method, max_distance, voxel, init } => {
+        Command::PcdConvert { input, output, format } => {
+            use sgm_model::pcd::DataFormat;
+            let format = match format {
+                PcdFormatArg::Ascii => DataFormat::Ascii,
+                PcdFormatArg::Binary => DataFormat::Binary,
+                PcdFormatArg::BinaryCompressed => DataFormat::BinaryCompressed,
+            };
+            cli::pcd_convert_cmd::run(&input, &output, format)
+        }
+        Command::Icp { source, target, method, max_distance, voxel, init, rotation_epsilon, translation_epsilon } => {
             use sgm_model::perception::icp::IcpMethod;
             let method = match method {
                 IcpMethodArg::PointToPoint => IcpMethod::PointToPoint,
                 IcpMethodArg::PointToPlane => IcpMethod::PointToPlane,
             };
-            cli::icp_cmd::run(cli::icp_cmd::Options { source, target, method, max_distance, voxel, init })
+            cli::icp_cmd::run(cli::icp_cmd::Options {
+                source,
+                target,
+                method,
+                max_distance,
+                voxel,
+                init,
+                rotation_epsilon,
+                translation_epsilon,
+            })
         }
         Command::EncodeCloud { cloud, resolution } => cli::encode_cloud_cmd::run(&cloud, resolution),
         Command::Bench { which: BenchCommand::Matching { reps, seed, json, config, skip_dense, error_on } } => {

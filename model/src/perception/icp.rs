@@ -116,8 +116,13 @@ pub fn register(
     if target.len() < 3 {
         return Err(IcpError::TooFewPoints("target"));
     }
-    let target_array: Vec<[f64; 3]> = target.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&target_array);
+    // Single precision for the search only (µm at km range); residuals use the f64 points.
+    let target_array: Vec<[f32; 3]> = target.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
+    let tree: ImmutableKdTree<f32, 3> = ImmutableKdTree::new_from_slice(&target_array);
+    let nearest = |p: &Point3<f64>| {
+        let nn = tree.nearest_one::<SquaredEuclidean>(&[p.x as f32, p.y as f32, p.z as f32]);
+        (nn.distance as f64, nn.item as usize)
+    };
     let target_normals = match config.method {
         IcpMethod::PointToPlane => normals::estimate(&target, &tree, config.normal_neighbours),
         IcpMethod::PointToPoint => Vec::new(),
@@ -134,14 +139,14 @@ pub fn register(
         let mut pairs = 0;
         for s in &source {
             let p = pose * s;
-            let nn = tree.nearest_one::<SquaredEuclidean>(&[p.x, p.y, p.z]);
-            if nn.distance > max_d2 {
+            let (d2, item) = nearest(&p);
+            if d2 > max_d2 {
                 continue;
             }
-            let q = target[nn.item as usize];
+            let q = target[item];
             match config.method {
                 IcpMethod::PointToPlane => {
-                    let Some(n) = target_normals[nn.item as usize] else { continue };
+                    let Some(n) = target_normals[item] else { continue };
                     let r = n.dot(&(p - q));
                     let mut j = SMatrix::<f64, 1, 6>::zeros();
                     j.fixed_view_mut::<1, 3>(0, 0).copy_from(&p.coords.cross(&n).transpose());
@@ -178,12 +183,12 @@ pub fn register(
     let mut h = Matrix6::zeros();
     for s in &source {
         let p = pose * s;
-        let nn = tree.nearest_one::<SquaredEuclidean>(&[p.x, p.y, p.z]);
-        if nn.distance > max_d2 {
+        let (d2, item) = nearest(&p);
+        if d2 > max_d2 {
             continue;
         }
         inliers += 1;
-        sum2 += nn.distance;
+        sum2 += (p - target[item]).norm_squared();
         let mut j = SMatrix::<f64, 3, 6>::zeros();
         j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-skew(&p.coords)));
         j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());

@@ -1,18 +1,19 @@
 //! Surface normals by principal component analysis of each point's k nearest neighbours: the
 //! eigenvector of the smallest eigenvalue of their covariance. Points with fewer than 3
-//! neighbours, or on a line, get no normal.
+//! neighbours, or on a line, get no normal. The kd-tree holds f32 coordinates: neighbour search
+//! needs micrometres, not f64.
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, Point3, Vector3};
 use std::num::NonZero;
 
 /// Normal of every point (`None` where undetermined), using `tree` built over `points`.
-pub fn estimate(points: &[Point3<f64>], tree: &ImmutableKdTree<f64, 3>, k: usize) -> Vec<Option<Vector3<f64>>> {
+pub fn estimate(points: &[Point3<f64>], tree: &ImmutableKdTree<f32, 3>, k: usize) -> Vec<Option<Vector3<f64>>> {
     let Some(k) = NonZero::new(k.max(3)) else { return vec![None; points.len()] };
     points
         .iter()
         .map(|p| {
-            let nearest = tree.nearest_n::<SquaredEuclidean>(&[p.x, p.y, p.z], k);
+            let nearest = tree.nearest_n::<SquaredEuclidean>(&[p.x as f32, p.y as f32, p.z as f32], k);
             if nearest.len() < 3 {
                 return None;
             }
@@ -43,14 +44,14 @@ mod tests {
     fn plane_normals_are_perpendicular() {
         let pts: Vec<Point3<f64>> =
             (0..100).map(|k| Point3::new((k % 10) as f64 * 0.1, (k / 10) as f64 * 0.1, 2.0)).collect();
-        let arr: Vec<[f64; 3]> = pts.iter().map(|p| [p.x, p.y, p.z]).collect();
+        let arr: Vec<[f32; 3]> = pts.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
         let tree = ImmutableKdTree::new_from_slice(&arr);
         for n in estimate(&pts, &tree, 8) {
             let n = n.expect("plane");
             assert!((n.z.abs() - 1.0).abs() < 1e-9);
         }
         let line: Vec<Point3<f64>> = (0..20).map(|k| Point3::new(k as f64, 0.0, 0.0)).collect();
-        let arr: Vec<[f64; 3]> = line.iter().map(|p| [p.x, p.y, p.z]).collect();
+        let arr: Vec<[f32; 3]> = line.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
         assert!(estimate(&line, &ImmutableKdTree::new_from_slice(&arr), 5).iter().all(Option::is_none));
     }
 }

@@ -1,5 +1,5 @@
 //! `sgm icp SOURCE.pcd TARGET.pcd [--method point-to-point|point-to-plane] [--max-distance M]
-//! [--voxel M] [--init x,y,z,roll,pitch,yaw]`: one JSON object
+//! [--voxel M] [--init x,y,z,roll,pitch,yaw] [--rotation-epsilon R] [--translation-epsilon T]`: one JSON object
 //! `{"converged", "T", "fitness", "rmse", "iterations", "time_ms"}` with p_target = T · p_source.
 //! Bad files or arguments: exit 2 and a message naming what is wrong.
 
@@ -20,6 +20,8 @@ pub struct Options {
     pub max_distance: f64,
     pub voxel: f64,
     pub init: Option<String>,
+    pub rotation_epsilon: f64,
+    pub translation_epsilon: f64,
 }
 
 fn load(path: &Path) -> Result<Vec<nalgebra::Point3<f64>>, String> {
@@ -40,7 +42,12 @@ fn parse_init(text: &str) -> Result<sgm_model::geometry::Pose3, String> {
     if values.len() != 6 || values.iter().any(|v| !v.is_finite()) {
         return Err("--init needs six finite numbers: x,y,z,roll,pitch,yaw (metres, radians)".into());
     }
-    Ok(pose_from_rpy_translation(values[3], values[4], values[5], nalgebra::Vector3::new(values[0], values[1], values[2])))
+    Ok(pose_from_rpy_translation(
+        values[3],
+        values[4],
+        values[5],
+        nalgebra::Vector3::new(values[0], values[1], values[2]),
+    ))
 }
 
 pub fn run(options: Options) -> ExitCode {
@@ -51,6 +58,13 @@ pub fn run(options: Options) -> ExitCode {
         };
         if !options.max_distance.is_finite() || options.max_distance <= 0.0 {
             return Err(format!("--max-distance {} must be finite and > 0", options.max_distance));
+        }
+        for (name, v) in
+            [("--rotation-epsilon", options.rotation_epsilon), ("--translation-epsilon", options.translation_epsilon)]
+        {
+            if !v.is_finite() || v <= 0.0 {
+                return Err(format!("{name} {v} must be finite and > 0"));
+            }
         }
         if !options.voxel.is_finite() || options.voxel < 0.0 {
             return Err(format!("--voxel {} must be finite and ≥ 0", options.voxel));
@@ -68,6 +82,8 @@ pub fn run(options: Options) -> ExitCode {
         method: options.method,
         max_correspondence_distance_m: options.max_distance,
         voxel_m: options.voxel,
+        convergence_rotation_rad: options.rotation_epsilon,
+        convergence_translation_m: options.translation_epsilon,
         ..IcpConfig::default()
     };
     let start = Instant::now();
