@@ -9,7 +9,8 @@
 //!
 //! weighted by a Huber kernel on |r| (scale `huber_m`). Stops when the step is below
 //! `convergence_rotation_rad` and `convergence_translation_m`, or after `max_iterations`.
-//! Reports fitness (fraction of source points with a correspondence), inlier RMSE, and the
+//! Reports, from the last correspondence pass (the step after it is below the convergence
+//! thresholds), fitness (fraction of source points with a correspondence), inlier RMSE, and the
 //! information matrix H = Σ Jᵀ J / RMSE² converted to the optimiser's chart (right
 //! perturbation of `target_from_source`: H_right = Adᵀ H Ad), usable as a between factor.
 
@@ -38,7 +39,8 @@ pub struct IcpConfig {
     pub max_correspondence_distance_m: f64,
     /// Voxel size applied to both clouds first (0: none), m. Default 0.
     pub voxel_m: f64,
-    /// Neighbours for target normals (point-to-plane). Default 10.
+    /// Neighbours for target normals (point-to-plane), searched within the correspondence
+    /// distance. Default 10.
     pub normal_neighbours: usize,
     /// Huber kernel scale on residuals, m. Default 0.1.
     pub huber_m: f64,
@@ -124,7 +126,9 @@ pub fn register(
         (nn.distance as f64, nn.item as usize)
     };
     let target_normals = match config.method {
-        IcpMethod::PointToPlane => normals::estimate(&target, &tree, config.normal_neighbours),
+        IcpMethod::PointToPlane => {
+            normals::estimate(&target, &tree, config.normal_neighbours, config.max_correspondence_distance_m)
+        }
         IcpMethod::PointToPoint => Vec::new(),
     };
     let max_d2 = config.max_correspondence_distance_m.powi(2);
@@ -132,11 +136,14 @@ pub fn register(
     let mut iterations = 0;
     let mut step_converged = false;
     let huber = |r: f64| if r.abs() <= config.huber_m { 1.0 } else { config.huber_m / r.abs() };
+    // Statistics of the last correspondence pass (before its small final step).
+    let (mut inliers, mut sum2, mut information_left) = (0usize, 0.0, Matrix6::zeros());
     while iterations < config.max_iterations {
         iterations += 1;
         let mut h = Matrix6::zeros();
         let mut g = Tangent3::zeros();
         let mut pairs = 0;
+        (inliers, sum2, information_left) = (0, 0.0, Matrix6::zeros());
         for s in &source {
             let p = pose * s;
             let (d2, item) = nearest(&p);
@@ -144,22 +151,23 @@ pub fn register(
                 continue;
             }
             let q = target[item];
+            let mut j = SMatrix::<f64, 3, 6>::zeros();
+            j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-skew(&p.coords)));
+            j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
+            inliers += 1;
+            sum2 += (p - q).norm_squared();
+            information_left += j.transpose() * j;
             match config.method {
                 IcpMethod::PointToPlane => {
                     let Some(n) = target_normals[item] else { continue };
                     let r = n.dot(&(p - q));
-                    let mut j = SMatrix::<f64, 1, 6>::zeros();
-                    j.fixed_view_mut::<1, 3>(0, 0).copy_from(&p.coords.cross(&n).transpose());
-                    j.fixed_view_mut::<1, 3>(0, 3).copy_from(&n.transpose());
+                    let jn = n.transpose() * j;
                     let w = huber(r);
-                    h += w * j.transpose() * j;
-                    g += w * j.transpose() * r;
+                    h += w * jn.transpose() * jn;
+                    g += w * jn.transpose() * r;
                 }
                 IcpMethod::PointToPoint => {
                     let r = p - q;
-                    let mut j = SMatrix::<f64, 3, 6>::zeros();
-                    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-skew(&p.coords)));
-                    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
                     let w = huber(r.norm());
                     h += w * j.transpose() * j;
                     g += w * j.transpose() * r;
@@ -178,22 +186,7 @@ pub fn register(
             break;
         }
     }
-    // Final correspondences: fitness, RMSE and information at the result.
-    let (mut inliers, mut sum2) = (0usize, 0.0);
-    let mut h = Matrix6::zeros();
-    for s in &source {
-        let p = pose * s;
-        let (d2, item) = nearest(&p);
-        if d2 > max_d2 {
-            continue;
-        }
-        inliers += 1;
-        sum2 += (p - target[item]).norm_squared();
-        let mut j = SMatrix::<f64, 3, 6>::zeros();
-        j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-skew(&p.coords)));
-        j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
-        h += j.transpose() * j;
-    }
+    let h = information_left;
     let fitness = inliers as f64 / source.len() as f64;
     let rmse_m = if inliers > 0 { (sum2 / inliers as f64).sqrt() } else { f64::INFINITY };
     let noise2 = rmse_m.max(1e-4).powi(2);
