@@ -3,4 +3,5 @@
 
 pub mod icp;
 pub mod normals;
+pub mod projection;
 pub mod voxel;
