@@ -66,7 +66,7 @@ impl LabelImage {
 impl CameraModel {
     /// Pixel (u, v) of a point in the camera frame (z forward); `None` behind the camera.
     pub fn project(&self, p: &Point3<f64>) -> Option<(f64, f64)> {
-        if !(p.z > 1e-9) || !p.x.is_finite() || !p.y.is_finite() {
+        if !p.z.is_finite() || p.z <= 1e-9 || !p.x.is_finite() || !p.y.is_finite() {
             return None;
         }
         let (x, y) = (p.x / p.z, p.y / p.z);
