@@ -1,0 +1,70 @@
+//! Semantic fusion + clustering of a 20k-point scan (issue [perception] target ≤ 5 ms): a
+//! synthetic scene of 40 objects of 6 classes on a ground plane, seen by a 640 × 480 camera
+//! looking along the LiDAR's x axis.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use nalgebra::{Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use sgm_model::geometry::Pose3;
+use sgm_model::perception::clustering::{cluster, ClusterConfig};
+use sgm_model::perception::projection::{label_points, CameraModel, LabelImage};
+use std::hint::black_box;
+
+fn scene() -> (Vec<Point3<f64>>, CameraModel, LabelImage, Pose3) {
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut points = Vec::with_capacity(20_000);
+    for k in 0..20_000 {
+        if k % 2 == 0 {
+            points.push(Point3::new(rng.random_range(1.0..30.0), rng.random_range(-15.0..15.0), -1.5));
+        } else {
+            let o = (k / 2) % 40;
+            let centre = Vector3::new(3.0 + (o % 8) as f64 * 3.0, -10.0 + (o / 8) as f64 * 5.0, -1.0);
+            points.push(Point3::from(
+                centre
+                    + Vector3::new(
+                        rng.random_range(-0.3..0.3),
+                        rng.random_range(-0.3..0.3),
+                        rng.random_range(-0.5..0.5),
+                    ),
+            ));
+        }
+    }
+    let camera = CameraModel {
+        width: 640,
+        height: 480,
+        fx: 300.0,
+        fy: 300.0,
+        cx: 320.0,
+        cy: 240.0,
+        distortion: [0.05, -0.01, 0.0, 0.0, 0.0],
+    };
+    let labels: Vec<u16> = (0..640 * 480).map(|i| ((i % 640) / 107) as u16 + 1).collect();
+    let image = LabelImage::new(640, 480, labels).unwrap_or_else(|_| unreachable!());
+    let r = Matrix3::new(0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0);
+    let camera_from_lidar = Pose3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)),
+    );
+    (points, camera, image, camera_from_lidar)
+}
+
+fn fusion_and_clustering(c: &mut Criterion) {
+    let (points, camera, image, camera_from_lidar) = scene();
+    let config = ClusterConfig::default();
+    c.bench_function("fusion_20k", |b| {
+        b.iter(|| label_points(black_box(&points), &camera_from_lidar, &camera, &image))
+    });
+    let labels = label_points(&points, &camera_from_lidar, &camera, &image).unwrap_or_default();
+    let objects_only: Vec<_> = labels.iter().enumerate().map(|(k, l)| if k % 2 == 1 { *l } else { None }).collect();
+    c.bench_function("clustering_20k_objects_only", |b| b.iter(|| cluster(black_box(&points), &objects_only, &config)));
+    c.bench_function("fusion_and_clustering_20k", |b| {
+        b.iter(|| {
+            let labels = label_points(black_box(&points), &camera_from_lidar, &camera, &image).unwrap_or_default();
+            cluster(&points, &labels, &config)
+        })
+    });
+}
+
+criterion_group!(benches, fusion_and_clustering);
+criterion_main!(benches);

@@ -1,0 +1,203 @@
+//! Object candidates from labelled points (paper §IV-A: "the labeled point cloud is clustered into
+//! distinct objects"): within each class, points are binned into voxels of side `tolerance_m`
+//! and occupied voxels that touch (26-neighbourhood) form one cluster — connected components by
+//! union–find over the sorted voxel keys, near-linear in the number of points. Two points in
+//! one cluster are linked by a chain of steps shorter than 2√3 · tolerance; points farther than
+//! 2 · tolerance from every other voxel's points are never joined. Clusters are kept when their
+//! point count and extent are plausible for the class.
+
+use crate::scene_graph::LabelId;
+use nalgebra::{Point3, Vector3};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Plausibility limits of one class's clusters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClassLimits {
+    pub min_points: usize,
+    pub max_points: usize,
+    /// Largest axis-aligned extent, m.
+    pub max_extent_m: f64,
+}
+
+impl Default for ClassLimits {
+    fn default() -> Self {
+        Self { min_points: 10, max_points: 50_000, max_extent_m: 10.0 }
+    }
+}
+
+/// Clustering parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClusterConfig {
+    /// Voxel side: points in touching voxels of this size join one cluster, m. Default 0.3.
+    pub tolerance_m: f64,
+    /// Limits for classes without their own entry.
+    pub default_limits: ClassLimits,
+    /// Per-class limits, by class id.
+    pub classes: BTreeMap<u16, ClassLimits>,
+}
+
+impl Default for ClusterConfig {
+    fn default() -> Self {
+        Self { tolerance_m: 0.3, default_limits: ClassLimits::default(), classes: BTreeMap::new() }
+    }
+}
+
+/// One cluster: an object candidate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObjectCandidate {
+    pub label: LabelId,
+    pub centroid: Point3<f64>,
+    /// Axis-aligned extent, m.
+    pub size: Vector3<f64>,
+    pub points: usize,
+}
+
+/// Clusters `points` by class (`labels[k]` is point k's class; `None` points are ignored).
+/// Output is ordered by class, then by each cluster's first point: deterministic.
+pub fn cluster(points: &[Point3<f64>], labels: &[Option<LabelId>], config: &ClusterConfig) -> Vec<ObjectCandidate> {
+    let mut by_class: BTreeMap<LabelId, Vec<usize>> = BTreeMap::new();
+    for (k, (p, l)) in points.iter().zip(labels).enumerate() {
+        if let Some(l) = l {
+            if p.coords.iter().all(|v| v.is_finite()) {
+                by_class.entry(*l).or_default().push(k);
+            }
+        }
+    }
+    let size = config.tolerance_m;
+    let mut out = Vec::new();
+    if !size.is_finite() || size <= 0.0 {
+        return out;
+    }
+    for (label, members) in by_class {
+        let limits = config.classes.get(&label.0).unwrap_or(&config.default_limits);
+        // Voxel key of every member, members sorted by key: equal keys are contiguous.
+        let key = |k: usize| {
+            let p = points[k];
+            [(p.x / size).floor() as i64, (p.y / size).floor() as i64, (p.z / size).floor() as i64]
+        };
+        let mut keyed: Vec<([i64; 3], usize)> = members.iter().map(|&k| (key(k), k)).collect();
+        keyed.sort_unstable();
+        let mut voxels: Vec<[i64; 3]> = Vec::new();
+        let mut voxel_of = Vec::with_capacity(keyed.len());
+        for (kk, _) in &keyed {
+            if voxels.last() != Some(kk) {
+                voxels.push(*kk);
+            }
+            voxel_of.push(voxels.len() - 1);
+        }
+        // Union–find over voxels, joining each voxel to its 13 "forward" neighbours.
+        let mut parent: Vec<usize> = (0..voxels.len()).collect();
+        fn root(parent: &mut [usize], mut v: usize) -> usize {
+            while parent[v] != v {
+                parent[v] = parent[parent[v]];
+                v = parent[v];
+            }
+            v
+        }
+        for (v, k) in voxels.iter().enumerate() {
+            for dx in -1..=1i64 {
+                for dy in -1..=1i64 {
+                    for dz in -1..=1i64 {
+                        if (dx, dy, dz) <= (0, 0, 0) {
+                            continue;
+                        }
+                        let neighbour = [k[0] + dx, k[1] + dy, k[2] + dz];
+                        if let Ok(w) = voxels.binary_search(&neighbour) {
+                            let (a, b) = (root(&mut parent, v), root(&mut parent, w));
+                            if a != b {
+                                parent[a.max(b)] = a.min(b);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // Gather clusters in order of their first point (smallest index).
+        let mut clusters: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        let mut first_of_root: BTreeMap<usize, usize> = BTreeMap::new();
+        for (i, &(_, k)) in keyed.iter().enumerate() {
+            let r = root(&mut parent, voxel_of[i]);
+            first_of_root.entry(r).and_modify(|f| *f = (*f).min(k)).or_insert(k);
+            clusters.entry(r).or_default().push(k);
+        }
+        let mut ordered: Vec<(usize, Vec<usize>)> =
+            clusters.into_iter().map(|(r, pts)| (first_of_root.get(&r).copied().unwrap_or(usize::MAX), pts)).collect();
+        ordered.sort_by_key(|(first, _)| *first);
+        for (_, cluster_points) in ordered {
+            if cluster_points.len() < limits.min_points || cluster_points.len() > limits.max_points {
+                continue;
+            }
+            let (mut lo, mut hi, mut sum) = (Vector3::repeat(f64::MAX), Vector3::repeat(f64::MIN), Vector3::zeros());
+            for &k in &cluster_points {
+                let p = points[k].coords;
+                lo = lo.inf(&p);
+                hi = hi.sup(&p);
+                sum += p;
+            }
+            let extent = hi - lo;
+            if extent.max() > limits.max_extent_m {
+                continue;
+            }
+            out.push(ObjectCandidate {
+                label,
+                centroid: Point3::from(sum / cluster_points.len() as f64),
+                size: extent,
+                points: cluster_points.len(),
+            });
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn boxed(rng: &mut ChaCha8Rng, centre: [f64; 3], half: f64, n: usize) -> Vec<Point3<f64>> {
+        (0..n)
+            .map(|_| {
+                Point3::new(
+                    centre[0] + rng.random_range(-half..half),
+                    centre[1] + rng.random_range(-half..half),
+                    centre[2] + rng.random_range(-half..half),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn separates_boxes_by_class_and_distance_and_drops_implausible_ones() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let mut points = Vec::new();
+        let mut labels = Vec::new();
+        let mut add = |pts: Vec<Point3<f64>>, label: Option<u16>| {
+            labels.extend(std::iter::repeat_n(label.map(LabelId), pts.len()));
+            points.extend(pts);
+        };
+        add(boxed(&mut rng, [0.0, 0.0, 0.5], 0.3, 200), Some(1)); // chair A
+        add(boxed(&mut rng, [3.0, 0.0, 0.5], 0.3, 200), Some(1)); // chair B, 3 m away
+        add(boxed(&mut rng, [0.0, 0.0, 0.5], 0.3, 150), Some(2)); // a table in the same place, other class
+        add(boxed(&mut rng, [10.0, 10.0, 0.5], 0.05, 5), Some(1)); // too few points
+        add(boxed(&mut rng, [5.0, 5.0, 0.5], 0.3, 300), None); // unlabelled
+        let wall: Vec<Point3<f64>> = (0..600).map(|k| Point3::new(20.0 + 0.05 * k as f64, 0.0, 1.0)).collect(); // 30 m long
+        add(wall, Some(1));
+        let candidates = cluster(&points, &labels, &ClusterConfig::default());
+        assert_eq!(candidates.len(), 3, "{candidates:?}");
+        let chairs: Vec<_> = candidates.iter().filter(|c| c.label == LabelId(1)).collect();
+        assert_eq!(chairs.len(), 2);
+        assert!((chairs[0].centroid - Point3::new(0.0, 0.0, 0.5)).norm() < 0.05);
+        assert!((chairs[1].centroid - Point3::new(3.0, 0.0, 0.5)).norm() < 0.05);
+        assert!(chairs.iter().all(|c| c.points == 200 && c.size.max() < 0.6 && c.size.min() > 0.5));
+        let table = candidates.iter().find(|c| c.label == LabelId(2)).unwrap();
+        assert_eq!(table.points, 150);
+        // Per-class limits: walls of class 1 become acceptable with a larger extent.
+        let mut config = ClusterConfig::default();
+        config.classes.insert(1, ClassLimits { max_extent_m: 50.0, ..ClassLimits::default() });
+        assert_eq!(cluster(&points, &labels, &config).len(), 4);
+    }
+}
