@@ -3,6 +3,8 @@
 
 pub mod clustering;
 pub mod icp;
+pub mod keyframes;
 pub mod normals;
 pub mod projection;
+pub mod tracker;
 pub mod voxel;

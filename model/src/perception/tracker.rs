@@ -1,0 +1,202 @@
+//! Object tracker (paper §IV-A, eqs. 2–4): object candidates of a new keyframe are associated
+//! with objects by a linear assignment on centroid distance, c_ij = ‖p_i − p_j‖₂, accepted when
+//! c_ij < c_max (`max_track_distance_m`). Beyond the paper, candidates are matched against the
+//! map's objects near the keyframe (within `search_radius_m`), not only the previous keyframe's,
+//! so an object that leaves the view and returns keeps its id. Only equal labels may associate.
+//! Associated objects are re-anchored to the new keyframe (scene graph); unassociated candidates
+//! become new objects; an object is confirmed after `confirm_after` sightings.
+
+use super::clustering::ObjectCandidate;
+use crate::matching::lap::{self, CostMatrix};
+use crate::scene_graph::{KeyframeId, ObjectId, SceneGraph, SceneGraphError};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrackerConfig {
+    /// c_max of eq. 4, m. Default 1.0.
+    pub max_track_distance_m: f64,
+    /// Map objects within this distance of the keyframe are association candidates, m. Default 30.
+    pub search_radius_m: f64,
+    /// Sightings before an object is confirmed (shared and matched). Default 3.
+    pub confirm_after: u32,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        Self { max_track_distance_m: 1.0, search_radius_m: 30.0, confirm_after: 3 }
+    }
+}
+
+/// Tracker state: sightings per object (serialisable with the scene graph).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Tracker {
+    sightings: BTreeMap<ObjectId, u32>,
+}
+
+/// What one keyframe's candidates became.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TrackUpdate {
+    /// Candidate index → the object it was associated with or created.
+    pub objects: Vec<ObjectId>,
+    pub created: Vec<ObjectId>,
+    /// Objects that reached `confirm_after` sightings with this keyframe.
+    pub newly_confirmed: Vec<ObjectId>,
+}
+
+/// Cost of a forbidden association (different labels): never below c_max.
+const FORBIDDEN: f64 = 1e9;
+
+impl Tracker {
+    pub fn sightings(&self, id: ObjectId) -> u32 {
+        self.sightings.get(&id).copied().unwrap_or(0)
+    }
+
+    pub fn is_confirmed(&self, id: ObjectId, config: &TrackerConfig) -> bool {
+        self.sightings(id) >= config.confirm_after
+    }
+
+    /// Associates `candidates` (centroids in the keyframe's body frame) observed at `keyframe`.
+    pub fn update(
+        &mut self,
+        graph: &mut SceneGraph,
+        keyframe: KeyframeId,
+        candidates: &[ObjectCandidate],
+        config: &TrackerConfig,
+    ) -> Result<TrackUpdate, SceneGraphError> {
+        let world_from_body =
+            graph.keyframe(keyframe).ok_or(SceneGraphError::UnknownKeyframe(keyframe))?.world_from_body;
+        let in_world: Vec<_> = candidates.iter().map(|c| world_from_body * c.centroid).collect();
+        let here = world_from_body.translation.vector;
+        let nearby: Vec<(ObjectId, nalgebra::Point3<f64>, crate::scene_graph::LabelId)> = graph
+            .objects()
+            .filter_map(|o| graph.centroid_in_world(o.id).map(|p| (o.id, p, o.label)))
+            .filter(|(_, p, _)| (p.coords - here).norm() <= config.search_radius_m)
+            .collect();
+        let mut costs = CostMatrix::filled(candidates.len(), nearby.len(), FORBIDDEN);
+        for (i, c) in candidates.iter().enumerate() {
+            for (j, (_, p, label)) in nearby.iter().enumerate() {
+                if *label == c.label {
+                    costs.set(i, j, (in_world[i] - p).norm());
+                }
+            }
+        }
+        let assignment = if nearby.is_empty() { vec![None; candidates.len()] } else { lap::solve(&costs) };
+        let mut update = TrackUpdate::default();
+        for (i, c) in candidates.iter().enumerate() {
+            let matched = assignment[i].filter(|&j| costs.get(i, j) < config.max_track_distance_m).map(|j| nearby[j].0);
+            let id = match matched {
+                Some(id) => {
+                    graph.observe_object(id, in_world[i], c.size, keyframe)?;
+                    id
+                }
+                None => {
+                    let id = graph.add_object(c.label, in_world[i], c.size, keyframe)?;
+                    update.created.push(id);
+                    id
+                }
+            };
+            let count = self.sightings.entry(id).or_insert(0);
+            *count += 1;
+            if *count == config.confirm_after {
+                update.newly_confirmed.push(id);
+            }
+            update.objects.push(id);
+        }
+        Ok(update)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::pose_from_yaw_translation;
+    use crate::scene_graph::{Keyframe, LabelId};
+    use nalgebra::{Point3, Vector3};
+
+    fn candidate(label: u16, x: f64, y: f64) -> ObjectCandidate {
+        ObjectCandidate {
+            label: LabelId(label),
+            centroid: Point3::new(x, y, 0.5),
+            size: Vector3::repeat(0.6),
+            points: 100,
+        }
+    }
+
+    /// A robot driving along x past two chairs and a bench; candidates are given in the body
+    /// frame of each keyframe, with 10 cm of noise.
+    #[test]
+    fn ids_survive_occlusion_and_neighbours_stay_apart() {
+        let mut graph = SceneGraph::new();
+        let mut tracker = Tracker::default();
+        let config = TrackerConfig::default();
+        let world = [(1u16, 5.0, 2.0), (1, 5.0, 3.2), (2, 9.0, -2.0)];
+        let mut ids_per_kf = Vec::new();
+        for (k, x) in [0.0, 1.0, 2.0, 3.0].into_iter().enumerate() {
+            let kf = KeyframeId(k as u32);
+            graph
+                .add_keyframe(Keyframe {
+                    id: kf,
+                    stamp: k as f64,
+                    world_from_body: pose_from_yaw_translation(0.1 * k as f64, Vector3::new(x, 0.0, 0.0)),
+                })
+                .unwrap();
+            let body_from_world = graph.keyframe(kf).unwrap().world_from_body.inverse();
+            let noise = [0.1, -0.08, 0.05, -0.1][k];
+            // Keyframe 2: the first chair is occluded.
+            let seen: Vec<ObjectCandidate> = world
+                .iter()
+                .enumerate()
+                .filter(|(o, _)| !(k == 2 && *o == 0))
+                .map(|(_, &(l, wx, wy))| {
+                    let b = body_from_world * Point3::new(wx + noise, wy - noise, 0.5);
+                    candidate(l, b.x, b.y)
+                })
+                .collect();
+            ids_per_kf.push(tracker.update(&mut graph, kf, &seen, &config).unwrap());
+        }
+        assert_eq!(graph.object_count(), 3, "no duplicates: each object keeps one id");
+        let first = &ids_per_kf[0].objects;
+        assert_eq!(ids_per_kf[1].objects, *first);
+        assert_eq!(ids_per_kf[2].objects, vec![first[1], first[2]]);
+        assert_eq!(ids_per_kf[3].objects, *first, "the occluded chair kept its id");
+        assert_eq!(tracker.sightings(first[0]), 3);
+        assert!(tracker.is_confirmed(first[0], &config) && tracker.is_confirmed(first[1], &config));
+        assert_eq!(ids_per_kf[2].newly_confirmed, vec![first[1], first[2]]);
+        assert_eq!(ids_per_kf[3].newly_confirmed, vec![first[0]]);
+        // The object is anchored to the latest keyframe that saw it.
+        assert_eq!(graph.object(first[0]).unwrap().anchor, KeyframeId(3));
+        assert_eq!(graph.keyframes_observing(first[0]).count(), 3);
+    }
+
+    #[test]
+    fn far_or_other_label_candidates_become_new_objects() {
+        let mut graph = SceneGraph::new();
+        let mut tracker = Tracker::default();
+        let config = TrackerConfig::default();
+        graph
+            .add_keyframe(Keyframe {
+                id: KeyframeId(0),
+                stamp: 0.0,
+                world_from_body: pose_from_yaw_translation(0.0, Vector3::zeros()),
+            })
+            .unwrap();
+        graph
+            .add_keyframe(Keyframe {
+                id: KeyframeId(1),
+                stamp: 1.0,
+                world_from_body: pose_from_yaw_translation(0.0, Vector3::zeros()),
+            })
+            .unwrap();
+        let a = tracker.update(&mut graph, KeyframeId(0), &[candidate(1, 2.0, 0.0)], &config).unwrap();
+        // 1.5 m away (> c_max) and a different label at the same place: both new.
+        let b = tracker
+            .update(&mut graph, KeyframeId(1), &[candidate(1, 3.5, 0.0), candidate(2, 2.0, 0.0)], &config)
+            .unwrap();
+        assert_eq!(b.created.len(), 2);
+        assert!(!b.objects.contains(&a.objects[0]));
+        assert_eq!(graph.object_count(), 3);
+        assert!(tracker.update(&mut graph, KeyframeId(9), &[], &config).is_err());
+    }
+}
