@@ -4,6 +4,7 @@
 pub mod clustering;
 pub mod icp;
 pub mod keyframes;
+pub mod loop_closure;
 pub mod normals;
 pub mod projection;
 pub mod tracker;
