@@ -1,6 +1,7 @@
 //! Perception (paper §IV-A, §IV-D): what a robot does to its own scans. So far: voxel
 //! downsampling, normals, ICP, camera projection (semantic fusion), clustering.
 
+pub mod classes;
 pub mod clustering;
 pub mod icp;
 pub mod keyframes;
