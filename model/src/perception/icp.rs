@@ -15,11 +15,11 @@
 //! perturbation of `target_from_source`: H_right = Adᵀ H Ad), usable as a between factor.
 
 use super::normals;
+use super::point_tree::PointTree;
 use super::voxel::downsample;
 use crate::geometry::Pose3;
 use crate::optim::lie::{se3_adjoint, se3_exp, Matrix6, Tangent3};
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
-use nalgebra::{Matrix3, Point3, SMatrix, Vector3};
+use nalgebra::{Matrix3, Point3, Vector3};
 
 /// Error metric.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -118,13 +118,7 @@ pub fn register(
     if target.len() < 3 {
         return Err(IcpError::TooFewPoints("target"));
     }
-    // Single precision for the search only (µm at km range); residuals use the f64 points.
-    let target_array: Vec<[f32; 3]> = target.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
-    let tree: ImmutableKdTree<f32, 3> = ImmutableKdTree::new_from_slice(&target_array);
-    let nearest = |p: &Point3<f64>| {
-        let nn = tree.nearest_one::<SquaredEuclidean>(&[p.x as f32, p.y as f32, p.z as f32]);
-        (nn.distance as f64, nn.item as usize)
-    };
+    let tree = PointTree::new(&target);
     let target_normals = match config.method {
         IcpMethod::PointToPlane => {
             normals::estimate(&target, &tree, config.normal_neighbours, config.max_correspondence_distance_m)
@@ -137,43 +131,44 @@ pub fn register(
     let mut step_converged = false;
     let huber = |r: f64| if r.abs() <= config.huber_m { 1.0 } else { config.huber_m / r.abs() };
     // Statistics of the last correspondence pass (before its small final step).
-    let (mut inliers, mut sum2, mut information_left) = (0usize, 0.0, Matrix6::zeros());
+    let (mut inliers, mut sum2) = (0usize, 0.0);
+    let mut unweighted = Moments::default();
     while iterations < config.max_iterations {
         iterations += 1;
+        let mut weighted = Moments::default();
         let mut h = Matrix6::zeros();
         let mut g = Tangent3::zeros();
         let mut pairs = 0;
-        (inliers, sum2, information_left) = (0, 0.0, Matrix6::zeros());
+        (inliers, sum2, unweighted) = (0, 0.0, Moments::default());
         for s in &source {
             let p = pose * s;
-            let (d2, item) = nearest(&p);
-            if d2 > max_d2 {
-                continue;
-            }
+            let Some((d2, item)) = tree.nearest(&p).filter(|(d2, _)| *d2 <= max_d2) else { continue };
             let q = target[item];
-            let mut j = SMatrix::<f64, 3, 6>::zeros();
-            j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-skew(&p.coords)));
-            j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
+            let e = p - q;
             inliers += 1;
-            sum2 += (p - q).norm_squared();
-            information_left += j.transpose() * j;
+            sum2 += d2;
+            unweighted.add(1.0, &p.coords);
             match config.method {
                 IcpMethod::PointToPlane => {
                     let Some(n) = target_normals[item] else { continue };
-                    let r = n.dot(&(p - q));
-                    let jn = n.transpose() * j;
+                    let r = n.dot(&e);
+                    let pn = p.coords.cross(&n);
+                    let jn = Tangent3::new(pn.x, pn.y, pn.z, n.x, n.y, n.z);
                     let w = huber(r);
-                    h += w * jn.transpose() * jn;
-                    g += w * jn.transpose() * r;
+                    h.ger(w, &jn, &jn, 1.0);
+                    g.axpy(w * r, &jn, 1.0);
                 }
                 IcpMethod::PointToPoint => {
-                    let r = p - q;
-                    let w = huber(r.norm());
-                    h += w * j.transpose() * j;
-                    g += w * j.transpose() * r;
+                    let w = huber(e.norm());
+                    weighted.add(w, &p.coords);
+                    let (gw, gv) = (w * p.coords.cross(&e), w * e);
+                    g += Tangent3::new(gw.x, gw.y, gw.z, gv.x, gv.y, gv.z);
                 }
             }
             pairs += 1;
+        }
+        if config.method == IcpMethod::PointToPoint {
+            h = weighted.gram();
         }
         if pairs < 6 {
             break;
@@ -186,7 +181,7 @@ pub fn register(
             break;
         }
     }
-    let h = information_left;
+    let h = unweighted.gram();
     let fitness = inliers as f64 / source.len() as f64;
     let rmse_m = if inliers > 0 { (sum2 / inliers as f64).sqrt() } else { f64::INFINITY };
     let noise2 = rmse_m.max(1e-4).powi(2);
@@ -202,8 +197,32 @@ pub fn register(
     })
 }
 
-fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+/// Weighted moments of the transformed source points p, enough for Σ w Jᵀ J of the
+/// point-to-point Jacobian J = [−p^, I] without forming J per point:
+/// Σ w Jᵀ J = [[Σw(|p|² I − p pᵀ), (Σ w p)^], [−(Σ w p)^, (Σ w) I]].
+#[derive(Default)]
+struct Moments {
+    weight: f64,
+    first: Vector3<f64>,
+    second: Matrix3<f64>,
+}
+
+impl Moments {
+    fn add(&mut self, w: f64, p: &Vector3<f64>) {
+        self.weight += w;
+        self.first.axpy(w, p, 1.0);
+        self.second.ger(w, p, p, 1.0);
+    }
+
+    fn gram(&self) -> Matrix6 {
+        let mut m = Matrix6::zeros();
+        let skew = self.first.cross_matrix();
+        m.fixed_view_mut::<3, 3>(0, 0).copy_from(&(Matrix3::identity() * self.second.trace() - self.second));
+        m.fixed_view_mut::<3, 3>(0, 3).copy_from(&skew);
+        m.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-skew));
+        m.fixed_view_mut::<3, 3>(3, 3).copy_from(&(Matrix3::identity() * self.weight));
+        m
+    }
 }
 
 #[cfg(test)]
@@ -260,6 +279,23 @@ mod tests {
             register(&[Point3::origin()], &target, &Pose3::identity(), &IcpConfig::default()),
             Err(IcpError::TooFewPoints("source"))
         );
+    }
+
+    #[test]
+    fn moments_give_the_explicit_gram_matrix() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut moments = Moments::default();
+        let mut explicit = Matrix6::zeros();
+        for _ in 0..50 {
+            let p = Vector3::new(rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0), rng.random_range(-2.0..2.0));
+            let w = rng.random_range(0.1..1.0);
+            let mut j = nalgebra::SMatrix::<f64, 3, 6>::zeros();
+            j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-p.cross_matrix()));
+            j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
+            explicit += w * j.transpose() * j;
+            moments.add(w, &p);
+        }
+        assert!((moments.gram() - explicit).norm() < 1e-9 * explicit.norm());
     }
 
     #[test]

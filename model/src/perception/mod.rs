@@ -7,6 +7,7 @@ pub mod icp;
 pub mod keyframes;
 pub mod loop_closure;
 pub mod normals;
+pub mod point_tree;
 pub mod projection;
 pub mod tracker;
 pub mod voxel;

@@ -1,34 +1,25 @@
 //! Surface normals by principal component analysis of each point's k nearest neighbours: the
 //! eigenvector of the smallest eigenvalue of their covariance. Points with fewer than 3
-//! neighbours, or on a line, get no normal. The kd-tree holds f32 coordinates: neighbour search
-//! needs micrometres, not f64.
+//! neighbours, or on a line, get no normal.
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use super::point_tree::PointTree;
 use nalgebra::{Matrix3, Point3, Vector3};
-use std::num::NonZero;
 
 /// Normal of every point (`None` where undetermined) from its `k` nearest neighbours within
 /// `radius` (m), using `tree` built over `points`.
-pub fn estimate(
-    points: &[Point3<f64>],
-    tree: &ImmutableKdTree<f32, 3>,
-    k: usize,
-    radius: f64,
-) -> Vec<Option<Vector3<f64>>> {
-    let Some(k) = NonZero::new(k.max(3)) else { return vec![None; points.len()] };
-    let r2 = (radius * radius) as f32;
+pub fn estimate(points: &[Point3<f64>], tree: &PointTree, k: usize, radius: f64) -> Vec<Option<Vector3<f64>>> {
     points
         .iter()
         .map(|p| {
-            let nearest = tree.nearest_n_within::<SquaredEuclidean>(&[p.x as f32, p.y as f32, p.z as f32], r2, k, true);
+            let nearest = tree.nearest_k_within(p, k.max(3), radius);
             if nearest.len() < 3 {
                 return None;
             }
             let n = nearest.len() as f64;
-            let mean = nearest.iter().fold(Vector3::zeros(), |acc, nb| acc + points[nb.item as usize].coords) / n;
+            let mean = nearest.iter().fold(Vector3::zeros(), |acc, &i| acc + points[i].coords) / n;
             let mut cov = Matrix3::zeros();
-            for nb in &nearest {
-                let d = points[nb.item as usize].coords - mean;
+            for &i in &nearest {
+                let d = points[i].coords - mean;
                 cov += d * d.transpose();
             }
             smallest_eigenvector(&cov)
@@ -80,15 +71,12 @@ mod tests {
     fn plane_normals_are_perpendicular() {
         let pts: Vec<Point3<f64>> =
             (0..100).map(|k| Point3::new((k % 10) as f64 * 0.1, (k / 10) as f64 * 0.1, 2.0)).collect();
-        let arr: Vec<[f32; 3]> = pts.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
-        let tree = ImmutableKdTree::new_from_slice(&arr);
-        for n in estimate(&pts, &tree, 8, 1.0) {
+        for n in estimate(&pts, &PointTree::new(&pts), 8, 1.0) {
             let n = n.expect("plane");
             assert!((n.z.abs() - 1.0).abs() < 1e-9);
         }
         let line: Vec<Point3<f64>> = (0..20).map(|k| Point3::new(k as f64, 0.0, 0.0)).collect();
-        let arr: Vec<[f32; 3]> = line.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
-        assert!(estimate(&line, &ImmutableKdTree::new_from_slice(&arr), 5, 10.0).iter().all(Option::is_none));
+        assert!(estimate(&line, &PointTree::new(&line), 5, 10.0).iter().all(Option::is_none));
     }
 
     #[test]
