@@ -1,5 +1,6 @@
-//! Perception (paper §IV-A, §IV-D): what a robot does to its own scans. So far: voxel
-//! downsampling, normals, ICP, camera projection (semantic fusion), clustering.
+//! Perception (paper §IV-A, §IV-D): what a robot does to its own scans — voxel downsampling,
+//! kd-tree, normals, ICP, camera projection (semantic fusion), class table, clustering, keyframe
+//! selection, object tracking, intra-robot loop closure.
 
 pub mod classes;
 pub mod clustering;
