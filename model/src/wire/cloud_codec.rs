@@ -139,8 +139,14 @@ pub fn encode(points: &[Point3<f64>], resolution_m: f64) -> Result<EncodedCloud,
     Ok(EncodedCloud { bytes, points: points.len(), max_error_m })
 }
 
-/// Decodes a cloud (cell centres, Morton order).
+/// Decodes a cloud (cell centres, Morton order) of at most [`MAX_POINTS`] points.
 pub fn decode(bytes: &[u8]) -> Result<Vec<Point3<f64>>, CodecError> {
+    decode_at_most(bytes, MAX_POINTS)
+}
+
+/// Decodes a cloud of at most `max_points` points (checked before anything is allocated or
+/// decompressed: a radio payload cannot make us allocate more).
+pub fn decode_at_most(bytes: &[u8], max_points: usize) -> Result<Vec<Point3<f64>>, CodecError> {
     let version = *bytes.first().ok_or(CodecError::Corrupt("empty"))?;
     if version != VERSION {
         return Err(CodecError::Version(version));
@@ -157,7 +163,7 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<Point3<f64>>, CodecError> {
         *v = get_i64(bytes, &mut at).ok_or(CodecError::Corrupt("origin"))?;
     }
     let n = get_u64(bytes, &mut at).ok_or(CodecError::Corrupt("count"))? as usize;
-    if n > MAX_POINTS {
+    if n > max_points.min(MAX_POINTS) {
         return Err(CodecError::Corrupt("more points than the limit"));
     }
     let packed = &bytes[at..];

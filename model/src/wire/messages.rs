@@ -1,0 +1,301 @@
+//! The inter-robot messages (paper §IV-B..F, Table 4), as compact serde types for postcard.
+//!
+//! | message | when | content |
+//! |---|---|---|
+//! | `ObjectData` | scene-graph change, rate-limited | objects: id, label, quantised centroid, size |
+//! | `ObjectCloudRequest` / `Response` | after a match | sparse object clouds + observing keyframe ids |
+//! | `KeyframeRequest` / `Response` | for keyframes not yet held | compressed cloud, pose, covariance |
+//! | `KeyframeRefusal` | a request the sender cannot serve now | the keyframe ids and why |
+//!
+//! Centroids travel as integers in units of `resolution_mm` (zigzag varints under postcard: two
+//! bytes per axis within ±163 m at 2 cm), sizes as bytes in 5 cm steps: an object costs 9–13
+//! bytes. Clouds are [`super::cloud_codec`] streams.
+
+use crate::geometry::Pose3;
+use crate::scene_graph::{KeyframeId, LabelId, ObjectId};
+use nalgebra::{Matrix6, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Message type, for accounting and limits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum MessageKind {
+    ObjectData,
+    ObjectCloudRequest,
+    ObjectCloudResponse,
+    KeyframeRequest,
+    KeyframeResponse,
+    KeyframeRefusal,
+}
+
+impl MessageKind {
+    pub const ALL: [MessageKind; 6] = [
+        MessageKind::ObjectData,
+        MessageKind::ObjectCloudRequest,
+        MessageKind::ObjectCloudResponse,
+        MessageKind::KeyframeRequest,
+        MessageKind::KeyframeResponse,
+        MessageKind::KeyframeRefusal,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            MessageKind::ObjectData => "ObjectData",
+            MessageKind::ObjectCloudRequest => "ObjectCloudRequest",
+            MessageKind::ObjectCloudResponse => "ObjectCloudResponse",
+            MessageKind::KeyframeRequest => "KeyframeRequest",
+            MessageKind::KeyframeResponse => "KeyframeResponse",
+            MessageKind::KeyframeRefusal => "KeyframeRefusal",
+        }
+    }
+}
+
+/// Every message that crosses the radio.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Message {
+    ObjectData(ObjectData),
+    ObjectCloudRequest(ObjectCloudRequest),
+    ObjectCloudResponse(ObjectCloudResponse),
+    KeyframeRequest(KeyframeRequest),
+    KeyframeResponse(KeyframeResponse),
+    KeyframeRefusal(KeyframeRefusal),
+}
+
+impl Message {
+    pub fn kind(&self) -> MessageKind {
+        match self {
+            Message::ObjectData(_) => MessageKind::ObjectData,
+            Message::ObjectCloudRequest(_) => MessageKind::ObjectCloudRequest,
+            Message::ObjectCloudResponse(_) => MessageKind::ObjectCloudResponse,
+            Message::KeyframeRequest(_) => MessageKind::KeyframeRequest,
+            Message::KeyframeResponse(_) => MessageKind::KeyframeResponse,
+            Message::KeyframeRefusal(_) => MessageKind::KeyframeRefusal,
+        }
+    }
+}
+
+/// Step of the size field, m.
+pub const SIZE_STEP_M: f64 = 0.05;
+
+/// The sender's object layer, confirmed objects only, in the sender's world frame.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectData {
+    /// Increases with every broadcast of this sender: a receiver ignores older ones.
+    pub revision: u32,
+    /// Centroid quantum, millimetres (≥ 1).
+    pub resolution_mm: u16,
+    pub objects: Vec<WireObject>,
+}
+
+/// One object of `ObjectData`.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WireObject {
+    pub id: ObjectId,
+    pub label: LabelId,
+    /// Centroid in units of the message's `resolution_mm`.
+    pub centroid: [i32; 3],
+    /// Extent per world axis in steps of [`SIZE_STEP_M`], saturating at 255 (12.75 m).
+    pub size: [u8; 3],
+}
+
+impl ObjectData {
+    /// Quantises `(id, label, centroid_in_world, size)` at `resolution_mm`. Centroids beyond
+    /// ±2³¹ quanta (±21 000 km at 1 cm) saturate.
+    pub fn quantise<'a>(
+        revision: u32,
+        resolution_mm: u16,
+        objects: impl IntoIterator<Item = (ObjectId, LabelId, Point3<f64>, Vector3<f64>)> + 'a,
+    ) -> Self {
+        let resolution_mm = resolution_mm.max(1);
+        let r = f64::from(resolution_mm) * 1e-3;
+        let objects = objects
+            .into_iter()
+            .map(|(id, label, c, s)| WireObject {
+                id,
+                label,
+                centroid: [c.x, c.y, c.z].map(|v| (v / r).round().clamp(i32::MIN as f64, i32::MAX as f64) as i32),
+                size: [s.x, s.y, s.z].map(|v| (v / SIZE_STEP_M).round().clamp(0.0, 255.0) as u8),
+            })
+            .collect();
+        Self { revision, resolution_mm, objects }
+    }
+}
+
+impl WireObject {
+    pub fn centroid_m(&self, resolution_mm: u16) -> Point3<f64> {
+        let r = f64::from(resolution_mm.max(1)) * 1e-3;
+        Point3::new(f64::from(self.centroid[0]) * r, f64::from(self.centroid[1]) * r, f64::from(self.centroid[2]) * r)
+    }
+
+    pub fn size_m(&self) -> Vector3<f64> {
+        Vector3::new(f64::from(self.size[0]), f64::from(self.size[1]), f64::from(self.size[2])) * SIZE_STEP_M
+    }
+}
+
+/// Ask for the sparse clouds of matched objects.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ObjectCloudRequest {
+    pub objects: Vec<ObjectId>,
+}
+
+/// The requested objects' clouds (sender's world frame) and the keyframes that observed them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectCloudResponse {
+    pub objects: Vec<ObjectCloud>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectCloud {
+    pub id: ObjectId,
+    pub keyframes: Vec<KeyframeId>,
+    /// A [`super::cloud_codec`] stream; empty when the object has no stored points.
+    #[serde(with = "serde_bytes_compat")]
+    pub cloud: Vec<u8>,
+}
+
+/// Ask for keyframes not yet held.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct KeyframeRequest {
+    pub keyframes: Vec<KeyframeId>,
+}
+
+/// One keyframe: its cloud (body frame), optimised pose and marginal covariance.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct KeyframeResponse {
+    pub keyframe: KeyframeId,
+    pub stamp: f64,
+    pub world_from_body: WirePose,
+    /// Upper triangle, row-major, of the 6 × 6 marginal covariance over (ω, v).
+    pub covariance: [f32; 21],
+    #[serde(with = "serde_bytes_compat")]
+    pub cloud: Vec<u8>,
+}
+
+/// Requested keyframes the sender will not serve now.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct KeyframeRefusal {
+    pub keyframes: Vec<KeyframeId>,
+    pub reason: RefusalReason,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum RefusalReason {
+    /// No such keyframe, or its cloud was evicted.
+    Unknown,
+    /// The sender's outgoing budget is spent: ask again later.
+    Busy,
+}
+
+/// A pose as translation and unit quaternion (x, y, z, w).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WirePose {
+    pub translation: [f64; 3],
+    pub rotation: [f64; 4],
+}
+
+impl From<&Pose3> for WirePose {
+    fn from(p: &Pose3) -> Self {
+        let q = p.rotation.quaternion();
+        Self { translation: [p.translation.x, p.translation.y, p.translation.z], rotation: [q.i, q.j, q.k, q.w] }
+    }
+}
+
+impl WirePose {
+    /// `None` unless finite with a quaternion of norm 1 ± 1e-6.
+    pub fn to_pose(&self) -> Option<Pose3> {
+        let [x, y, z, w] = self.rotation;
+        let q = Quaternion::new(w, x, y, z);
+        let finite = self.translation.iter().chain(&self.rotation).all(|v| v.is_finite());
+        if !finite || (q.norm() - 1.0).abs() > 1e-6 {
+            return None;
+        }
+        let [tx, ty, tz] = self.translation;
+        Some(Pose3::from_parts(Translation3::new(tx, ty, tz), UnitQuaternion::from_quaternion(q)))
+    }
+}
+
+/// Packs the upper triangle of a symmetric 6 × 6 matrix.
+pub fn pack_covariance(m: &Matrix6<f64>) -> [f32; 21] {
+    let mut out = [0f32; 21];
+    let mut k = 0;
+    for i in 0..6 {
+        for j in i..6 {
+            out[k] = m[(i, j)] as f32;
+            k += 1;
+        }
+    }
+    out
+}
+
+/// Unpacks [`pack_covariance`]; `None` unless finite, symmetric positive definite.
+pub fn unpack_covariance(packed: &[f32; 21]) -> Option<Matrix6<f64>> {
+    let mut m = Matrix6::zeros();
+    let mut k = 0;
+    for i in 0..6 {
+        for j in i..6 {
+            m[(i, j)] = f64::from(packed[k]);
+            m[(j, i)] = f64::from(packed[k]);
+            k += 1;
+        }
+    }
+    (m.iter().all(|v| v.is_finite()) && m.cholesky().is_some()).then_some(m)
+}
+
+/// Byte vectors as serde bytes (one length prefix, no per-element tag) without another crate.
+mod serde_bytes_compat {
+    use serde::{Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(bytes: &[u8], s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_bytes(bytes)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<u8>, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = Vec<u8>;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("bytes")
+            }
+            fn visit_bytes<E: serde::de::Error>(self, v: &[u8]) -> Result<Vec<u8>, E> {
+                Ok(v.to_vec())
+            }
+            fn visit_byte_buf<E: serde::de::Error>(self, v: Vec<u8>) -> Result<Vec<u8>, E> {
+                Ok(v)
+            }
+        }
+        d.deserialize_byte_buf(Visitor)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::pose_from_rpy_translation;
+
+    #[test]
+    fn quantised_objects_round_trip_within_half_a_quantum() {
+        let objects = [
+            (ObjectId(3), LabelId(2), Point3::new(12.345, -70.011, 0.4), Vector3::new(0.5, 0.6, 1.2)),
+            (ObjectId(400), LabelId(7), Point3::new(-150.0, 149.99, -2.0), Vector3::new(20.0, 0.01, 0.0)),
+        ];
+        let data = ObjectData::quantise(1, 20, objects);
+        for ((_, _, c, s), w) in objects.iter().zip(&data.objects) {
+            assert!((w.centroid_m(20) - c).abs().max() <= 0.01 + 1e-12);
+            assert!((w.size_m() - s).abs().max() <= 0.025 + 1e-12 || s.max() > 12.75);
+        }
+        assert_eq!(data.objects[1].size, [255, 0, 0]);
+    }
+
+    #[test]
+    fn poses_and_covariances_round_trip() {
+        let pose = pose_from_rpy_translation(0.1, -0.2, 2.5, Vector3::new(1.0, -2.0, 0.3));
+        let back = WirePose::from(&pose).to_pose().unwrap();
+        assert!((back.to_homogeneous() - pose.to_homogeneous()).abs().max() < 1e-12);
+        let bad = WirePose { translation: [0.0; 3], rotation: [0.0, 0.0, 0.0, 2.0] };
+        assert_eq!(bad.to_pose(), None);
+        let a = Matrix6::<f64>::from_fn(|i, j| ((i * 7 + j * 3) % 5) as f64 * 0.1);
+        let cov = a * a.transpose() + Matrix6::identity() * 0.01;
+        let unpacked = unpack_covariance(&pack_covariance(&cov)).unwrap();
+        assert!((unpacked - cov).abs().max() < 1e-6);
+        assert_eq!(unpack_covariance(&[0.0; 21]), None);
+    }
+}
