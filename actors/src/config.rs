@@ -1,0 +1,366 @@
+//! One robot's configuration: a section per actor, loaded with the `config` crate from built-in
+//! defaults, then a TOML file, then `SGM__SECTION__KEY` environment variables
+//! (`SGM__MATCHER__EDGE_SHARPNESS=2`), and validated before anything starts: an error names the
+//! key, the value and the allowed range. The book's configuration reference lists every key.
+
+use crate::protocol::RetryConfig;
+use serde::{Deserialize, Serialize};
+use sgm_model::matching::MatcherConfig;
+use sgm_model::perception::classes::{ClassSpec, ClassTable};
+use sgm_model::perception::icp::IcpConfig;
+use sgm_model::perception::keyframes::KeyframeConfig;
+use sgm_model::perception::loop_closure::LoopClosureConfig;
+use sgm_model::perception::tracker::TrackerConfig;
+use sgm_model::wire::{TeamKey, WireLimits};
+use std::path::Path;
+
+/// Everything one robot needs; `[robot]`, `[fusion]`, `[tracker]`, `[matcher]`, `[optimiser]`,
+/// `[comms]`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RobotConfig {
+    pub robot: RobotSection,
+    pub fusion: FusionConfig,
+    pub tracker: TrackerSection,
+    pub matcher: MatcherSection,
+    pub optimiser: OptimiserConfig,
+    pub comms: CommsConfig,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RobotSection {
+    /// Team-wide unique id (0–65535). Default 0.
+    pub id: u16,
+    /// Name in logs and reports. Default "robot".
+    pub name: String,
+}
+
+impl Default for RobotSection {
+    fn default() -> Self {
+        Self { id: 0, name: "robot".into() }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FusionConfig {
+    /// Points of one class closer than this join one cluster, m. Default 0.3.
+    pub cluster_tolerance_m: f64,
+    /// LiDAR returns farther than this are ignored, m. Default 60.
+    pub max_range_m: f64,
+    /// The class table. Default: [`default_classes`].
+    pub classes: Vec<ClassSpec>,
+}
+
+impl Default for FusionConfig {
+    fn default() -> Self {
+        Self { cluster_tolerance_m: 0.3, max_range_m: 60.0, classes: default_classes() }
+    }
+}
+
+/// The built-in class table: the outdoor and indoor objects of the paper's experiments.
+pub fn default_classes() -> Vec<ClassSpec> {
+    let class = |name: &str, id: u16, colour: [u8; 3], matchable: bool, object: bool, max_extent_m: f64| ClassSpec {
+        name: name.into(),
+        id,
+        colour,
+        matchable,
+        object,
+        min_points: 5,
+        max_points: 50_000,
+        max_extent_m,
+    };
+    vec![
+        class("ground", 0, [120, 120, 120], false, false, 1e3),
+        class("wall", 1, [200, 200, 200], false, false, 1e3),
+        class("tree", 2, [30, 140, 40], true, true, 8.0),
+        class("lamp_post", 3, [250, 220, 60], true, true, 6.0),
+        class("bench", 4, [150, 90, 40], true, true, 3.0),
+        class("trash_can", 5, [60, 60, 200], true, true, 1.5),
+        class("chair", 6, [220, 80, 80], true, true, 1.5),
+        class("table", 7, [180, 130, 70], true, true, 3.0),
+        class("bookshelf", 8, [120, 60, 160], true, true, 3.0),
+        class("car", 9, [40, 160, 200], false, true, 6.0),
+    ]
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrackerSection {
+    pub keyframes: KeyframeConfig,
+    pub tracking: TrackerConfig,
+    pub loop_closure: LoopClosureConfig,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MatcherSection {
+    /// Object-graph matching (paper §IV-C).
+    #[serde(flatten)]
+    pub matching: MatcherConfig,
+    /// Matched objects needed before object clouds are requested. Default 4.
+    pub min_matched_objects: usize,
+    /// Object-cloud ICP (paper §IV-D).
+    pub icp: IcpConfig,
+    /// Neighbour keyframes around each observing keyframe that are requested (paper: ±5).
+    /// Default 5.
+    pub keyframe_neighbourhood: usize,
+}
+
+impl Default for MatcherSection {
+    fn default() -> Self {
+        Self {
+            matching: MatcherConfig::default(),
+            min_matched_objects: 4,
+            icp: IcpConfig { max_correspondence_distance_m: 1.0, voxel_m: 0.1, ..IcpConfig::default() },
+            keyframe_neighbourhood: 5,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OptimiserConfig {
+    /// Odometry noise per keyframe step, standard deviations (rotation rad ×3, translation m ×3).
+    /// Default 0.01 rad, 0.05 m.
+    pub odometry_sigmas: [f64; 6],
+    /// Optimise after this many new keyframes (1: every keyframe). Default 1.
+    pub every_keyframes: usize,
+}
+
+impl Default for OptimiserConfig {
+    fn default() -> Self {
+        Self { odometry_sigmas: [0.01, 0.01, 0.01, 0.05, 0.05, 0.05], every_keyframes: 1 }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CommsConfig {
+    /// Team secret: 64 hex digits, or a passphrase of ≥ 12 characters. Default: a development
+    /// key that must be replaced in the field (`sgm` warns when it is in use).
+    pub team_key: String,
+    /// Shortest interval between two ObjectData broadcasts, s. Default 2.
+    pub object_data_interval_s: f64,
+    /// Objects whose centroid moved farther than this count as a significant change, m.
+    /// Default 0.5.
+    pub significant_move_m: f64,
+    /// Centroid quantum of ObjectData, mm. Default 20.
+    pub centroid_resolution_mm: u16,
+    /// Keyframe requests are coalesced over this window before being sent, s. Default 0.5.
+    pub request_window_s: f64,
+    /// Keyframes requested but not yet received, per neighbour, at most. Default 32.
+    pub max_keyframes_in_flight: usize,
+    /// Keyframe ids per KeyframeRequest, at most. Default 16.
+    pub max_keyframes_per_request: usize,
+    /// Keyframe responses sent per tick, at most (the outgoing budget). Default 8.
+    pub max_responses_per_tick: usize,
+    /// A neighbour silent for this long is considered lost, s. Default 30.
+    pub link_timeout_s: f64,
+    /// Cloud quantum of keyframe responses, m. Default 0.01.
+    pub cloud_resolution_m: f64,
+    pub retry: RetryConfig,
+    pub limits: WireLimits,
+}
+
+/// The key every build knows: fine in simulation, never in the field.
+pub const DEVELOPMENT_TEAM_KEY: &str = "sgm development team key - replace me";
+
+impl Default for CommsConfig {
+    fn default() -> Self {
+        Self {
+            team_key: DEVELOPMENT_TEAM_KEY.into(),
+            object_data_interval_s: 2.0,
+            significant_move_m: 0.5,
+            centroid_resolution_mm: 20,
+            request_window_s: 0.5,
+            max_keyframes_in_flight: 32,
+            max_keyframes_per_request: 16,
+            max_responses_per_tick: 8,
+            link_timeout_s: 30.0,
+            cloud_resolution_m: 0.01,
+            retry: RetryConfig::default(),
+            limits: WireLimits::default(),
+        }
+    }
+}
+
+impl CommsConfig {
+    pub fn team_key(&self) -> Result<TeamKey, ConfigError> {
+        let hex = self.team_key.len() == 64 && self.team_key.chars().all(|c| c.is_ascii_hexdigit());
+        let key = if hex { TeamKey::from_hex(&self.team_key) } else { TeamKey::from_passphrase(&self.team_key) };
+        key.map_err(|e| ConfigError::Invalid {
+            key: "comms.team_key".into(),
+            value: "<secret>".into(),
+            allowed: e.to_string(),
+        })
+    }
+}
+
+/// A configuration that cannot be loaded or is out of range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{source_name}: {message}")]
+    Load { source_name: String, message: String },
+    #[error("{key} = {value}: allowed {allowed}")]
+    Invalid { key: String, value: String, allowed: String },
+}
+
+fn check(ok: bool, key: &str, value: impl ToString, allowed: &str) -> Result<(), ConfigError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ConfigError::Invalid { key: key.into(), value: value.to_string(), allowed: allowed.into() })
+    }
+}
+
+fn positive(v: f64) -> bool {
+    v.is_finite() && v > 0.0
+}
+
+impl RobotConfig {
+    /// Defaults, then `file` (TOML) if given, then `SGM__…` environment variables.
+    pub fn load(file: Option<&Path>) -> Result<Self, ConfigError> {
+        Self::load_with_env(file, "SGM")
+    }
+
+    /// As [`RobotConfig::load`] with another environment prefix (tests use their own).
+    pub fn load_with_env(file: Option<&Path>, prefix: &str) -> Result<Self, ConfigError> {
+        let source_name = file.map(|p| p.display().to_string()).unwrap_or_else(|| "environment".into());
+        let load_error =
+            |e: config::ConfigError| ConfigError::Load { source_name: source_name.clone(), message: e.to_string() };
+        let defaults = config::Config::try_from(&RobotConfig::default()).map_err(load_error)?;
+        let mut builder = config::Config::builder().add_source(defaults);
+        if let Some(path) = file {
+            builder = builder.add_source(config::File::from(path).format(config::FileFormat::Toml).required(true));
+        }
+        builder = builder.add_source(
+            config::Environment::with_prefix(prefix).prefix_separator("__").separator("__").try_parsing(true),
+        );
+        let merged = builder.build().map_err(load_error)?;
+        let config: RobotConfig = merged.try_deserialize().map_err(load_error)?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Checks every key against its allowed range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.matcher.matching.validate().map_err(|e| ConfigError::Invalid {
+            key: format!("matcher.{}", e.key),
+            value: e.value,
+            allowed: e.allowed.into(),
+        })?;
+        ClassTable::new(self.fusion.classes.clone()).map_err(|e| ConfigError::Invalid {
+            key: "fusion.classes".into(),
+            value: "(table)".into(),
+            allowed: e.to_string(),
+        })?;
+        let f = &self.fusion;
+        check(positive(f.cluster_tolerance_m), "fusion.cluster_tolerance_m", f.cluster_tolerance_m, "finite and > 0")?;
+        check(positive(f.max_range_m), "fusion.max_range_m", f.max_range_m, "finite and > 0")?;
+        let k = &self.tracker.keyframes;
+        check(positive(k.min_translation_m), "tracker.keyframes.min_translation_m", k.min_translation_m, "> 0")?;
+        check(positive(k.min_rotation_rad), "tracker.keyframes.min_rotation_rad", k.min_rotation_rad, "> 0")?;
+        let t = &self.tracker.tracking;
+        check(
+            positive(t.max_track_distance_m),
+            "tracker.tracking.max_track_distance_m",
+            t.max_track_distance_m,
+            "> 0",
+        )?;
+        check(positive(t.search_radius_m), "tracker.tracking.search_radius_m", t.search_radius_m, "> 0")?;
+        check(t.confirm_after >= 1, "tracker.tracking.confirm_after", t.confirm_after, "≥ 1")?;
+        let m = &self.matcher;
+        check(m.min_matched_objects >= 3, "matcher.min_matched_objects", m.min_matched_objects, "≥ 3")?;
+        check(
+            positive(m.icp.max_correspondence_distance_m),
+            "matcher.icp.max_correspondence_distance_m",
+            m.icp.max_correspondence_distance_m,
+            "> 0",
+        )?;
+        check(m.keyframe_neighbourhood <= 50, "matcher.keyframe_neighbourhood", m.keyframe_neighbourhood, "0–50")?;
+        let o = &self.optimiser;
+        check(
+            o.odometry_sigmas.iter().all(|s| positive(*s)),
+            "optimiser.odometry_sigmas",
+            format!("{:?}", o.odometry_sigmas),
+            "six values > 0",
+        )?;
+        check(o.every_keyframes >= 1, "optimiser.every_keyframes", o.every_keyframes, "≥ 1")?;
+        let c = &self.comms;
+        c.team_key()?;
+        check(positive(c.object_data_interval_s), "comms.object_data_interval_s", c.object_data_interval_s, "> 0")?;
+        check(positive(c.significant_move_m), "comms.significant_move_m", c.significant_move_m, "> 0")?;
+        check(c.centroid_resolution_mm >= 1, "comms.centroid_resolution_mm", c.centroid_resolution_mm, "1–65535")?;
+        check(
+            c.request_window_s.is_finite() && c.request_window_s >= 0.0,
+            "comms.request_window_s",
+            c.request_window_s,
+            "≥ 0",
+        )?;
+        check(c.max_keyframes_in_flight >= 1, "comms.max_keyframes_in_flight", c.max_keyframes_in_flight, "≥ 1")?;
+        check(
+            (1..=c.limits.max_ids).contains(&c.max_keyframes_per_request),
+            "comms.max_keyframes_per_request",
+            c.max_keyframes_per_request,
+            "1 – comms.limits.max_ids",
+        )?;
+        check(c.max_responses_per_tick >= 1, "comms.max_responses_per_tick", c.max_responses_per_tick, "≥ 1")?;
+        check(positive(c.link_timeout_s), "comms.link_timeout_s", c.link_timeout_s, "> 0")?;
+        check(positive(c.cloud_resolution_m), "comms.cloud_resolution_m", c.cloud_resolution_m, "> 0")?;
+        check(positive(c.retry.timeout_s), "comms.retry.timeout_s", c.retry.timeout_s, "> 0")?;
+        check(c.retry.backoff.is_finite() && c.retry.backoff >= 1.0, "comms.retry.backoff", c.retry.backoff, "≥ 1")?;
+        check(
+            c.limits.max_envelope_bytes >= 1024,
+            "comms.limits.max_envelope_bytes",
+            c.limits.max_envelope_bytes,
+            "≥ 1024",
+        )?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    #[test]
+    fn defaults_are_valid_and_round_trip_through_the_loader() {
+        RobotConfig::default().validate().unwrap();
+        assert_eq!(RobotConfig::load_with_env(None, "SGM_TEST_NONE").unwrap(), RobotConfig::default());
+    }
+
+    #[test]
+    fn file_then_environment_overrides_and_errors_name_the_key() {
+        let mut file = tempfile::NamedTempFile::new().unwrap();
+        writeln!(
+            file,
+            "[robot]\nid = 7\nname = \"husky\"\n[matcher]\nedge_sharpness = 2.5\n[comms]\nmax_keyframes_in_flight = 8"
+        )
+        .unwrap();
+        std::env::set_var("SGM_TEST_A__COMMS__REQUEST_WINDOW_S", "1.5");
+        let c = RobotConfig::load_with_env(Some(file.path()), "SGM_TEST_A").unwrap();
+        assert_eq!((c.robot.id, c.robot.name.as_str()), (7, "husky"));
+        assert_eq!(c.matcher.matching.edge_sharpness, 2.5);
+        assert_eq!((c.comms.max_keyframes_in_flight, c.comms.request_window_s), (8, 1.5));
+        std::env::set_var("SGM_TEST_B__MATCHER__EDGE_SHARPNESS", "-1");
+        let e = RobotConfig::load_with_env(None, "SGM_TEST_B").unwrap_err();
+        assert_eq!(e.to_string(), "matcher.edge_sharpness = -1: allowed finite and > 0");
+        std::env::set_var("SGM_TEST_C__COMMS__MAX_KEYFRAMES_IN_FLIGHT", "0");
+        let e = RobotConfig::load_with_env(None, "SGM_TEST_C").unwrap_err();
+        assert_eq!(e.to_string(), "comms.max_keyframes_in_flight = 0: allowed ≥ 1");
+        writeln!(file, "[comms.limits]\nbogus = 1").unwrap();
+        let e = RobotConfig::load_with_env(Some(file.path()), "SGM_TEST_D").unwrap_err();
+        assert!(e.to_string().contains("bogus"), "{e}");
+    }
+
+    #[test]
+    fn team_keys_hex_or_passphrase() {
+        let mut c = CommsConfig { team_key: "ab".repeat(32), ..CommsConfig::default() };
+        assert!(c.team_key().is_ok());
+        c.team_key = "short".into();
+        assert!(c.team_key().unwrap_err().to_string().starts_with("comms.team_key = <secret>: allowed"));
+    }
+}

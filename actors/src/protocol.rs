@@ -1,0 +1,298 @@
+//! The per-neighbour protocol (paper §IV-C..F) as typestates: `Neighbour<Discovered>` →
+//! `Neighbour<ObjectsReceived>` → `Neighbour<Matched>` → `Neighbour<KeyframesRequested>` →
+//! `Neighbour<Aligned>`. Each transition consumes the old state, so an illegal one does not
+//! compile:
+//!
+//! ```compile_fail
+//! use sgm_actors::protocol::{Neighbour, Discovered};
+//! use sgm_model::scene_graph::RobotId;
+//! let n = Neighbour::<Discovered>::discovered(RobotId(2), 0.0);
+//! n.aligned(sgm_model::geometry::Pose3::identity(), 1.0); // no such transition from Discovered
+//! ```
+//!
+//! [`Protocol`] holds any state for storage in an actor; it changes only through these
+//! transitions. Waiting states carry a [`Wait`] (deadline, attempts) for timeouts, retries with
+//! exponential back-off, and giving up back to `ObjectsReceived`.
+
+use sgm_model::geometry::Pose3;
+use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, Stamp};
+use std::collections::BTreeSet;
+
+/// Timeouts and retries of waiting states.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RetryConfig {
+    /// First wait for a response, s. Default 2.
+    pub timeout_s: f64,
+    /// Each retry waits this factor longer. Default 2.
+    pub backoff: f64,
+    /// Retries before giving up. Default 4.
+    pub max_retries: u32,
+}
+
+impl Default for RetryConfig {
+    fn default() -> Self {
+        Self { timeout_s: 2.0, backoff: 2.0, max_retries: 4 }
+    }
+}
+
+/// A pending request: when it expires and how often it was sent.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wait {
+    pub deadline: Stamp,
+    pub attempts: u32,
+}
+
+impl Wait {
+    pub fn new(now: Stamp, config: &RetryConfig) -> Self {
+        Self { deadline: now + config.timeout_s, attempts: 1 }
+    }
+
+    pub fn expired(&self, now: Stamp) -> bool {
+        now >= self.deadline
+    }
+
+    /// The next attempt, or `None` when retries are exhausted.
+    pub fn retry(&self, now: Stamp, config: &RetryConfig) -> Option<Wait> {
+        (self.attempts <= config.max_retries).then(|| Wait {
+            deadline: now + config.timeout_s * config.backoff.powi(self.attempts as i32),
+            attempts: self.attempts + 1,
+        })
+    }
+}
+
+/// A neighbour in state `S`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Neighbour<S> {
+    pub robot: RobotId,
+    /// When the current state was entered.
+    pub since: Stamp,
+    pub state: S,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Discovered;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObjectsReceived {
+    pub revision: u32,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Matched {
+    pub revision: u32,
+    pub local_from_remote: Pose3,
+    /// (local, remote) object pairs of the match.
+    pub pairs: Vec<(ObjectId, ObjectId)>,
+    /// The object-cloud request.
+    pub wait: Wait,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct KeyframesRequested {
+    pub revision: u32,
+    pub local_from_remote: Pose3,
+    pub pairs: Vec<(ObjectId, ObjectId)>,
+    pub awaiting: BTreeSet<KeyframeId>,
+    pub wait: Wait,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Aligned {
+    pub revision: u32,
+    pub local_from_remote: Pose3,
+    pub pairs: Vec<(ObjectId, ObjectId)>,
+}
+
+impl<S> Neighbour<S> {
+    fn to<T>(self, now: Stamp, state: T) -> Neighbour<T> {
+        Neighbour { robot: self.robot, since: now, state }
+    }
+
+    /// The link went silent: start over (what was learnt about the neighbour is kept elsewhere).
+    pub fn lost(self, now: Stamp) -> Neighbour<Discovered> {
+        self.to(now, Discovered)
+    }
+}
+
+impl Neighbour<Discovered> {
+    pub fn discovered(robot: RobotId, now: Stamp) -> Self {
+        Neighbour { robot, since: now, state: Discovered }
+    }
+
+    pub fn objects_received(self, revision: u32, now: Stamp) -> Neighbour<ObjectsReceived> {
+        self.to(now, ObjectsReceived { revision })
+    }
+}
+
+impl Neighbour<ObjectsReceived> {
+    pub fn objects_received(self, revision: u32, now: Stamp) -> Neighbour<ObjectsReceived> {
+        let revision = revision.max(self.state.revision);
+        self.to(now, ObjectsReceived { revision })
+    }
+
+    pub fn matched(
+        self,
+        local_from_remote: Pose3,
+        pairs: Vec<(ObjectId, ObjectId)>,
+        now: Stamp,
+        retry: &RetryConfig,
+    ) -> Neighbour<Matched> {
+        let revision = self.state.revision;
+        self.to(now, Matched { revision, local_from_remote, pairs, wait: Wait::new(now, retry) })
+    }
+}
+
+impl Neighbour<Matched> {
+    /// Object clouds arrived; the keyframes in `awaiting` were requested.
+    pub fn keyframes_requested(
+        self,
+        local_from_remote: Pose3,
+        awaiting: BTreeSet<KeyframeId>,
+        now: Stamp,
+        retry: &RetryConfig,
+    ) -> Neighbour<KeyframesRequested> {
+        let Matched { revision, pairs, .. } = self.state.clone();
+        let wait = Wait::new(now, retry);
+        self.to(now, KeyframesRequested { revision, local_from_remote, pairs, awaiting, wait })
+    }
+
+    /// No answer after every retry: back to waiting for object data.
+    pub fn gave_up(self, now: Stamp) -> Neighbour<ObjectsReceived> {
+        let revision = self.state.revision;
+        self.to(now, ObjectsReceived { revision })
+    }
+}
+
+impl Neighbour<KeyframesRequested> {
+    /// Registration of the received keyframes succeeded.
+    pub fn aligned(self, local_from_remote: Pose3, now: Stamp) -> Neighbour<Aligned> {
+        let KeyframesRequested { revision, pairs, .. } = self.state.clone();
+        self.to(now, Aligned { revision, local_from_remote, pairs })
+    }
+
+    pub fn gave_up(self, now: Stamp) -> Neighbour<ObjectsReceived> {
+        let revision = self.state.revision;
+        self.to(now, ObjectsReceived { revision })
+    }
+}
+
+impl Neighbour<Aligned> {
+    /// Newer object data: keep the alignment, refine it when a new match asks for keyframes.
+    pub fn objects_received(mut self, revision: u32) -> Neighbour<Aligned> {
+        self.state.revision = self.state.revision.max(revision);
+        self
+    }
+
+    /// A fresh match (more objects in common) asks for more keyframes to refine the alignment.
+    pub fn rematched(self, pairs: Vec<(ObjectId, ObjectId)>, now: Stamp, retry: &RetryConfig) -> Neighbour<Matched> {
+        let Aligned { revision, local_from_remote, .. } = self.state.clone();
+        self.to(now, Matched { revision, local_from_remote, pairs, wait: Wait::new(now, retry) })
+    }
+}
+
+/// Any protocol state, for storage in an actor.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Protocol {
+    Discovered(Neighbour<Discovered>),
+    ObjectsReceived(Neighbour<ObjectsReceived>),
+    Matched(Neighbour<Matched>),
+    KeyframesRequested(Neighbour<KeyframesRequested>),
+    Aligned(Neighbour<Aligned>),
+}
+
+macro_rules! into_protocol {
+    ($($s:ident),*) => {$(
+        impl From<Neighbour<$s>> for Protocol {
+            fn from(n: Neighbour<$s>) -> Self {
+                Protocol::$s(n)
+            }
+        }
+    )*};
+}
+into_protocol!(Discovered, ObjectsReceived, Matched, KeyframesRequested, Aligned);
+
+impl Protocol {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Protocol::Discovered(_) => "Discovered",
+            Protocol::ObjectsReceived(_) => "ObjectsReceived",
+            Protocol::Matched(_) => "Matched",
+            Protocol::KeyframesRequested(_) => "KeyframesRequested",
+            Protocol::Aligned(_) => "Aligned",
+        }
+    }
+
+    /// The current estimate of `local_from_remote`, if any.
+    pub fn local_from_remote(&self) -> Option<&Pose3> {
+        match self {
+            Protocol::Matched(n) => Some(&n.state.local_from_remote),
+            Protocol::KeyframesRequested(n) => Some(&n.state.local_from_remote),
+            Protocol::Aligned(n) => Some(&n.state.local_from_remote),
+            _ => None,
+        }
+    }
+
+    pub fn is_aligned(&self) -> bool {
+        matches!(self, Protocol::Aligned(_))
+    }
+
+    /// Object data arrived with `revision`.
+    pub fn on_objects(self, revision: u32, now: Stamp) -> Protocol {
+        match self {
+            Protocol::Discovered(n) => n.objects_received(revision, now).into(),
+            Protocol::ObjectsReceived(n) => n.objects_received(revision, now).into(),
+            Protocol::Aligned(n) => n.objects_received(revision).into(),
+            waiting => waiting, // a request is in flight: the match it serves stands
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_happy_path_and_giving_up() {
+        let retry = RetryConfig::default();
+        let n = Neighbour::discovered(RobotId(2), 0.0).objects_received(3, 1.0);
+        let m = n.matched(Pose3::identity(), vec![(ObjectId(1), ObjectId(7))], 1.5, &retry);
+        assert_eq!(m.state.wait, Wait { deadline: 3.5, attempts: 1 });
+        let k = m.keyframes_requested(Pose3::identity(), [KeyframeId(4)].into(), 2.0, &retry);
+        let a = k.aligned(Pose3::identity(), 3.0);
+        assert_eq!((a.since, a.state.revision), (3.0, 3));
+        let p: Protocol = a.objects_received(5).into();
+        assert!(p.is_aligned());
+        assert_eq!(
+            p.clone().on_objects(9, 4.0),
+            Protocol::Aligned(Neighbour {
+                robot: RobotId(2),
+                since: 3.0,
+                state: Aligned {
+                    revision: 9,
+                    local_from_remote: Pose3::identity(),
+                    pairs: vec![(ObjectId(1), ObjectId(7))]
+                }
+            })
+        );
+        let again = Neighbour::discovered(RobotId(2), 0.0).objects_received(1, 0.0).matched(
+            Pose3::identity(),
+            vec![],
+            0.0,
+            &retry,
+        );
+        assert_eq!(again.gave_up(9.0).state.revision, 1);
+    }
+
+    #[test]
+    fn retries_back_off_then_stop() {
+        let retry = RetryConfig { timeout_s: 1.0, backoff: 2.0, max_retries: 2 };
+        let w = Wait::new(0.0, &retry);
+        assert!(!w.expired(0.5) && w.expired(1.0));
+        let w2 = w.retry(1.0, &retry).unwrap();
+        assert_eq!(w2, Wait { deadline: 3.0, attempts: 2 });
+        let w3 = w2.retry(3.0, &retry).unwrap();
+        assert_eq!(w3, Wait { deadline: 7.0, attempts: 3 });
+        assert_eq!(w3.retry(7.0, &retry), None);
+    }
+}
