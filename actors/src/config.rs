@@ -125,13 +125,14 @@ pub struct OptimiserConfig {
     /// Odometry noise per keyframe step, standard deviations (rotation rad ×3, translation m ×3).
     /// Default 0.01 rad, 0.05 m.
     pub odometry_sigmas: [f64; 6],
-    /// Optimise after this many new keyframes (1: every keyframe). Default 1.
+    /// Optimise after this many new keyframes (1: every keyframe), and at once on a loop closure
+    /// or new inter-robot constraints. Default 10.
     pub every_keyframes: usize,
 }
 
 impl Default for OptimiserConfig {
     fn default() -> Self {
-        Self { odometry_sigmas: [0.01, 0.01, 0.01, 0.05, 0.05, 0.05], every_keyframes: 1 }
+        Self { odometry_sigmas: [0.01, 0.01, 0.01, 0.05, 0.05, 0.05], every_keyframes: 10 }
     }
 }
 

@@ -8,6 +8,7 @@ pub mod icp;
 pub mod keyframes;
 pub mod loop_closure;
 pub mod normals;
+pub mod object_cloud;
 pub mod point_tree;
 pub mod projection;
 pub mod tracker;

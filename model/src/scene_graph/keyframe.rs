@@ -41,6 +41,7 @@ pub struct KeyframeEdge {
     pub to: KeyframeRef,
     /// Measured pose of `to`'s body in `from`'s body frame.
     pub from_from_to: Pose3,
-    /// Information matrix (inverse covariance) over (translation, rotation) tangent coordinates.
+    /// Information matrix (inverse covariance) over the optimiser's SE(3) tangent (ω, v), right
+    /// perturbation of `from_from_to`.
     pub information: Matrix6<f64>,
 }

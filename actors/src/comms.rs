@@ -1,0 +1,417 @@
+//! `Comms`: the robot's only door to other robots (paper §IV-B..F, DESIGN.md §4). Seals and opens
+//! envelopes (team-key MAC, replay window, size limits), broadcasts ObjectData on significant
+//! change with a rate limit, coalesces keyframe requests over a window and bounds them in flight
+//! (never asking twice for a keyframe held or in flight; timeouts retried with back-off, then
+//! reported), paces keyframe responses, and accounts every message by type.
+
+use crate::clock::Clock;
+use crate::config::CommsConfig;
+use crate::messages::*;
+use crate::protocol::Wait;
+use crate::transport::{Delivered, Transport};
+use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
+use nalgebra::Point3;
+use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, Stamp};
+use sgm_model::wire::cloud_codec;
+use sgm_model::wire::messages::{unpack_covariance, KeyframeRequest, ObjectCloudRequest, ObjectData, RefusalReason};
+use sgm_model::wire::{
+    open, seal, Destination, Envelope, Message as WireMessage, RejectionCounts, ReplayWindow, TeamKey, TrafficAccount,
+    PROTOCOL_VERSION,
+};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+
+/// Where Comms delivers what arrives.
+#[derive(Clone)]
+pub struct CommsLinks {
+    pub objects: Recipient<NeighbourObjects>,
+    pub object_clouds: Recipient<NeighbourObjectClouds>,
+    pub keyframes: Recipient<NeighbourKeyframe>,
+    pub unavailable: Recipient<KeyframesUnavailable>,
+    pub serve: Recipient<Serve>,
+}
+
+#[derive(Message)]
+#[rtype(result = "()")]
+pub struct ConnectComms(pub CommsLinks);
+
+/// What Comms has seen, for status and reports.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CommsStatus {
+    pub sent: TrafficAccount,
+    pub received: TrafficAccount,
+    pub rejected: RejectionCounts,
+    /// Keyframe responses sent for a keyframe this neighbour had already been sent.
+    pub keyframes_sent_twice: u64,
+    /// Largest number of keyframes in flight to one neighbour at any time.
+    pub max_keyframes_in_flight: usize,
+    /// Keyframes given up after every retry (reported to the Matcher, never silently dropped).
+    pub keyframes_given_up: u64,
+    pub neighbours: Vec<RobotId>,
+}
+
+#[derive(Message)]
+#[rtype(result = "CommsStatus")]
+pub struct GetCommsStatus;
+
+/// Keyframe requests to one neighbour.
+#[derive(Clone, Debug, Default)]
+struct KeyframeRequests {
+    /// Wanted, not yet asked for (coalescing).
+    wanted: BTreeSet<KeyframeId>,
+    in_flight: BTreeMap<KeyframeId, Wait>,
+    held: BTreeSet<KeyframeId>,
+    window_opened: Option<Stamp>,
+}
+
+pub struct Comms {
+    robot: RobotId,
+    config: CommsConfig,
+    key: TeamKey,
+    clock: Clock,
+    transport: Box<dyn Transport>,
+    links: Option<CommsLinks>,
+    sequence: u64,
+    replay: BTreeMap<RobotId, ReplayWindow>,
+    last_heard: BTreeMap<RobotId, Stamp>,
+    status: CommsStatus,
+    // ObjectData broadcast.
+    revision: u32,
+    latest_objects: Option<LocalObjects>,
+    broadcast_centroids: BTreeMap<ObjectId, Point3<f64>>,
+    change_pending: bool,
+    last_broadcast: Option<Stamp>,
+    // Keyframes.
+    requests: BTreeMap<RobotId, KeyframeRequests>,
+    responses: VecDeque<Outgoing>,
+    keyframes_sent: BTreeMap<RobotId, BTreeSet<KeyframeId>>,
+}
+
+impl Comms {
+    /// `sequence_start`: first sequence number. Sequences must never repeat under one team key,
+    /// also across restarts from a snapshot: start above anything sent before (the supervisor
+    /// uses the clock at start, in microseconds).
+    pub fn new(
+        robot: RobotId,
+        config: CommsConfig,
+        key: TeamKey,
+        clock: Clock,
+        transport: Box<dyn Transport>,
+        sequence_start: u64,
+    ) -> Self {
+        Self {
+            robot,
+            config,
+            key,
+            clock,
+            transport,
+            links: None,
+            sequence: sequence_start,
+            replay: BTreeMap::new(),
+            last_heard: BTreeMap::new(),
+            status: CommsStatus::default(),
+            revision: 0,
+            latest_objects: None,
+            broadcast_centroids: BTreeMap::new(),
+            change_pending: false,
+            last_broadcast: None,
+            requests: BTreeMap::new(),
+            responses: VecDeque::new(),
+            keyframes_sent: BTreeMap::new(),
+        }
+    }
+
+    fn send(&mut self, to: Destination, message: WireMessage) {
+        let kind = message.kind();
+        self.sequence += 1;
+        let envelope = Envelope { version: PROTOCOL_VERSION, from: self.robot, to, sequence: self.sequence, message };
+        match seal(&envelope, &self.key, &self.config.limits) {
+            Ok(bytes) => {
+                self.status.sent.record(kind, bytes.len());
+                self.transport.transmit(self.robot, to, bytes, self.clock.now());
+            }
+            Err(e) => tracing::warn!(robot = %self.robot, ?kind, "not sent: {e}"),
+        }
+    }
+
+    fn try_broadcast(&mut self, now: Stamp) {
+        let due = self.last_broadcast.is_none_or(|t| now - t >= self.config.object_data_interval_s);
+        if !self.change_pending || !due {
+            return;
+        }
+        let Some(objects) = &self.latest_objects else { return };
+        self.revision += 1;
+        let data = ObjectData::quantise(
+            self.revision,
+            self.config.centroid_resolution_mm,
+            objects.objects.iter().map(|o| (o.id, o.label, o.centroid, o.size.unwrap_or_default())),
+        );
+        self.broadcast_centroids = objects.objects.iter().map(|o| (o.id, o.centroid)).collect();
+        self.change_pending = false;
+        self.last_broadcast = Some(now);
+        self.send(Destination::Broadcast, WireMessage::ObjectData(data));
+    }
+
+    fn flush_requests(&mut self, now: Stamp) {
+        let robots: Vec<RobotId> = self.requests.keys().copied().collect();
+        for robot in robots {
+            let Some(q) = self.requests.get_mut(&robot) else { continue };
+            // Timeouts: retry with back-off, or report.
+            let expired: Vec<(KeyframeId, Wait)> =
+                q.in_flight.iter().filter(|(_, w)| w.expired(now)).map(|(k, w)| (*k, *w)).collect();
+            let (mut retry, mut given_up) = (Vec::new(), Vec::new());
+            for (id, wait) in expired {
+                match wait.retry(now, &self.config.retry) {
+                    Some(next) => {
+                        q.in_flight.insert(id, next);
+                        retry.push(id);
+                    }
+                    None => {
+                        q.in_flight.remove(&id);
+                        given_up.push(id);
+                    }
+                }
+            }
+            // New requests once the coalescing window has passed, within the in-flight bound.
+            let window_passed = q.window_opened.is_some_and(|t| now - t >= self.config.request_window_s);
+            let mut fresh = Vec::new();
+            if window_passed {
+                let room = self.config.max_keyframes_in_flight.saturating_sub(q.in_flight.len());
+                fresh = q.wanted.iter().copied().take(room).collect();
+                for id in &fresh {
+                    q.wanted.remove(id);
+                    q.in_flight.insert(*id, Wait::new(now, &self.config.retry));
+                }
+                q.window_opened = if q.wanted.is_empty() { None } else { Some(now) };
+            }
+            self.status.max_keyframes_in_flight = self.status.max_keyframes_in_flight.max(q.in_flight.len());
+            let mut ids = retry;
+            ids.extend(fresh);
+            for chunk in ids.chunks(self.config.max_keyframes_per_request) {
+                self.send(
+                    Destination::Robot(robot),
+                    WireMessage::KeyframeRequest(KeyframeRequest { keyframes: chunk.to_vec() }),
+                );
+            }
+            if !given_up.is_empty() {
+                self.status.keyframes_given_up += given_up.len() as u64;
+                if let Some(links) = &self.links {
+                    links.unavailable.do_send(KeyframesUnavailable {
+                        robot,
+                        keyframes: given_up,
+                        reason: RefusalReason::Busy,
+                    });
+                }
+            }
+        }
+    }
+
+    fn send_responses(&mut self) {
+        for _ in 0..self.config.max_responses_per_tick {
+            let Some(out) = self.responses.pop_front() else { break };
+            if let WireMessage::KeyframeResponse(r) = &out.message {
+                if !self.keyframes_sent.entry(out.to).or_default().insert(r.keyframe) {
+                    self.status.keyframes_sent_twice += 1;
+                }
+            }
+            self.send(Destination::Robot(out.to), out.message);
+        }
+    }
+
+    fn receive(&mut self, bytes: &[u8]) {
+        let envelope = match open(bytes, &self.key, &self.config.limits) {
+            Ok(e) => e,
+            Err(e) => {
+                self.status.rejected.record_wire(&e);
+                tracing::debug!(robot = %self.robot, "refused envelope: {e}");
+                return;
+            }
+        };
+        if envelope.from == self.robot || !envelope.to.includes(self.robot) {
+            return;
+        }
+        if let Err(e) = self.replay.entry(envelope.from).or_default().accept(envelope.sequence) {
+            self.status.rejected.record_replay(&e);
+            return;
+        }
+        let from = envelope.from;
+        self.status.received.record(envelope.message.kind(), bytes.len());
+        self.last_heard.insert(from, self.clock.now());
+        if !self.status.neighbours.contains(&from) {
+            self.status.neighbours.push(from);
+            self.status.neighbours.sort();
+        }
+        let Some(links) = self.links.clone() else { return };
+        match envelope.message {
+            WireMessage::ObjectData(data) => links.objects.do_send(NeighbourObjects { robot: from, data }),
+            WireMessage::ObjectCloudRequest(r) => {
+                links.serve.do_send(Serve::ObjectClouds { robot: from, objects: r.objects })
+            }
+            WireMessage::ObjectCloudResponse(r) => {
+                links.object_clouds.do_send(NeighbourObjectClouds { robot: from, clouds: r.objects })
+            }
+            WireMessage::KeyframeRequest(r) => {
+                if self.responses.len() + r.keyframes.len() > self.config.limits.max_ids * 4 {
+                    // Outgoing budget spent: say so instead of dropping.
+                    let refusal = sgm_model::wire::messages::KeyframeRefusal {
+                        keyframes: r.keyframes,
+                        reason: RefusalReason::Busy,
+                    };
+                    self.send(Destination::Robot(from), WireMessage::KeyframeRefusal(refusal));
+                } else {
+                    links.serve.do_send(Serve::Keyframes { robot: from, keyframes: r.keyframes });
+                }
+            }
+            WireMessage::KeyframeResponse(r) => {
+                let q = self.requests.entry(from).or_default();
+                if q.in_flight.remove(&r.keyframe).is_none() && q.held.contains(&r.keyframe) {
+                    return; // a late duplicate of a retried request
+                }
+                q.held.insert(r.keyframe);
+                let pose = r.world_from_body.to_pose();
+                let covariance = unpack_covariance(&r.covariance);
+                let points = cloud_codec::decode_at_most(&r.cloud, self.config.limits.max_cloud_points);
+                match (pose, covariance, points) {
+                    (Some(world_from_body), Some(covariance), Ok(points_in_body)) => {
+                        links.keyframes.do_send(NeighbourKeyframe {
+                            robot: from,
+                            id: r.keyframe,
+                            world_from_body,
+                            covariance,
+                            points_in_body,
+                        })
+                    }
+                    _ => {
+                        self.status.rejected.malformed += 1;
+                        links.unavailable.do_send(KeyframesUnavailable {
+                            robot: from,
+                            keyframes: vec![r.keyframe],
+                            reason: RefusalReason::Unknown,
+                        });
+                    }
+                }
+            }
+            WireMessage::KeyframeRefusal(r) => {
+                let q = self.requests.entry(from).or_default();
+                let now = self.clock.now();
+                let mut unknown = Vec::new();
+                for id in r.keyframes {
+                    match r.reason {
+                        // Busy: leave it in flight; its timeout retries with back-off.
+                        RefusalReason::Busy => {}
+                        RefusalReason::Unknown => {
+                            q.in_flight.remove(&id);
+                            unknown.push(id);
+                        }
+                    }
+                }
+                let _ = now;
+                if !unknown.is_empty() {
+                    links.unavailable.do_send(KeyframesUnavailable {
+                        robot: from,
+                        keyframes: unknown,
+                        reason: RefusalReason::Unknown,
+                    });
+                }
+            }
+        }
+    }
+}
+
+impl Actor for Comms {
+    type Context = Context<Self>;
+}
+
+impl Supervised for Comms {
+    fn restarting(&mut self, _: &mut Context<Self>) {
+        // Everything survives a restart: sequence, replay windows, requests, accounting.
+        tracing::warn!(robot = %self.robot, "comms restarting");
+    }
+}
+
+impl Handler<ConnectComms> for Comms {
+    type Result = ();
+    fn handle(&mut self, msg: ConnectComms, _: &mut Context<Self>) {
+        self.links = Some(msg.0);
+    }
+}
+
+impl Handler<Delivered> for Comms {
+    type Result = ();
+    fn handle(&mut self, msg: Delivered, _: &mut Context<Self>) {
+        self.receive(&msg.bytes);
+    }
+}
+
+impl Handler<LocalObjects> for Comms {
+    type Result = ();
+    fn handle(&mut self, msg: LocalObjects, _: &mut Context<Self>) {
+        let significant = msg.objects.iter().any(|o| {
+            self.broadcast_centroids.get(&o.id).is_none_or(|c| (c - o.centroid).norm() > self.config.significant_move_m)
+        }) || msg.objects.len() != self.broadcast_centroids.len();
+        self.change_pending |= significant;
+        self.latest_objects = Some(msg);
+        self.try_broadcast(self.clock.now());
+    }
+}
+
+impl Handler<RequestObjectClouds> for Comms {
+    type Result = ();
+    fn handle(&mut self, msg: RequestObjectClouds, _: &mut Context<Self>) {
+        for chunk in msg.objects.chunks(self.config.limits.max_ids) {
+            self.send(
+                Destination::Robot(msg.robot),
+                WireMessage::ObjectCloudRequest(ObjectCloudRequest { objects: chunk.to_vec() }),
+            );
+        }
+    }
+}
+
+impl Handler<RequestKeyframes> for Comms {
+    type Result = ();
+    fn handle(&mut self, msg: RequestKeyframes, _: &mut Context<Self>) {
+        let now = self.clock.now();
+        let q = self.requests.entry(msg.robot).or_default();
+        for id in msg.keyframes {
+            if !q.held.contains(&id) && !q.in_flight.contains_key(&id) {
+                q.wanted.insert(id);
+            }
+        }
+        if !q.wanted.is_empty() && q.window_opened.is_none() {
+            q.window_opened = Some(now);
+        }
+    }
+}
+
+impl Handler<Outgoing> for Comms {
+    type Result = ();
+    fn handle(&mut self, msg: Outgoing, _: &mut Context<Self>) {
+        match msg.message {
+            WireMessage::KeyframeResponse(_) => self.responses.push_back(msg),
+            message => self.send(Destination::Robot(msg.to), message),
+        }
+    }
+}
+
+impl Handler<Tick> for Comms {
+    type Result = ();
+    fn handle(&mut self, msg: Tick, _: &mut Context<Self>) {
+        self.try_broadcast(msg.now);
+        self.flush_requests(msg.now);
+        self.send_responses();
+    }
+}
+
+impl Handler<GetCommsStatus> for Comms {
+    type Result = MessageResult<GetCommsStatus>;
+    fn handle(&mut self, _: GetCommsStatus, _: &mut Context<Self>) -> Self::Result {
+        MessageResult(self.status.clone())
+    }
+}
+
+impl Handler<InjectFailure> for Comms {
+    type Result = ();
+    fn handle(&mut self, _: InjectFailure, ctx: &mut Context<Self>) {
+        use actix::ActorContext;
+        ctx.stop();
+    }
+}

@@ -1,0 +1,75 @@
+//! `Fusion` (paper §IV-A): LiDAR points take the class of their pixel in the segmented image
+//! (`model::perception::projection`), or keep per-point labels given upstream; classes that are
+//! not objects are cleared; points beyond range are dropped; objects are clustered per class
+//! (`model::perception::clustering`). Out: a [`LabelledScan`] to the Tracker.
+
+use crate::config::FusionConfig;
+use crate::messages::{FrameLabels, InjectFailure, LabelledScan, SensorFrame};
+use actix::{Actor, ActorContext, Context, Handler, Recipient, Supervised};
+use sgm_model::perception::classes::ClassTable;
+use sgm_model::perception::clustering::{cluster, ClusterConfig};
+use sgm_model::perception::projection::label_points;
+use sgm_model::scene_graph::LabelId;
+
+pub struct Fusion {
+    classes: ClassTable,
+    clustering: ClusterConfig,
+    max_range_m: f64,
+    tracker: Recipient<LabelledScan>,
+}
+
+impl Fusion {
+    /// `config` must have been validated (its class table is valid).
+    pub fn new(config: &FusionConfig, tracker: Recipient<LabelledScan>) -> Self {
+        let classes = ClassTable::new(config.classes.clone()).unwrap_or_default();
+        let clustering = classes.cluster_config(config.cluster_tolerance_m);
+        Self { classes, clustering, max_range_m: config.max_range_m, tracker }
+    }
+}
+
+impl Actor for Fusion {
+    type Context = Context<Self>;
+}
+
+impl Supervised for Fusion {}
+
+impl Handler<SensorFrame> for Fusion {
+    type Result = ();
+    fn handle(&mut self, frame: SensorFrame, _: &mut Context<Self>) {
+        let labels = match &frame.labels {
+            FrameLabels::PerPoint(labels) => labels.clone(),
+            FrameLabels::Image { image, camera, camera_from_body } => {
+                match label_points(&frame.points_in_body, camera_from_body, camera, image) {
+                    Ok(l) => l,
+                    Err(e) => {
+                        tracing::warn!(stamp = frame.stamp, "label image unusable: {e}");
+                        vec![None; frame.points_in_body.len()]
+                    }
+                }
+            }
+        };
+        let r2 = self.max_range_m * self.max_range_m;
+        let (mut points, mut kept) = (Vec::with_capacity(labels.len()), Vec::with_capacity(labels.len()));
+        for (p, l) in frame.points_in_body.iter().zip(labels) {
+            if p.coords.iter().all(|v| v.is_finite()) && p.coords.norm_squared() <= r2 {
+                points.push(*p);
+                kept.push(l.and_then(|LabelId(id)| self.classes.object_label(id)));
+            }
+        }
+        let candidates = cluster(&points, &kept, &self.clustering);
+        self.tracker.do_send(LabelledScan {
+            stamp: frame.stamp,
+            world_from_body: frame.world_from_body,
+            points_in_body: points,
+            labels: kept,
+            candidates,
+        });
+    }
+}
+
+impl Handler<InjectFailure> for Fusion {
+    type Result = ();
+    fn handle(&mut self, _: InjectFailure, ctx: &mut Context<Self>) {
+        ctx.stop();
+    }
+}

@@ -1,0 +1,393 @@
+//! `Matcher` (paper §IV-C, §IV-D): per neighbour, the protocol of `crate::protocol`. Object data
+//! in → object-graph matching (`model::matching`) → with enough matched objects, the neighbour's
+//! object clouds → ICP of its object clouds onto ours (refines `local_from_remote`) → the
+//! neighbour keyframes that observed the matched objects, ± `keyframe_neighbourhood` → each
+//! registered by ICP to the nearest local keyframe that observed a matched object → inter-robot
+//! factors and the neighbour keyframes (with their marginal covariances) to the Optimiser.
+
+use crate::clock::Clock;
+use crate::config::MatcherSection;
+use crate::messages::*;
+use crate::protocol::{Neighbour, Protocol, RetryConfig};
+use actix::{Actor, ActorContext, Context, Handler, Message, MessageResult, Recipient, Supervised};
+use nalgebra::Point3;
+use sgm_model::geometry::Pose3;
+use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
+use sgm_model::perception::icp::register;
+use sgm_model::perception::object_cloud::{object_cloud, UNLABELLED};
+use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId};
+use sgm_model::wire::cloud_codec;
+use sgm_model::wire::messages::ObjectData;
+use std::collections::{BTreeMap, BTreeSet};
+
+/// Where the Matcher sends what it produces.
+#[derive(Clone)]
+pub struct MatcherLinks {
+    pub request_clouds: Recipient<RequestObjectClouds>,
+    pub request_keyframes: Recipient<RequestKeyframes>,
+    pub optimiser: Recipient<InterRobotConstraints>,
+}
+
+#[derive(Message)]
+#[rtype(result = "()")]
+pub struct ConnectMatcher(pub MatcherLinks);
+
+/// The protocol state and alignment of every neighbour.
+#[derive(Message)]
+#[rtype(result = "Vec<NeighbourStatus>")]
+pub struct GetNeighbours;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct NeighbourStatus {
+    pub robot: RobotId,
+    pub state: &'static str,
+    pub local_from_remote: Option<Pose3>,
+    /// When it first reached `Aligned`.
+    pub first_aligned: Option<f64>,
+    pub keyframes_held: usize,
+}
+
+struct LocalKeyframeData {
+    world_from_body: Pose3,
+    points: Vec<Point3<f32>>,
+    labels: Vec<LabelId>,
+}
+
+struct NeighbourEntry {
+    protocol: Option<Protocol>,
+    objects: Option<ObjectData>,
+    keyframes: BTreeMap<KeyframeId, NeighbourKeyframe>,
+    first_aligned: Option<f64>,
+    /// Remote object → keyframes that observed it (from the object-cloud response).
+    observed_in: BTreeMap<ObjectId, Vec<KeyframeId>>,
+}
+
+pub struct Matcher {
+    robot: RobotId,
+    config: MatcherSection,
+    retry: RetryConfig,
+    clock: Clock,
+    labels: LabelSimilarity,
+    links: Option<MatcherLinks>,
+    local: LocalObjects,
+    keyframes: BTreeMap<KeyframeId, LocalKeyframeData>,
+    neighbours: BTreeMap<RobotId, NeighbourEntry>,
+}
+
+impl Matcher {
+    pub fn new(robot: RobotId, config: MatcherSection, retry: RetryConfig, clock: Clock, label_count: usize) -> Self {
+        Self {
+            robot,
+            config,
+            retry,
+            clock,
+            labels: LabelSimilarity::hard(label_count),
+            links: None,
+            local: LocalObjects::default(),
+            keyframes: BTreeMap::new(),
+            neighbours: BTreeMap::new(),
+        }
+    }
+
+    fn entry(&mut self, robot: RobotId) -> &mut NeighbourEntry {
+        let now = self.clock.now();
+        self.neighbours.entry(robot).or_insert_with(|| NeighbourEntry {
+            protocol: Some(Neighbour::discovered(robot, now).into()),
+            objects: None,
+            keyframes: BTreeMap::new(),
+            first_aligned: None,
+            observed_in: BTreeMap::new(),
+        })
+    }
+
+    fn local_object_cloud(&self, object: &GraphObject) -> Vec<Point3<f64>> {
+        let observed = self.local.observed_in.get(&object.id).cloned().unwrap_or_default();
+        let scans = observed
+            .iter()
+            .filter_map(|k| self.keyframes.get(k))
+            .map(|k| (&k.world_from_body, &k.points[..], &k.labels[..]));
+        object_cloud(scans, object.label, &object.centroid, &object.size.unwrap_or_default(), 0.3, 0.1)
+    }
+
+    /// Matches the neighbour's latest object data against ours; asks for object clouds on success.
+    fn try_match(&mut self, robot: RobotId) {
+        let now = self.clock.now();
+        let min_matched = self.config.min_matched_objects;
+        let Some(entry) = self.neighbours.get(&robot) else { return };
+        let Some(data) = &entry.objects else { return };
+        let waiting = matches!(entry.protocol, Some(Protocol::ObjectsReceived(_)));
+        if !waiting {
+            return;
+        }
+        let remote_objects: Vec<GraphObject> = data
+            .objects
+            .iter()
+            .map(|o| GraphObject {
+                id: o.id,
+                label: o.label,
+                centroid: o.centroid_m(data.resolution_mm),
+                size: Some(o.size_m()),
+            })
+            .collect();
+        let (Ok(local), Ok(remote)) =
+            (ObjectGraph::new(self.local.objects.clone(), usize::MAX), ObjectGraph::new(remote_objects, usize::MAX))
+        else {
+            return;
+        };
+        let report = match_graphs(&local, &remote, &self.labels, &self.config.matching);
+        let MatchOutcome::Aligned(alignment) = report.outcome else { return };
+        if alignment.matches.len() < min_matched {
+            return;
+        }
+        let pairs: Vec<(ObjectId, ObjectId)> = alignment.matches.iter().map(|m| (m.local, m.remote)).collect();
+        let remote_ids: Vec<ObjectId> = pairs.iter().map(|p| p.1).collect();
+        let retry = self.retry.clone();
+        let Some(entry) = self.neighbours.get_mut(&robot) else { return };
+        if let Some(Protocol::ObjectsReceived(n)) = entry.protocol.take() {
+            entry.protocol = Some(n.matched(alignment.local_from_remote, pairs, now, &retry).into());
+        }
+        tracing::info!(robot = %self.robot, neighbour = %robot, matches = remote_ids.len(), "object graphs matched");
+        if let Some(links) = &self.links {
+            links.request_clouds.do_send(RequestObjectClouds { robot, objects: remote_ids });
+        }
+    }
+
+    fn on_object_clouds(&mut self, msg: NeighbourObjectClouds) {
+        let now = self.clock.now();
+        let Some(Protocol::Matched(matched)) = self.neighbours.get(&msg.robot).and_then(|e| e.protocol.clone()) else {
+            return;
+        };
+        // Object-cloud ICP: remote object points (remote world) onto ours (local world).
+        let remote_of: BTreeMap<ObjectId, ObjectId> = matched.state.pairs.iter().map(|(l, r)| (*r, *l)).collect();
+        let (mut source, mut target) = (Vec::new(), Vec::new());
+        let mut observed_in = BTreeMap::new();
+        for cloud in &msg.clouds {
+            let Some(local_id) = remote_of.get(&cloud.id) else { continue };
+            observed_in.insert(cloud.id, cloud.keyframes.clone());
+            if let Ok(points) = cloud_codec::decode_at_most(&cloud.cloud, 200_000) {
+                source.extend(points);
+            }
+            if let Some(object) = self.local.objects.iter().find(|o| o.id == *local_id) {
+                target.extend(self.local_object_cloud(object));
+            }
+        }
+        let mut local_from_remote = matched.state.local_from_remote;
+        if let Ok(result) = register(&source, &target, &local_from_remote, &self.config.icp) {
+            if result.converged {
+                local_from_remote = result.target_from_source;
+            }
+        }
+        // Neighbour keyframes that observed the matched objects, ± the neighbourhood.
+        let k = self.config.keyframe_neighbourhood as u32;
+        let wanted: BTreeSet<KeyframeId> = observed_in
+            .values()
+            .flatten()
+            .flat_map(|id| (id.0.saturating_sub(k)..=id.0.saturating_add(k)).map(KeyframeId))
+            .collect();
+        let retry = self.retry.clone();
+        let entry = self.entry(msg.robot);
+        entry.observed_in = observed_in;
+        let wanted: BTreeSet<KeyframeId> = wanted.into_iter().filter(|id| !entry.keyframes.contains_key(id)).collect();
+        entry.protocol = Some(matched.keyframes_requested(local_from_remote, wanted.clone(), now, &retry).into());
+        if wanted.is_empty() {
+            self.finish_alignment(msg.robot);
+        } else if let Some(links) = &self.links {
+            links
+                .request_keyframes
+                .do_send(RequestKeyframes { robot: msg.robot, keyframes: wanted.into_iter().collect() });
+        }
+    }
+
+    fn on_keyframe_resolved(&mut self, robot: RobotId, id: KeyframeId) {
+        let Some(entry) = self.neighbours.get_mut(&robot) else { return };
+        if let Some(Protocol::KeyframesRequested(n)) = &mut entry.protocol {
+            n.state.awaiting.remove(&id);
+            if n.state.awaiting.is_empty() {
+                self.finish_alignment(robot);
+            }
+        }
+    }
+
+    /// Every requested keyframe arrived or was reported unavailable: register them and align.
+    fn finish_alignment(&mut self, robot: RobotId) {
+        let now = self.clock.now();
+        let Some(entry) = self.neighbours.get(&robot) else { return };
+        let Some(Protocol::KeyframesRequested(n)) = entry.protocol.clone() else { return };
+        let mut local_from_remote = n.state.local_from_remote;
+        // Local keyframes that observed the matched objects are the registration targets.
+        let local_ids: BTreeSet<KeyframeId> =
+            n.state.pairs.iter().filter_map(|(l, _)| self.local.observed_in.get(l)).flatten().copied().collect();
+        let mut factors = Vec::new();
+        let mut neighbour_keyframes = Vec::new();
+        let mut best_rmse = f64::INFINITY;
+        for (id, kf) in &entry.keyframes {
+            let in_local = local_from_remote * kf.world_from_body;
+            let nearest = local_ids.iter().filter_map(|l| self.keyframes.get(l).map(|d| (*l, d))).min_by(|a, b| {
+                let da = (a.1.world_from_body.translation.vector - in_local.translation.vector).norm();
+                let db = (b.1.world_from_body.translation.vector - in_local.translation.vector).norm();
+                da.total_cmp(&db)
+            });
+            let Some((local_id, local)) = nearest else { continue };
+            let target: Vec<Point3<f64>> = local.points.iter().map(|p| p.cast::<f64>()).collect();
+            let initial = local.world_from_body.inverse() * in_local;
+            let Ok(result) = register(&kf.points_in_body, &target, &initial, &self.config.icp) else { continue };
+            if !result.converged {
+                continue;
+            }
+            neighbour_keyframes.push((*id, kf.world_from_body, kf.covariance));
+            factors.push((local_id, *id, result.target_from_source, result.information));
+            if result.rmse_m < best_rmse {
+                best_rmse = result.rmse_m;
+                local_from_remote = local.world_from_body * result.target_from_source * kf.world_from_body.inverse();
+            }
+        }
+        let Some(entry) = self.neighbours.get_mut(&robot) else { return };
+        if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
+            entry.protocol = Some(n.aligned(local_from_remote, now).into());
+            entry.first_aligned.get_or_insert(now);
+        }
+        tracing::info!(robot = %self.robot, neighbour = %robot, factors = factors.len(), "aligned");
+        if let (Some(links), false) = (&self.links, factors.is_empty()) {
+            links.optimiser.do_send(InterRobotConstraints { robot, local_from_remote, neighbour_keyframes, factors });
+        }
+    }
+}
+
+impl Actor for Matcher {
+    type Context = Context<Self>;
+}
+
+impl Supervised for Matcher {
+    fn restarting(&mut self, _: &mut Context<Self>) {
+        tracing::warn!(robot = %self.robot, "matcher restarting with its neighbour states");
+    }
+}
+
+impl Handler<ConnectMatcher> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: ConnectMatcher, _: &mut Context<Self>) {
+        self.links = Some(msg.0);
+    }
+}
+
+impl Handler<LocalObjects> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: LocalObjects, _: &mut Context<Self>) {
+        self.local = msg;
+        let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
+        for robot in robots {
+            self.try_match(robot);
+        }
+    }
+}
+
+impl Handler<LocalKeyframe> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: LocalKeyframe, _: &mut Context<Self>) {
+        let labels = msg.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect();
+        let points = msg.points_in_body.iter().map(|p| p.cast::<f32>()).collect();
+        self.keyframes.insert(msg.id, LocalKeyframeData { world_from_body: msg.world_from_body, points, labels });
+    }
+}
+
+impl Handler<PosesOptimised> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: PosesOptimised, _: &mut Context<Self>) {
+        for (id, pose) in msg.poses {
+            if let Some(k) = self.keyframes.get_mut(&id) {
+                k.world_from_body = pose;
+            }
+        }
+    }
+}
+
+impl Handler<NeighbourObjects> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourObjects, _: &mut Context<Self>) {
+        let now = self.clock.now();
+        let entry = self.entry(msg.robot);
+        if entry.objects.as_ref().is_some_and(|d| d.revision >= msg.data.revision) {
+            return;
+        }
+        let revision = msg.data.revision;
+        entry.objects = Some(msg.data);
+        entry.protocol = entry.protocol.take().map(|p| p.on_objects(revision, now));
+        self.try_match(msg.robot);
+    }
+}
+
+impl Handler<NeighbourObjectClouds> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourObjectClouds, _: &mut Context<Self>) {
+        self.on_object_clouds(msg);
+    }
+}
+
+impl Handler<NeighbourKeyframe> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourKeyframe, _: &mut Context<Self>) {
+        let (robot, id) = (msg.robot, msg.id);
+        self.entry(robot).keyframes.insert(id, msg);
+        self.on_keyframe_resolved(robot, id);
+    }
+}
+
+impl Handler<KeyframesUnavailable> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: KeyframesUnavailable, _: &mut Context<Self>) {
+        for id in msg.keyframes {
+            self.on_keyframe_resolved(msg.robot, id);
+        }
+    }
+}
+
+impl Handler<Tick> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: Tick, _: &mut Context<Self>) {
+        // Object clouds that never came: ask again with back-off, then start over.
+        let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
+        for robot in robots {
+            let Some(entry) = self.neighbours.get_mut(&robot) else { continue };
+            let Some(Protocol::Matched(mut n)) = entry.protocol.clone() else { continue };
+            if !n.state.wait.expired(msg.now) {
+                continue;
+            }
+            match n.state.wait.retry(msg.now, &self.retry) {
+                Some(next) => {
+                    n.state.wait = next;
+                    let objects = n.state.pairs.iter().map(|p| p.1).collect();
+                    entry.protocol = Some(n.into());
+                    if let Some(links) = &self.links {
+                        links.request_clouds.do_send(RequestObjectClouds { robot, objects });
+                    }
+                }
+                None => entry.protocol = Some(n.gave_up(msg.now).into()),
+            }
+        }
+    }
+}
+
+impl Handler<GetNeighbours> for Matcher {
+    type Result = MessageResult<GetNeighbours>;
+    fn handle(&mut self, _: GetNeighbours, _: &mut Context<Self>) -> Self::Result {
+        MessageResult(
+            self.neighbours
+                .iter()
+                .map(|(robot, e)| NeighbourStatus {
+                    robot: *robot,
+                    state: e.protocol.as_ref().map_or("?", Protocol::name),
+                    local_from_remote: e.protocol.as_ref().and_then(|p| p.local_from_remote().copied()),
+                    first_aligned: e.first_aligned,
+                    keyframes_held: e.keyframes.len(),
+                })
+                .collect(),
+        )
+    }
+}
+
+impl Handler<InjectFailure> for Matcher {
+    type Result = ();
+    fn handle(&mut self, _: InjectFailure, ctx: &mut Context<Self>) {
+        ctx.stop();
+    }
+}

@@ -1,0 +1,175 @@
+//! Typed messages between the actors of one robot (DESIGN.md §3). Every message is a Rust type;
+//! payloads that cross the radio are `sgm_model::wire` types inside `Comms` only.
+
+use actix::Message;
+use nalgebra::{Matrix6, Point3};
+use sgm_model::geometry::Pose3;
+use sgm_model::matching::GraphObject;
+use sgm_model::perception::clustering::ObjectCandidate;
+use sgm_model::perception::projection::{CameraModel, LabelImage};
+use sgm_model::scene_graph::{Keyframe, KeyframeEdge, KeyframeId, LabelId, ObjectId, RobotId, Stamp};
+use sgm_model::wire::messages::{ObjectCloud, ObjectData, RefusalReason};
+use sgm_model::wire::Message as WireMessage;
+use std::collections::BTreeMap;
+
+/// How the points of a frame get their classes.
+#[derive(Clone, Debug)]
+pub enum FrameLabels {
+    /// One class per point (`None`: unlabelled), e.g. from a simulator or an upstream fuser.
+    PerPoint(Vec<Option<LabelId>>),
+    /// A segmented image: points are projected into it (paper §IV-A).
+    Image { image: LabelImage, camera: CameraModel, camera_from_body: Pose3 },
+}
+
+/// One synchronised sensor frame: a LiDAR scan in the body frame, its labels, and the
+/// odometry pose of the body in the robot's world frame.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct SensorFrame {
+    pub stamp: Stamp,
+    pub world_from_body: Pose3,
+    pub points_in_body: Vec<Point3<f64>>,
+    pub labels: FrameLabels,
+}
+
+/// Fusion → Tracker: a labelled scan and its object candidates (body frame).
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct LabelledScan {
+    pub stamp: Stamp,
+    pub world_from_body: Pose3,
+    pub points_in_body: Vec<Point3<f64>>,
+    pub labels: Vec<Option<LabelId>>,
+    pub candidates: Vec<ObjectCandidate>,
+}
+
+/// Tracker → Optimiser: a new keyframe and the edges it brings (odometry, loops).
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct NewKeyframe {
+    pub keyframe: Keyframe,
+    pub edges: Vec<KeyframeEdge>,
+}
+
+/// Tracker → Matcher: a keyframe's labelled points, for object clouds and inter-robot ICP.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct LocalKeyframe {
+    pub id: KeyframeId,
+    pub world_from_body: Pose3,
+    pub points_in_body: Vec<Point3<f64>>,
+    pub labels: Vec<Option<LabelId>>,
+}
+
+/// Tracker → Matcher and Comms: the confirmed, matchable objects (world frame) and which
+/// keyframes observed each.
+#[derive(Message, Clone, Debug, Default)]
+#[rtype(result = "()")]
+pub struct LocalObjects {
+    pub objects: Vec<GraphObject>,
+    pub observed_in: BTreeMap<ObjectId, Vec<KeyframeId>>,
+}
+
+/// Optimiser → Tracker and Matcher: optimised keyframe poses (world frame) and marginal
+/// covariances over (ω, v).
+#[derive(Message, Clone, Debug, Default)]
+#[rtype(result = "()")]
+pub struct PosesOptimised {
+    pub poses: Vec<(KeyframeId, Pose3)>,
+    pub covariances: Vec<(KeyframeId, Matrix6<f64>)>,
+}
+
+/// Comms → Matcher: a neighbour's object data arrived.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct NeighbourObjects {
+    pub robot: RobotId,
+    pub data: ObjectData,
+}
+
+/// Comms → Matcher: object clouds arrived.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct NeighbourObjectClouds {
+    pub robot: RobotId,
+    pub clouds: Vec<ObjectCloud>,
+}
+
+/// Comms → Matcher: a neighbour keyframe arrived (cloud decoded, body frame).
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct NeighbourKeyframe {
+    pub robot: RobotId,
+    pub id: KeyframeId,
+    pub world_from_body: Pose3,
+    pub covariance: Matrix6<f64>,
+    pub points_in_body: Vec<Point3<f64>>,
+}
+
+/// Comms → Matcher: requested keyframes that will not come (unknown to the neighbour, or given
+/// up after every retry).
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct KeyframesUnavailable {
+    pub robot: RobotId,
+    pub keyframes: Vec<KeyframeId>,
+    pub reason: RefusalReason,
+}
+
+/// Matcher → Comms: ask a neighbour for object clouds.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct RequestObjectClouds {
+    pub robot: RobotId,
+    pub objects: Vec<ObjectId>,
+}
+
+/// Matcher → Comms: keyframes wanted from a neighbour (Comms coalesces, bounds and never asks
+/// twice).
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct RequestKeyframes {
+    pub robot: RobotId,
+    pub keyframes: Vec<KeyframeId>,
+}
+
+/// Comms → Tracker: a neighbour asked for data only the map holds.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub enum Serve {
+    ObjectClouds { robot: RobotId, objects: Vec<ObjectId> },
+    Keyframes { robot: RobotId, keyframes: Vec<KeyframeId> },
+}
+
+/// Tracker → Comms: a message for a neighbour.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct Outgoing {
+    pub to: RobotId,
+    pub message: WireMessage,
+}
+
+/// Matcher → Optimiser: inter-robot constraints with one neighbour (paper §IV-D, §IV-E):
+/// the neighbour keyframes as variables with priors, and relative-pose factors from ICP.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct InterRobotConstraints {
+    pub robot: RobotId,
+    pub local_from_remote: Pose3,
+    /// Neighbour keyframe → (pose in the neighbour's world, covariance over (ω, v)).
+    pub neighbour_keyframes: Vec<(KeyframeId, Pose3, Matrix6<f64>)>,
+    /// (local keyframe, neighbour keyframe, local_body_from_neighbour_body, information).
+    pub factors: Vec<(KeyframeId, KeyframeId, Pose3, Matrix6<f64>)>,
+}
+
+/// Runner / bridge → supervisor → children: time moved on to `now` (the clock is already set).
+#[derive(Message, Clone, Copy, Debug)]
+#[rtype(result = "()")]
+pub struct Tick {
+    pub now: Stamp,
+}
+
+/// Tests and fault scenarios: make a child fail (stop), as a crash would.
+#[derive(Message, Clone, Copy, Debug)]
+#[rtype(result = "()")]
+pub struct InjectFailure;

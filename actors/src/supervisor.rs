@@ -1,0 +1,152 @@
+//! `RobotSupervisor`: one robot's actor tree (DESIGN.md §3). Builds and wires the children
+//! explicitly (no registry: many robots share a process), owns the clock, forwards ticks, and
+//! restarts a child that stops (actix `Supervisor`). What survives a restart: everything — each
+//! child's state is its struct, which actix keeps across restarts; only the message being
+//! handled when the child failed is lost (the map, the pose graph, the neighbour protocol states,
+//! the request queues and the replay windows are not).
+
+use crate::clock::Clock;
+use crate::comms::{Comms, CommsLinks, ConnectComms};
+use crate::config::{ConfigError, RobotConfig};
+use crate::fusion::Fusion;
+use crate::matcher::{ConnectMatcher, Matcher, MatcherLinks};
+use crate::messages::{SensorFrame, Tick};
+use crate::optimiser::{ConnectOptimiser, Optimiser, OptimiserLinks};
+use crate::sensor::Sensor;
+use crate::tracker::{ConnectTracker, Tracker, TrackerLinks};
+use crate::transport::{InProcessRadio, Transport};
+use actix::{Actor, Addr, Context, Handler, Supervisor};
+use sgm_model::perception::classes::ClassTable;
+use sgm_model::scene_graph::RobotId;
+
+/// Addresses of one robot's actors (stable across restarts).
+#[derive(Clone)]
+pub struct RobotHandle {
+    pub robot: RobotId,
+    pub name: String,
+    pub clock: Clock,
+    pub supervisor: Addr<RobotSupervisor>,
+    pub sensor: Addr<Sensor>,
+    pub fusion: Addr<Fusion>,
+    pub tracker: Addr<Tracker>,
+    pub matcher: Addr<Matcher>,
+    pub optimiser: Addr<Optimiser>,
+    pub comms: Addr<Comms>,
+}
+
+pub struct RobotSupervisor {
+    clock: Clock,
+    sensor: Addr<Sensor>,
+    matcher: Addr<Matcher>,
+    comms: Addr<Comms>,
+}
+
+impl Actor for RobotSupervisor {
+    type Context = Context<Self>;
+}
+
+/// Starts one robot on the current actix system, attached to `radio`. The configuration is
+/// validated first; nothing starts if it is invalid.
+pub fn start_robot(config: &RobotConfig, clock: Clock, radio: &InProcessRadio) -> Result<RobotHandle, ConfigError> {
+    start_robot_on(config, clock, Box::new(radio.clone()), |robot, comms| radio.attach(robot, comms.recipient()))
+}
+
+/// As [`start_robot`] over any transport; `attach` registers the robot's Comms with it.
+pub fn start_robot_on(
+    config: &RobotConfig,
+    clock: Clock,
+    transport: Box<dyn Transport>,
+    attach: impl FnOnce(RobotId, Addr<Comms>),
+) -> Result<RobotHandle, ConfigError> {
+    config.validate()?;
+    let robot = RobotId(config.robot.id);
+    let key = config.comms.team_key()?;
+    let classes = ClassTable::new(config.fusion.classes.clone()).map_err(|e| ConfigError::Invalid {
+        key: "fusion.classes".into(),
+        value: "(table)".into(),
+        allowed: e.to_string(),
+    })?;
+    let label_count = classes.classes().iter().map(|c| usize::from(c.id) + 1).max().unwrap_or(1);
+
+    // Sequence numbers start at the clock in microseconds: a restarted robot never reuses one.
+    let sequence_start = (clock.now().max(0.0) * 1e6) as u64;
+    let comms_config = config.comms.clone();
+    let comms_clock = clock.clone();
+    let comms =
+        Supervisor::start(move |_| Comms::new(robot, comms_config, key, comms_clock, transport, sequence_start));
+    let tracker_config = (config.tracker.clone(), classes, config.optimiser.clone(), config.comms.cloud_resolution_m);
+    let tracker = Supervisor::start(move |_| {
+        let (t, classes, o, r) = tracker_config;
+        Tracker::new(robot, t, classes, &o, r)
+    });
+    let (matcher_config, retry, matcher_clock) = (config.matcher.clone(), config.comms.retry.clone(), clock.clone());
+    let matcher = Supervisor::start(move |_| Matcher::new(robot, matcher_config, retry, matcher_clock, label_count));
+    let optimiser_config = config.optimiser.clone();
+    let optimiser = Supervisor::start(move |_| Optimiser::new(robot, optimiser_config));
+    let fusion_config = config.fusion.clone();
+    let tracker_in = tracker.clone().recipient();
+    let fusion = Supervisor::start(move |_| Fusion::new(&fusion_config, tracker_in));
+    let fusion_in = fusion.clone().recipient();
+    let sensor = Supervisor::start(move |_| Sensor::new(fusion_in));
+
+    comms.do_send(ConnectComms(CommsLinks {
+        objects: matcher.clone().recipient(),
+        object_clouds: matcher.clone().recipient(),
+        keyframes: matcher.clone().recipient(),
+        unavailable: matcher.clone().recipient(),
+        serve: tracker.clone().recipient(),
+    }));
+    tracker.do_send(ConnectTracker(TrackerLinks {
+        optimiser: optimiser.clone().recipient(),
+        matcher_keyframes: matcher.clone().recipient(),
+        matcher_objects: matcher.clone().recipient(),
+        comms_objects: comms.clone().recipient(),
+        comms_outgoing: comms.clone().recipient(),
+    }));
+    matcher.do_send(ConnectMatcher(MatcherLinks {
+        request_clouds: comms.clone().recipient(),
+        request_keyframes: comms.clone().recipient(),
+        optimiser: optimiser.clone().recipient(),
+    }));
+    optimiser.do_send(ConnectOptimiser(OptimiserLinks {
+        tracker: tracker.clone().recipient(),
+        matcher: matcher.clone().recipient(),
+    }));
+    attach(robot, comms.clone());
+
+    let supervisor = RobotSupervisor {
+        clock: clock.clone(),
+        sensor: sensor.clone(),
+        matcher: matcher.clone(),
+        comms: comms.clone(),
+    }
+    .start();
+    Ok(RobotHandle {
+        robot,
+        name: config.robot.name.clone(),
+        clock,
+        supervisor,
+        sensor,
+        fusion,
+        tracker,
+        matcher,
+        optimiser,
+        comms,
+    })
+}
+
+impl Handler<SensorFrame> for RobotSupervisor {
+    type Result = ();
+    fn handle(&mut self, frame: SensorFrame, _: &mut Context<Self>) {
+        self.sensor.do_send(frame);
+    }
+}
+
+impl Handler<Tick> for RobotSupervisor {
+    type Result = ();
+    fn handle(&mut self, tick: Tick, _: &mut Context<Self>) {
+        self.clock.advance_to(tick.now);
+        self.matcher.do_send(tick);
+        self.comms.do_send(tick);
+    }
+}

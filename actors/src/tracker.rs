@@ -1,0 +1,295 @@
+//! `Tracker`: the robot's map (paper §IV-A, §IV-E). Selects keyframes (LIO-SAM thresholds),
+//! chains odometry increments onto the optimised poses, keeps the object layer (Hungarian LAP
+//! with c_max against nearby map objects, `model::perception::tracker`), detects intra-robot loop
+//! closures, and answers neighbours' requests for object clouds and keyframes. Owns the
+//! `SceneGraph`; a restart keeps it (the keyframe database survives).
+
+use crate::config::{OptimiserConfig, TrackerSection};
+use crate::messages::*;
+use actix::{Actor, ActorContext, Context, Handler, Message, MessageResult, Recipient, Supervised};
+use nalgebra::{Matrix6, Point3};
+use sgm_model::geometry::Pose3;
+use sgm_model::matching::GraphObject;
+use sgm_model::perception::classes::ClassTable;
+use sgm_model::perception::keyframes::is_keyframe;
+use sgm_model::perception::loop_closure;
+use sgm_model::perception::object_cloud::{object_cloud, UNLABELLED};
+use sgm_model::perception::tracker::Tracker as ObjectTracker;
+use sgm_model::scene_graph::{
+    Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, ObjectId, RobotId, SceneGraph, SemanticScan,
+};
+use sgm_model::wire::cloud_codec;
+use sgm_model::wire::messages::{
+    pack_covariance, KeyframeRefusal, KeyframeResponse, ObjectCloud, ObjectCloudResponse, RefusalReason, WirePose,
+};
+use sgm_model::wire::Message as WireMessage;
+use std::collections::BTreeMap;
+
+/// Where the Tracker sends what it produces.
+#[derive(Clone)]
+pub struct TrackerLinks {
+    pub optimiser: Recipient<NewKeyframe>,
+    pub matcher_keyframes: Recipient<LocalKeyframe>,
+    pub matcher_objects: Recipient<LocalObjects>,
+    pub comms_objects: Recipient<LocalObjects>,
+    pub comms_outgoing: Recipient<Outgoing>,
+}
+
+#[derive(Message)]
+#[rtype(result = "()")]
+pub struct ConnectTracker(pub TrackerLinks);
+
+/// A copy of the map, for status and reports.
+#[derive(Message)]
+#[rtype(result = "SceneGraph")]
+pub struct GetSceneGraph;
+
+/// A keyframe's pose, points (body) and labels, borrowed from the map.
+type ScanRef<'a> = (&'a Pose3, &'a [Point3<f32>], &'a [sgm_model::scene_graph::LabelId]);
+
+pub struct Tracker {
+    robot: RobotId,
+    config: TrackerSection,
+    classes: ClassTable,
+    odometry_information: Matrix6<f64>,
+    cloud_resolution_m: f64,
+    links: Option<TrackerLinks>,
+    graph: SceneGraph,
+    objects: ObjectTracker,
+    next_keyframe: u32,
+    /// Odometry pose of the latest keyframe (for increments).
+    last_odometry: Option<(KeyframeId, Pose3)>,
+    covariances: BTreeMap<KeyframeId, Matrix6<f64>>,
+}
+
+impl Tracker {
+    pub fn new(
+        robot: RobotId,
+        config: TrackerSection,
+        classes: ClassTable,
+        optimiser: &OptimiserConfig,
+        cloud_resolution_m: f64,
+    ) -> Self {
+        let s = optimiser.odometry_sigmas;
+        let odometry_information =
+            Matrix6::from_diagonal(&nalgebra::Vector6::from_iterator(s.iter().map(|v| 1.0 / (v * v))));
+        Self {
+            robot,
+            config,
+            classes,
+            odometry_information,
+            cloud_resolution_m,
+            links: None,
+            graph: SceneGraph::new(),
+            objects: ObjectTracker::default(),
+            next_keyframe: 0,
+            last_odometry: None,
+            covariances: BTreeMap::new(),
+        }
+    }
+
+    fn local_objects(&self) -> LocalObjects {
+        let mut out = LocalObjects::default();
+        for o in self.graph.objects() {
+            if !self.classes.is_matchable(o.label) || !self.objects.is_confirmed(o.id, &self.config.tracking) {
+                continue;
+            }
+            let Some(centroid) = self.graph.centroid_in_world(o.id) else { continue };
+            out.objects.push(GraphObject { id: o.id, label: o.label, centroid, size: Some(o.size) });
+            out.observed_in.insert(o.id, o.observed_in.iter().copied().collect());
+        }
+        out
+    }
+
+    fn add_keyframe(&mut self, scan: &LabelledScan) -> Result<KeyframeId, String> {
+        let id = KeyframeId(self.next_keyframe);
+        let (world_from_body, odometry_edge) = match self.last_odometry {
+            None => (scan.world_from_body, None),
+            Some((previous, odometry)) => {
+                let increment = odometry.inverse() * scan.world_from_body;
+                let optimised = self.graph.keyframe(previous).map(|k| k.world_from_body).unwrap_or(odometry);
+                let edge = KeyframeEdge {
+                    kind: KeyframeEdgeKind::Odometry,
+                    from: previous,
+                    to: KeyframeRef::Local(id),
+                    from_from_to: increment,
+                    information: self.odometry_information,
+                };
+                (optimised * increment, Some(edge))
+            }
+        };
+        self.graph.add_keyframe(Keyframe { id, stamp: scan.stamp, world_from_body }).map_err(|e| e.to_string())?;
+        self.next_keyframe += 1;
+        self.last_odometry = Some((id, scan.world_from_body));
+        let semantic = SemanticScan {
+            points_in_body: scan.points_in_body.iter().map(|p| p.cast::<f32>()).collect(),
+            labels: scan.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect(),
+        };
+        self.graph.set_semantic_scan(id, semantic).map_err(|e| e.to_string())?;
+        let mut edges = Vec::new();
+        if let Some(edge) = odometry_edge {
+            self.graph.add_edge(edge.clone()).map_err(|e| e.to_string())?;
+            edges.push(edge);
+        }
+        self.objects.update(&mut self.graph, id, &scan.candidates, &self.config.tracking).map_err(|e| e.to_string())?;
+        if let Some(edge) = loop_closure::detect(&self.graph, id, &self.config.loop_closure) {
+            if self.graph.add_edge(edge.clone()).is_ok() {
+                edges.push(edge);
+            }
+        }
+        if let Some(links) = &self.links {
+            links
+                .optimiser
+                .do_send(NewKeyframe { keyframe: Keyframe { id, stamp: scan.stamp, world_from_body }, edges });
+            links.matcher_keyframes.do_send(LocalKeyframe {
+                id,
+                world_from_body,
+                points_in_body: scan.points_in_body.clone(),
+                labels: scan.labels.clone(),
+            });
+        }
+        Ok(id)
+    }
+
+    fn publish_objects(&self) {
+        if let Some(links) = &self.links {
+            let objects = self.local_objects();
+            links.matcher_objects.do_send(objects.clone());
+            links.comms_objects.do_send(objects);
+        }
+    }
+
+    fn scans_of<'a>(&'a self, keyframes: impl IntoIterator<Item = KeyframeId> + 'a) -> Vec<ScanRef<'a>> {
+        keyframes
+            .into_iter()
+            .filter_map(|k| {
+                let kf = self.graph.keyframe(k)?;
+                let scan = self.graph.semantic_scan(k)?;
+                Some((&kf.world_from_body, &scan.points_in_body[..], &scan.labels[..]))
+            })
+            .collect()
+    }
+
+    fn serve_object_clouds(&self, robot: RobotId, ids: &[ObjectId]) -> WireMessage {
+        let objects = ids
+            .iter()
+            .filter_map(|id| {
+                let o = self.graph.object(*id)?;
+                let centroid = self.graph.centroid_in_world(*id)?;
+                let points =
+                    object_cloud(self.scans_of(o.observed_in.iter().copied()), o.label, &centroid, &o.size, 0.3, 0.1);
+                let cloud = cloud_codec::encode(&points, self.cloud_resolution_m).map(|c| c.bytes).unwrap_or_default();
+                Some(ObjectCloud { id: *id, keyframes: o.observed_in.iter().copied().collect(), cloud })
+            })
+            .collect();
+        tracing::debug!(robot = %self.robot, to = %robot, "serving object clouds");
+        WireMessage::ObjectCloudResponse(ObjectCloudResponse { objects })
+    }
+
+    fn serve_keyframe(&self, id: KeyframeId) -> Option<WireMessage> {
+        let kf = self.graph.keyframe(id)?;
+        let scan = self.graph.semantic_scan(id)?;
+        let points: Vec<Point3<f64>> = scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
+        let cloud = cloud_codec::encode(&points, self.cloud_resolution_m).ok()?.bytes;
+        let covariance = self
+            .covariances
+            .get(&id)
+            .copied()
+            .unwrap_or_else(|| self.odometry_information.try_inverse().unwrap_or_else(Matrix6::identity));
+        Some(WireMessage::KeyframeResponse(KeyframeResponse {
+            keyframe: id,
+            stamp: kf.stamp,
+            world_from_body: WirePose::from(&kf.world_from_body),
+            covariance: pack_covariance(&covariance),
+            cloud,
+        }))
+    }
+}
+
+impl Actor for Tracker {
+    type Context = Context<Self>;
+}
+
+impl Supervised for Tracker {
+    fn restarting(&mut self, _: &mut Context<Self>) {
+        tracing::warn!(robot = %self.robot, keyframes = self.graph.keyframe_count(), "tracker restarting with its map");
+    }
+}
+
+impl Handler<ConnectTracker> for Tracker {
+    type Result = ();
+    fn handle(&mut self, msg: ConnectTracker, _: &mut Context<Self>) {
+        self.links = Some(msg.0);
+    }
+}
+
+impl Handler<LabelledScan> for Tracker {
+    type Result = ();
+    fn handle(&mut self, scan: LabelledScan, _: &mut Context<Self>) {
+        let last = self.last_odometry.map(|(_, p)| p);
+        if !is_keyframe(last.as_ref(), &scan.world_from_body, &self.config.keyframes) {
+            return;
+        }
+        match self.add_keyframe(&scan) {
+            Ok(_) => self.publish_objects(),
+            Err(e) => tracing::warn!(robot = %self.robot, stamp = scan.stamp, "keyframe not added: {e}"),
+        }
+    }
+}
+
+impl Handler<PosesOptimised> for Tracker {
+    type Result = ();
+    fn handle(&mut self, msg: PosesOptimised, _: &mut Context<Self>) {
+        let known: Vec<(KeyframeId, Pose3)> =
+            msg.poses.into_iter().filter(|(k, _)| self.graph.keyframe(*k).is_some()).collect();
+        if let Err(e) = self.graph.update_keyframe_poses(known.iter().map(|(k, p)| (*k, p))) {
+            tracing::warn!(robot = %self.robot, "optimised poses not applied: {e}");
+            return;
+        }
+        self.covariances.extend(msg.covariances);
+        self.publish_objects();
+    }
+}
+
+impl Handler<Serve> for Tracker {
+    type Result = ();
+    fn handle(&mut self, msg: Serve, _: &mut Context<Self>) {
+        let Some(links) = self.links.clone() else { return };
+        match msg {
+            Serve::ObjectClouds { robot, objects } => {
+                links
+                    .comms_outgoing
+                    .do_send(Outgoing { to: robot, message: self.serve_object_clouds(robot, &objects) });
+            }
+            Serve::Keyframes { robot, keyframes } => {
+                let mut unknown = Vec::new();
+                for id in keyframes {
+                    match self.serve_keyframe(id) {
+                        Some(message) => links.comms_outgoing.do_send(Outgoing { to: robot, message }),
+                        None => unknown.push(id),
+                    }
+                }
+                if !unknown.is_empty() {
+                    let refusal = KeyframeRefusal { keyframes: unknown, reason: RefusalReason::Unknown };
+                    links
+                        .comms_outgoing
+                        .do_send(Outgoing { to: robot, message: WireMessage::KeyframeRefusal(refusal) });
+                }
+            }
+        }
+    }
+}
+
+impl Handler<GetSceneGraph> for Tracker {
+    type Result = MessageResult<GetSceneGraph>;
+    fn handle(&mut self, _: GetSceneGraph, _: &mut Context<Self>) -> Self::Result {
+        MessageResult(self.graph.clone())
+    }
+}
+
+impl Handler<InjectFailure> for Tracker {
+    type Result = ();
+    fn handle(&mut self, _: InjectFailure, ctx: &mut Context<Self>) {
+        ctx.stop();
+    }
+}
