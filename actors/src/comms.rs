@@ -292,7 +292,6 @@ impl Comms {
             }
             WireMessage::KeyframeRefusal(r) => {
                 let q = self.requests.entry(from).or_default();
-                let now = self.clock.now();
                 let mut unknown = Vec::new();
                 for id in r.keyframes {
                     match r.reason {
@@ -304,7 +303,6 @@ impl Comms {
                         }
                     }
                 }
-                let _ = now;
                 if !unknown.is_empty() {
                     links.unavailable.do_send(KeyframesUnavailable {
                         robot: from,
@@ -386,7 +384,15 @@ impl Handler<Outgoing> for Comms {
     type Result = ();
     fn handle(&mut self, msg: Outgoing, _: &mut Context<Self>) {
         match msg.message {
-            WireMessage::KeyframeResponse(_) => self.responses.push_back(msg),
+            WireMessage::KeyframeResponse(ref r) => {
+                // A retried request must not queue a second copy of a response still waiting.
+                let queued = self.responses.iter().any(|q| {
+                    q.to == msg.to && matches!(&q.message, WireMessage::KeyframeResponse(x) if x.keyframe == r.keyframe)
+                });
+                if !queued {
+                    self.responses.push_back(msg);
+                }
+            }
             message => self.send(Destination::Robot(msg.to), message),
         }
     }

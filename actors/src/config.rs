@@ -155,7 +155,7 @@ pub struct CommsConfig {
     pub max_keyframes_in_flight: usize,
     /// Keyframe ids per KeyframeRequest, at most. Default 16.
     pub max_keyframes_per_request: usize,
-    /// Keyframe responses sent per tick, at most (the outgoing budget). Default 8.
+    /// Keyframe responses sent per tick, at most (the outgoing budget). Default 16.
     pub max_responses_per_tick: usize,
     /// A neighbour silent for this long is considered lost, s. Default 30.
     pub link_timeout_s: f64,
@@ -178,7 +178,7 @@ impl Default for CommsConfig {
             request_window_s: 0.5,
             max_keyframes_in_flight: 32,
             max_keyframes_per_request: 16,
-            max_responses_per_tick: 8,
+            max_responses_per_tick: 16,
             link_timeout_s: 30.0,
             cloud_resolution_m: 0.01,
             retry: RetryConfig::default(),

@@ -22,7 +22,7 @@ use std::collections::BTreeSet;
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RetryConfig {
-    /// First wait for a response, s. Default 2.
+    /// First wait for a response, s. Default 5.
     pub timeout_s: f64,
     /// Each retry waits this factor longer. Default 2.
     pub backoff: f64,
@@ -32,7 +32,7 @@ pub struct RetryConfig {
 
 impl Default for RetryConfig {
     fn default() -> Self {
-        Self { timeout_s: 2.0, backoff: 2.0, max_retries: 4 }
+        Self { timeout_s: 5.0, backoff: 2.0, max_retries: 4 }
     }
 }
 
@@ -257,7 +257,7 @@ mod tests {
         let retry = RetryConfig::default();
         let n = Neighbour::discovered(RobotId(2), 0.0).objects_received(3, 1.0);
         let m = n.matched(Pose3::identity(), vec![(ObjectId(1), ObjectId(7))], 1.5, &retry);
-        assert_eq!(m.state.wait, Wait { deadline: 3.5, attempts: 1 });
+        assert_eq!(m.state.wait, Wait { deadline: 6.5, attempts: 1 });
         let k = m.keyframes_requested(Pose3::identity(), [KeyframeId(4)].into(), 2.0, &retry);
         let a = k.aligned(Pose3::identity(), 3.0);
         assert_eq!((a.since, a.state.revision), (3.0, 3));

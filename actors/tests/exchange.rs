@@ -1,0 +1,162 @@
+//! Two and three robots in one process, fed scripted frames from a small synthetic world
+//! (labelled boxes on a ground plane), over the in-process radio: they must find each other and
+//! converge to the right `local_from_remote`.
+
+use nalgebra::{Point3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use sgm_actors::clock::Clock;
+use sgm_actors::comms::GetCommsStatus;
+use sgm_actors::config::RobotConfig;
+use sgm_actors::matcher::GetNeighbours;
+use sgm_actors::messages::{FrameLabels, SensorFrame, Tick};
+use sgm_actors::supervisor::{start_robot, RobotHandle};
+use sgm_actors::transport::{InProcessRadio, PerfectLinks};
+use sgm_model::geometry::{pose_error, pose_from_yaw_translation, Pose3};
+use sgm_model::scene_graph::{LabelId, RobotId};
+use sgm_model::wire::MessageKind;
+
+struct WorldObject {
+    label: LabelId,
+    centre: Point3<f64>,
+    size: Vector3<f64>,
+}
+
+fn world(seed: u64) -> Vec<WorldObject> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..40)
+        .map(|_| {
+            let label = LabelId(rng.random_range(2..9));
+            let size = Vector3::new(rng.random_range(0.4..1.5), rng.random_range(0.4..1.5), rng.random_range(0.5..3.0));
+            let centre = Point3::new(rng.random_range(-30.0..30.0), rng.random_range(-30.0..30.0), size.z / 2.0);
+            WorldObject { label, centre, size }
+        })
+        .collect()
+}
+
+/// Points on the objects within 20 m (box surfaces) and on the ground, labelled; body frame.
+fn scan(
+    world: &[WorldObject],
+    world_from_body: &Pose3,
+    rng: &mut ChaCha8Rng,
+) -> (Vec<Point3<f64>>, Vec<Option<LabelId>>) {
+    let body_from_world = world_from_body.inverse();
+    let here = world_from_body.translation.vector;
+    let (mut points, mut labels) = (Vec::new(), Vec::new());
+    for o in world {
+        if (o.centre.coords - here).xy().norm() > 20.0 {
+            continue;
+        }
+        for _ in 0..150 {
+            let mut u =
+                Vector3::new(rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5));
+            let axis = rng.random_range(0..3);
+            u[axis] = if rng.random_bool(0.5) { 0.5 } else { -0.5 };
+            points.push(body_from_world * (o.centre + u.component_mul(&o.size)));
+            labels.push(Some(o.label));
+        }
+    }
+    for _ in 0..1500 {
+        let p = Point3::new(here.x + rng.random_range(-20.0..20.0), here.y + rng.random_range(-20.0..20.0), 0.0);
+        points.push(body_from_world * p);
+        labels.push(Some(LabelId(0)));
+    }
+    (points, labels)
+}
+
+struct Robot {
+    handle: RobotHandle,
+    /// The robot's world frame in the true world: p_true = truth_from_world · p_world.
+    truth_from_world: Pose3,
+    waypoints: Vec<Point3<f64>>,
+}
+
+fn position(waypoints: &[Point3<f64>], s: f64) -> (Point3<f64>, f64) {
+    let legs: Vec<f64> = waypoints.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
+    let mut s = s;
+    for (k, len) in legs.iter().enumerate() {
+        if s <= *len || k == legs.len() - 1 {
+            let d = (waypoints[k + 1] - waypoints[k]) / *len;
+            let t = s.min(*len);
+            return (waypoints[k] + d * t, d.y.atan2(d.x));
+        }
+        s -= len;
+    }
+    (waypoints[0], 0.0)
+}
+
+async fn settle() {
+    for _ in 0..200 {
+        actix_rt::task::yield_now().await;
+    }
+}
+
+async fn run_team(paths: Vec<(Vec<Point3<f64>>, Pose3)>, seconds: usize) -> Vec<Robot> {
+    let world = world(11);
+    let radio = InProcessRadio::new(Box::new(PerfectLinks));
+    let mut robots = Vec::new();
+    for (k, (waypoints, truth_from_world)) in paths.into_iter().enumerate() {
+        let mut config = RobotConfig::default();
+        config.robot.id = k as u16 + 1;
+        config.robot.name = format!("robot{k}");
+        config.optimiser.every_keyframes = 1000;
+        let handle = start_robot(&config, Clock::starting_at(0.0), &radio).expect("valid configuration");
+        robots.push(Robot { handle, truth_from_world, waypoints });
+    }
+    settle().await;
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for step in 1..=seconds * 2 {
+        let t = step as f64 * 0.5;
+        for r in &robots {
+            r.handle.clock.advance_to(t);
+            let (p, yaw) = position(&r.waypoints, t * 1.5);
+            let truth_from_body = pose_from_yaw_translation(yaw, p.coords);
+            let world_from_body = r.truth_from_world.inverse() * truth_from_body;
+            let (points, labels) = scan(&world, &truth_from_body, &mut rng);
+            r.handle.sensor.do_send(SensorFrame {
+                stamp: t,
+                world_from_body,
+                points_in_body: points,
+                labels: FrameLabels::PerPoint(labels),
+            });
+        }
+        settle().await;
+        for r in &robots {
+            r.handle.supervisor.do_send(Tick { now: t });
+        }
+        settle().await;
+        radio.deliver_due(t);
+        settle().await;
+    }
+    robots
+}
+
+fn truth_local_from_remote(local: &Robot, remote: &Robot) -> Pose3 {
+    local.truth_from_world.inverse() * remote.truth_from_world
+}
+
+#[actix_rt::test]
+async fn two_robots_align() {
+    let a = vec![Point3::new(-25.0, -10.0, 0.0), Point3::new(25.0, -10.0, 0.0), Point3::new(25.0, 10.0, 0.0)];
+    let b = vec![Point3::new(20.0, 15.0, 0.0), Point3::new(-20.0, 15.0, 0.0), Point3::new(-20.0, -15.0, 0.0)];
+    let robots =
+        run_team(vec![(a, Pose3::identity()), (b, pose_from_yaw_translation(0.8, Vector3::new(12.0, -7.0, 0.0)))], 60)
+            .await;
+    for (i, local) in robots.iter().enumerate() {
+        let neighbours = local.handle.matcher.send(GetNeighbours).await.unwrap();
+        let status = local.handle.comms.send(GetCommsStatus).await.unwrap();
+        for n in &neighbours {
+            let remote = robots.iter().find(|r| r.handle.robot == n.robot).unwrap();
+            let estimate = n.local_from_remote.unwrap_or_else(|| panic!("robot {i}: {n:?} {status:?}"));
+            let e = pose_error(&estimate, &truth_local_from_remote(local, remote));
+            assert_eq!(n.state, "Aligned", "{n:?}");
+            assert!(e.translation_m < 0.2 && e.max_axis_rotation_deg() < 1.0, "robot {i}: {e:?}");
+        }
+        assert_eq!(neighbours.len(), 1);
+        assert_eq!(status.keyframes_sent_twice, 0);
+        assert_eq!(status.rejected.total(), 0);
+        assert!(status.sent.get(MessageKind::ObjectData).count > 0);
+        assert!(status.max_keyframes_in_flight <= RobotConfig::default().comms.max_keyframes_in_flight);
+        let _ = RobotId(0);
+    }
+}
