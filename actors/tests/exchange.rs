@@ -135,6 +135,40 @@ fn truth_local_from_remote(local: &Robot, remote: &Robot) -> Pose3 {
     local.truth_from_world.inverse() * remote.truth_from_world
 }
 
+fn assert_aligned(robots: &[Robot], neighbours: &[Vec<sgm_actors::matcher::NeighbourStatus>]) {
+    for (i, local) in robots.iter().enumerate() {
+        for n in &neighbours[i] {
+            let remote = robots.iter().find(|r| r.handle.robot == n.robot).unwrap();
+            assert_eq!(n.state, "Aligned", "robot {i}: {n:?}");
+            let e = pose_error(&n.local_from_remote.unwrap(), &truth_local_from_remote(local, remote));
+            assert!(e.translation_m < 0.2 && e.max_axis_rotation_deg() < 1.0, "robot {i} ← {}: {e:?}", n.robot);
+        }
+    }
+}
+
+#[actix_rt::test]
+async fn three_robots_align_pairwise() {
+    let a = vec![Point3::new(-25.0, -10.0, 0.0), Point3::new(25.0, -10.0, 0.0)];
+    let b = vec![Point3::new(20.0, 15.0, 0.0), Point3::new(-20.0, 15.0, 0.0), Point3::new(-20.0, -15.0, 0.0)];
+    let c = vec![Point3::new(0.0, -25.0, 0.0), Point3::new(0.0, 25.0, 0.0)];
+    let robots = run_team(
+        vec![
+            (a, Pose3::identity()),
+            (b, pose_from_yaw_translation(0.8, Vector3::new(12.0, -7.0, 0.0))),
+            (c, pose_from_yaw_translation(-2.0, Vector3::new(-5.0, 20.0, 0.0))),
+        ],
+        45,
+    )
+    .await;
+    let mut all = Vec::new();
+    for r in &robots {
+        let n = r.handle.matcher.send(GetNeighbours).await.unwrap();
+        assert_eq!(n.len(), 2, "{n:?}");
+        all.push(n);
+    }
+    assert_aligned(&robots, &all);
+}
+
 #[actix_rt::test]
 async fn two_robots_align() {
     let a = vec![Point3::new(-25.0, -10.0, 0.0), Point3::new(25.0, -10.0, 0.0), Point3::new(25.0, 10.0, 0.0)];
@@ -159,4 +193,87 @@ async fn two_robots_align() {
         assert!(status.max_keyframes_in_flight <= RobotConfig::default().comms.max_keyframes_in_flight);
         let _ = RobotId(0);
     }
+}
+
+/// Records every envelope it hears.
+struct Tap(std::sync::Arc<std::sync::Mutex<Vec<Vec<u8>>>>);
+impl actix::Actor for Tap {
+    type Context = actix::Context<Self>;
+}
+impl actix::Handler<sgm_actors::transport::Delivered> for Tap {
+    type Result = ();
+    fn handle(&mut self, msg: sgm_actors::transport::Delivered, _: &mut actix::Context<Self>) {
+        self.0.lock().unwrap().push(msg.bytes);
+    }
+}
+
+#[actix_rt::test]
+async fn foreign_replayed_truncated_and_oversized_envelopes_are_refused_and_counted() {
+    use actix::Actor;
+    use sgm_actors::messages::InjectFailure;
+    use sgm_actors::tracker::GetSceneGraph;
+    use sgm_actors::transport::Transport;
+    use sgm_model::wire::messages::{KeyframeRequest, Message};
+    use sgm_model::wire::{seal, Destination, Envelope, TeamKey, WireLimits, PROTOCOL_VERSION};
+    let radio = InProcessRadio::new(Box::new(PerfectLinks));
+    let heard = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    radio.attach(RobotId(99), Tap(heard.clone()).start().recipient());
+    let mut config = RobotConfig::default();
+    config.robot.id = 1;
+    let handle = start_robot(&config, Clock::starting_at(0.0), &radio).unwrap();
+    settle().await;
+    let world = world(11);
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    for step in 1..=20 {
+        let t = step as f64;
+        handle.clock.advance_to(t);
+        let pose = pose_from_yaw_translation(0.0, Vector3::new(t - 10.0, 0.0, 0.0));
+        let (points, labels) = scan(&world, &pose, &mut rng);
+        handle.sensor.do_send(SensorFrame {
+            stamp: t,
+            world_from_body: pose,
+            points_in_body: points,
+            labels: FrameLabels::PerPoint(labels),
+        });
+        settle().await;
+        handle.supervisor.do_send(Tick { now: t });
+        settle().await;
+        radio.deliver_due(t);
+        settle().await;
+    }
+    let graph_before = handle.tracker.send(GetSceneGraph).await.unwrap();
+    assert!(graph_before.keyframe_count() > 5 && graph_before.object_count() > 3);
+    let captured = heard.lock().unwrap().clone();
+    assert!(!captured.is_empty(), "robot 1 broadcast its objects");
+    // A genuine envelope from robot 2 (sealed with the team key), then: the same bytes again
+    // (replay), one sealed under another key, two truncations (shorter than a MAC), and 5 MiB.
+    let key = config.comms.team_key().unwrap();
+    let request = |seq| Envelope {
+        version: PROTOCOL_VERSION,
+        from: RobotId(2),
+        to: Destination::Robot(RobotId(1)),
+        sequence: seq,
+        message: Message::KeyframeRequest(KeyframeRequest { keyframes: vec![] }),
+    };
+    let genuine = seal(&request(7), &key, &WireLimits::default()).unwrap();
+    let foreign = seal(&request(8), &TeamKey::from_bytes([9; 32]), &WireLimits::default()).unwrap();
+    radio.transmit(RobotId(99), Destination::Robot(RobotId(1)), genuine.clone(), 20.0);
+    radio.transmit(RobotId(99), Destination::Robot(RobotId(1)), genuine.clone(), 20.0);
+    radio.transmit(RobotId(99), Destination::Robot(RobotId(1)), foreign, 20.0);
+    radio.transmit(RobotId(99), Destination::Robot(RobotId(1)), genuine[..genuine.len() / 2].to_vec(), 20.0);
+    radio.transmit(RobotId(99), Destination::Robot(RobotId(1)), genuine[..10].to_vec(), 20.0);
+    radio.transmit(RobotId(99), Destination::Robot(RobotId(1)), vec![1u8; 5 << 20], 20.0);
+    radio.deliver_due(20.0);
+    settle().await;
+    let status = handle.comms.send(GetCommsStatus).await.unwrap();
+    assert_eq!(status.received.get(MessageKind::KeyframeRequest).count, 1, "{status:?}");
+    assert_eq!(status.rejected.replayed, 1);
+    assert_eq!(status.rejected.bad_mac, 1, "{status:?}");
+    assert_eq!(status.rejected.truncated, 2);
+    assert_eq!(status.rejected.oversized, 1);
+    // A failed child restarts with its state: the keyframe database survives.
+    handle.tracker.do_send(InjectFailure);
+    settle().await;
+    let graph_after = handle.tracker.send(GetSceneGraph).await.unwrap();
+    assert_eq!(graph_after, graph_before);
 }
