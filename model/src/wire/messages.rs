@@ -148,7 +148,7 @@ pub struct ObjectCloud {
     pub id: ObjectId,
     pub keyframes: Vec<KeyframeId>,
     /// A [`super::cloud_codec`] stream; empty when the object has no stored points.
-    #[serde(with = "serde_bytes_compat")]
+    #[serde(with = "serde_bytes")]
     pub cloud: Vec<u8>,
 }
 
@@ -166,7 +166,7 @@ pub struct KeyframeResponse {
     pub world_from_body: WirePose,
     /// Upper triangle, row-major, of the 6 × 6 marginal covariance over (ω, v).
     pub covariance: [f32; 21],
-    #[serde(with = "serde_bytes_compat")]
+    #[serde(with = "serde_bytes")]
     pub cloud: Vec<u8>,
 }
 
@@ -238,32 +238,6 @@ pub fn unpack_covariance(packed: &[f32; 21]) -> Option<Matrix6<f64>> {
         }
     }
     (m.iter().all(|v| v.is_finite()) && m.cholesky().is_some()).then_some(m)
-}
-
-/// Byte vectors as serde bytes (one length prefix, no per-element tag) without another crate.
-mod serde_bytes_compat {
-    use serde::{Deserializer, Serializer};
-
-    pub fn serialize<S: Serializer>(bytes: &[u8], s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_bytes(bytes)
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<u8>, D::Error> {
-        struct Visitor;
-        impl<'de> serde::de::Visitor<'de> for Visitor {
-            type Value = Vec<u8>;
-            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("bytes")
-            }
-            fn visit_bytes<E: serde::de::Error>(self, v: &[u8]) -> Result<Vec<u8>, E> {
-                Ok(v.to_vec())
-            }
-            fn visit_byte_buf<E: serde::de::Error>(self, v: Vec<u8>) -> Result<Vec<u8>, E> {
-                Ok(v)
-            }
-        }
-        d.deserialize_byte_buf(Visitor)
-    }
 }
 
 #[cfg(test)]
