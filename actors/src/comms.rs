@@ -30,10 +30,6 @@ pub struct CommsLinks {
     pub serve: Recipient<Serve>,
 }
 
-#[derive(Message)]
-#[rtype(result = "()")]
-pub struct ConnectComms(pub CommsLinks);
-
 /// What Comms has seen, for status and reports.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct CommsStatus {
@@ -326,13 +322,6 @@ impl Supervised for Comms {
     }
 }
 
-impl Handler<ConnectComms> for Comms {
-    type Result = ();
-    fn handle(&mut self, msg: ConnectComms, _: &mut Context<Self>) {
-        self.links = Some(msg.0);
-    }
-}
-
 impl Handler<Delivered> for Comms {
     type Result = ();
     fn handle(&mut self, msg: Delivered, _: &mut Context<Self>) {
@@ -414,10 +403,5 @@ impl Handler<GetCommsStatus> for Comms {
     }
 }
 
-impl Handler<InjectFailure> for Comms {
-    type Result = ();
-    fn handle(&mut self, _: InjectFailure, ctx: &mut Context<Self>) {
-        use actix::ActorContext;
-        ctx.stop();
-    }
-}
+connects!(Comms => CommsLinks);
+stops_on_injected_failure!(Comms);

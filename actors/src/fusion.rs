@@ -4,8 +4,8 @@
 //! (`model::perception::clustering`). Out: a [`LabelledScan`] to the Tracker.
 
 use crate::config::FusionConfig;
-use crate::messages::{FrameLabels, InjectFailure, LabelledScan, SensorFrame};
-use actix::{Actor, ActorContext, Context, Handler, Recipient, Supervised};
+use crate::messages::{FrameLabels, LabelledScan, SensorFrame};
+use actix::{Actor, Context, Handler, Recipient, Supervised};
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::perception::clustering::{cluster, ClusterConfig};
 use sgm_model::perception::projection::label_points;
@@ -19,9 +19,8 @@ pub struct Fusion {
 }
 
 impl Fusion {
-    /// `config` must have been validated (its class table is valid).
-    pub fn new(config: &FusionConfig, tracker: Recipient<LabelledScan>) -> Self {
-        let classes = ClassTable::new(config.classes.clone()).unwrap_or_default();
+    /// `classes`: the validated table of `config.classes`.
+    pub fn new(config: &FusionConfig, classes: ClassTable, tracker: Recipient<LabelledScan>) -> Self {
         let clustering = classes.cluster_config(config.cluster_tolerance_m);
         Self { classes, clustering, max_range_m: config.max_range_m, tracker }
     }
@@ -67,9 +66,4 @@ impl Handler<SensorFrame> for Fusion {
     }
 }
 
-impl Handler<InjectFailure> for Fusion {
-    type Result = ();
-    fn handle(&mut self, _: InjectFailure, ctx: &mut Context<Self>) {
-        ctx.stop();
-    }
-}
+stops_on_injected_failure!(Fusion);

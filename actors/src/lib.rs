@@ -7,6 +7,31 @@
 //!                  │                               └─► Comms
 //! ```
 
+/// The [`messages::InjectFailure`] handler of each listed actor: it stops, and its actix
+/// `Supervisor` restarts it with its state.
+macro_rules! stops_on_injected_failure {
+    ($($actor:ty),*) => {$(
+        impl actix::Handler<crate::messages::InjectFailure> for $actor {
+            type Result = ();
+            fn handle(&mut self, _: crate::messages::InjectFailure, ctx: &mut actix::Context<Self>) {
+                actix::ActorContext::stop(ctx);
+            }
+        }
+    )*};
+}
+
+/// The [`messages::Connect`] handler of each listed actor and links type.
+macro_rules! connects {
+    ($($actor:ty => $links:ty),*) => {$(
+        impl actix::Handler<crate::messages::Connect<$links>> for $actor {
+            type Result = ();
+            fn handle(&mut self, msg: crate::messages::Connect<$links>, _: &mut actix::Context<Self>) {
+                self.links = Some(msg.0);
+            }
+        }
+    )*};
+}
+
 pub mod clock;
 pub mod comms;
 pub mod config;

@@ -9,7 +9,7 @@ use crate::clock::Clock;
 use crate::config::MatcherSection;
 use crate::messages::*;
 use crate::protocol::{Neighbour, Protocol, RetryConfig};
-use actix::{Actor, ActorContext, Context, Handler, Message, MessageResult, Recipient, Supervised};
+use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use nalgebra::Point3;
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
@@ -27,10 +27,6 @@ pub struct MatcherLinks {
     pub request_keyframes: Recipient<RequestKeyframes>,
     pub optimiser: Recipient<InterRobotConstraints>,
 }
-
-#[derive(Message)]
-#[rtype(result = "()")]
-pub struct ConnectMatcher(pub MatcherLinks);
 
 /// The protocol state and alignment of every neighbour.
 #[derive(Message)]
@@ -263,13 +259,6 @@ impl Supervised for Matcher {
     }
 }
 
-impl Handler<ConnectMatcher> for Matcher {
-    type Result = ();
-    fn handle(&mut self, msg: ConnectMatcher, _: &mut Context<Self>) {
-        self.links = Some(msg.0);
-    }
-}
-
 impl Handler<LocalObjects> for Matcher {
     type Result = ();
     fn handle(&mut self, msg: LocalObjects, _: &mut Context<Self>) {
@@ -385,9 +374,5 @@ impl Handler<GetNeighbours> for Matcher {
     }
 }
 
-impl Handler<InjectFailure> for Matcher {
-    type Result = ();
-    fn handle(&mut self, _: InjectFailure, ctx: &mut Context<Self>) {
-        ctx.stop();
-    }
-}
+connects!(Matcher => MatcherLinks);
+stops_on_injected_failure!(Matcher);

@@ -169,6 +169,14 @@ pub struct Tick {
     pub now: Stamp,
 }
 
+/// Supervisor → child, once at start: the addresses the child sends to (`L` is its links
+/// struct). Mailboxes are FIFO, so it is handled before anything sent after it.
+pub struct Connect<L>(pub L);
+
+impl<L: 'static> Message for Connect<L> {
+    type Result = ();
+}
+
 /// Tests and fault scenarios: make a child fail (stop), as a crash would.
 #[derive(Message, Clone, Copy, Debug)]
 #[rtype(result = "()")]

@@ -6,7 +6,7 @@
 
 use crate::config::OptimiserConfig;
 use crate::messages::*;
-use actix::{Actor, ActorContext, Context, Handler, Message, Recipient, Supervised};
+use actix::{Actor, Context, Handler, Recipient, Supervised};
 use nalgebra::Matrix6;
 use sgm_model::geometry::Pose3;
 use sgm_model::optim::factors::{Between, Prior};
@@ -22,10 +22,6 @@ pub struct OptimiserLinks {
     pub tracker: Recipient<PosesOptimised>,
     pub matcher: Recipient<PosesOptimised>,
 }
-
-#[derive(Message)]
-#[rtype(result = "()")]
-pub struct ConnectOptimiser(pub OptimiserLinks);
 
 /// Most keyframes whose marginal covariance is computed after each optimisation (the latest).
 const MARGINALS: usize = 200;
@@ -111,13 +107,6 @@ impl Supervised for Optimiser {
     }
 }
 
-impl Handler<ConnectOptimiser> for Optimiser {
-    type Result = ();
-    fn handle(&mut self, msg: ConnectOptimiser, _: &mut Context<Self>) {
-        self.links = Some(msg.0);
-    }
-}
-
 impl Handler<NewKeyframe> for Optimiser {
     type Result = ();
     fn handle(&mut self, msg: NewKeyframe, _: &mut Context<Self>) {
@@ -168,9 +157,5 @@ impl Handler<InterRobotConstraints> for Optimiser {
     }
 }
 
-impl Handler<InjectFailure> for Optimiser {
-    type Result = ();
-    fn handle(&mut self, _: InjectFailure, ctx: &mut Context<Self>) {
-        ctx.stop();
-    }
-}
+connects!(Optimiser => OptimiserLinks);
+stops_on_injected_failure!(Optimiser);

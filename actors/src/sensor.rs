@@ -2,8 +2,8 @@
 //! [`SensorFrame`]s to `Fusion`. A frame with a non-finite pose or stamp, a label count that does
 //! not match its points, or an out-of-order stamp is dropped and counted; the robot keeps running.
 
-use crate::messages::{InjectFailure, SensorFrame};
-use actix::{Actor, ActorContext, Context, Handler, Message, Recipient, Supervised};
+use crate::messages::SensorFrame;
+use actix::{Actor, Context, Handler, Message, Recipient, Supervised};
 use sgm_model::scene_graph::Stamp;
 
 pub struct Sensor {
@@ -73,9 +73,4 @@ impl Handler<GetDroppedFrames> for Sensor {
     }
 }
 
-impl Handler<InjectFailure> for Sensor {
-    type Result = ();
-    fn handle(&mut self, _: InjectFailure, ctx: &mut Context<Self>) {
-        ctx.stop();
-    }
-}
+stops_on_injected_failure!(Sensor);

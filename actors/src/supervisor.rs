@@ -6,14 +6,14 @@
 //! the request queues and the replay windows are not).
 
 use crate::clock::Clock;
-use crate::comms::{Comms, CommsLinks, ConnectComms};
+use crate::comms::{Comms, CommsLinks};
 use crate::config::{ConfigError, RobotConfig};
 use crate::fusion::Fusion;
-use crate::matcher::{ConnectMatcher, Matcher, MatcherLinks};
-use crate::messages::{SensorFrame, Tick};
-use crate::optimiser::{ConnectOptimiser, Optimiser, OptimiserLinks};
+use crate::matcher::{Matcher, MatcherLinks};
+use crate::messages::{Connect, SensorFrame, Tick};
+use crate::optimiser::{Optimiser, OptimiserLinks};
 use crate::sensor::Sensor;
-use crate::tracker::{ConnectTracker, Tracker, TrackerLinks};
+use crate::tracker::{Tracker, TrackerLinks};
 use crate::transport::{InProcessRadio, Transport};
 use actix::{Actor, Addr, Context, Handler, Supervisor};
 use sgm_model::perception::classes::ClassTable;
@@ -74,6 +74,7 @@ pub fn start_robot_on(
     let comms_clock = clock.clone();
     let comms =
         Supervisor::start(move |_| Comms::new(robot, comms_config, key, comms_clock, transport, sequence_start));
+    let tracker_config_classes = classes.clone();
     let tracker_config = (config.tracker.clone(), classes, config.optimiser.clone(), config.comms.cloud_resolution_m);
     let tracker = Supervisor::start(move |_| {
         let (t, classes, o, r) = tracker_config;
@@ -83,32 +84,32 @@ pub fn start_robot_on(
     let matcher = Supervisor::start(move |_| Matcher::new(robot, matcher_config, retry, matcher_clock, label_count));
     let optimiser_config = config.optimiser.clone();
     let optimiser = Supervisor::start(move |_| Optimiser::new(robot, optimiser_config));
-    let fusion_config = config.fusion.clone();
+    let (fusion_config, fusion_classes) = (config.fusion.clone(), tracker_config_classes);
     let tracker_in = tracker.clone().recipient();
-    let fusion = Supervisor::start(move |_| Fusion::new(&fusion_config, tracker_in));
+    let fusion = Supervisor::start(move |_| Fusion::new(&fusion_config, fusion_classes, tracker_in));
     let fusion_in = fusion.clone().recipient();
     let sensor = Supervisor::start(move |_| Sensor::new(fusion_in));
 
-    comms.do_send(ConnectComms(CommsLinks {
+    comms.do_send(Connect(CommsLinks {
         objects: matcher.clone().recipient(),
         object_clouds: matcher.clone().recipient(),
         keyframes: matcher.clone().recipient(),
         unavailable: matcher.clone().recipient(),
         serve: tracker.clone().recipient(),
     }));
-    tracker.do_send(ConnectTracker(TrackerLinks {
+    tracker.do_send(Connect(TrackerLinks {
         optimiser: optimiser.clone().recipient(),
         matcher_keyframes: matcher.clone().recipient(),
         matcher_objects: matcher.clone().recipient(),
         comms_objects: comms.clone().recipient(),
         comms_outgoing: comms.clone().recipient(),
     }));
-    matcher.do_send(ConnectMatcher(MatcherLinks {
+    matcher.do_send(Connect(MatcherLinks {
         request_clouds: comms.clone().recipient(),
         request_keyframes: comms.clone().recipient(),
         optimiser: optimiser.clone().recipient(),
     }));
-    optimiser.do_send(ConnectOptimiser(OptimiserLinks {
+    optimiser.do_send(Connect(OptimiserLinks {
         tracker: tracker.clone().recipient(),
         matcher: matcher.clone().recipient(),
     }));

@@ -6,7 +6,7 @@
 
 use crate::config::{OptimiserConfig, TrackerSection};
 use crate::messages::*;
-use actix::{Actor, ActorContext, Context, Handler, Message, MessageResult, Recipient, Supervised};
+use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use nalgebra::{Matrix6, Point3};
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::GraphObject;
@@ -34,10 +34,6 @@ pub struct TrackerLinks {
     pub comms_objects: Recipient<LocalObjects>,
     pub comms_outgoing: Recipient<Outgoing>,
 }
-
-#[derive(Message)]
-#[rtype(result = "()")]
-pub struct ConnectTracker(pub TrackerLinks);
 
 /// A copy of the map, for status and reports.
 #[derive(Message)]
@@ -216,13 +212,6 @@ impl Supervised for Tracker {
     }
 }
 
-impl Handler<ConnectTracker> for Tracker {
-    type Result = ();
-    fn handle(&mut self, msg: ConnectTracker, _: &mut Context<Self>) {
-        self.links = Some(msg.0);
-    }
-}
-
 impl Handler<LabelledScan> for Tracker {
     type Result = ();
     fn handle(&mut self, scan: LabelledScan, _: &mut Context<Self>) {
@@ -287,9 +276,5 @@ impl Handler<GetSceneGraph> for Tracker {
     }
 }
 
-impl Handler<InjectFailure> for Tracker {
-    type Result = ();
-    fn handle(&mut self, _: InjectFailure, ctx: &mut Context<Self>) {
-        ctx.stop();
-    }
-}
+connects!(Tracker => TrackerLinks);
+stops_on_injected_failure!(Tracker);
