@@ -220,6 +220,30 @@ fn positive(v: f64) -> bool {
     v.is_finite() && v > 0.0
 }
 
+fn load_error(file: Option<&Path>, e: config::ConfigError) -> ConfigError {
+    let source_name = file.map(|p| p.display().to_string()).unwrap_or_else(|| "environment".into());
+    ConfigError::Load { source_name, message: e.to_string() }
+}
+
+/// The layers every SGM configuration is read from: `defaults` (if any), then `file` (TOML,
+/// required when given), then `PREFIX__SECTION__KEY` environment variables.
+pub fn layered(
+    defaults: Option<config::Config>,
+    file: Option<&Path>,
+    prefix: &str,
+) -> Result<config::Config, ConfigError> {
+    let mut builder = config::Config::builder();
+    if let Some(defaults) = defaults {
+        builder = builder.add_source(defaults);
+    }
+    if let Some(path) = file {
+        builder = builder.add_source(config::File::from(path).format(config::FileFormat::Toml).required(true));
+    }
+    builder = builder
+        .add_source(config::Environment::with_prefix(prefix).prefix_separator("__").separator("__").try_parsing(true));
+    builder.build().map_err(|e| load_error(file, e))
+}
+
 impl RobotConfig {
     /// Defaults, then `file` (TOML) if given, then `SGM__…` environment variables.
     pub fn load(file: Option<&Path>) -> Result<Self, ConfigError> {
@@ -228,19 +252,9 @@ impl RobotConfig {
 
     /// As [`RobotConfig::load`] with another environment prefix (tests use their own).
     pub fn load_with_env(file: Option<&Path>, prefix: &str) -> Result<Self, ConfigError> {
-        let source_name = file.map(|p| p.display().to_string()).unwrap_or_else(|| "environment".into());
-        let load_error =
-            |e: config::ConfigError| ConfigError::Load { source_name: source_name.clone(), message: e.to_string() };
-        let defaults = config::Config::try_from(&RobotConfig::default()).map_err(load_error)?;
-        let mut builder = config::Config::builder().add_source(defaults);
-        if let Some(path) = file {
-            builder = builder.add_source(config::File::from(path).format(config::FileFormat::Toml).required(true));
-        }
-        builder = builder.add_source(
-            config::Environment::with_prefix(prefix).prefix_separator("__").separator("__").try_parsing(true),
-        );
-        let merged = builder.build().map_err(load_error)?;
-        let config: RobotConfig = merged.try_deserialize().map_err(load_error)?;
+        let defaults = config::Config::try_from(&RobotConfig::default()).map_err(|e| load_error(file, e))?;
+        let merged = layered(Some(defaults), file, prefix)?;
+        let config: RobotConfig = merged.try_deserialize().map_err(|e| load_error(file, e))?;
         config.validate()?;
         Ok(config)
     }

@@ -1,6 +1,7 @@
 //! Configuration: built-in defaults, then a TOML file, then `SGM__SECTION__KEY` environment
 //! variables, loaded with the `config` crate and validated before use.
 
+use sgm_actors::config::{layered, ConfigError};
 use sgm_model::matching::MatcherConfig;
 use std::path::Path;
 
@@ -16,14 +17,10 @@ pub enum SettingsError {
 /// Loads the `[matcher]` section.
 pub fn load_matcher_config(path: Option<&Path>) -> Result<MatcherConfig, SettingsError> {
     let source_name = path.map(|p| p.display().to_string()).unwrap_or_else(|| "environment".into());
-    let mut builder = config::Config::builder();
-    if let Some(path) = path {
-        builder = builder.add_source(config::File::from(path).format(config::FileFormat::Toml).required(true));
-    }
-    builder = builder
-        .add_source(config::Environment::with_prefix("SGM").prefix_separator("__").separator("__").try_parsing(true));
-    let merged =
-        builder.build().map_err(|e| SettingsError::Load { path: source_name.clone(), message: e.to_string() })?;
+    let merged = layered(None, path, "SGM").map_err(|e| match e {
+        ConfigError::Load { source_name, message } => SettingsError::Load { path: source_name, message },
+        other => SettingsError::Load { path: source_name.clone(), message: other.to_string() },
+    })?;
     let matcher: MatcherConfig = match merged.get::<MatcherConfig>("matcher") {
         Ok(m) => m,
         Err(config::ConfigError::NotFound(_)) => MatcherConfig::default(),
