@@ -286,26 +286,18 @@ impl Comms {
                     }
                 }
             }
+            // Busy: the keyframes stay in flight and their timeouts retry with back-off.
+            WireMessage::KeyframeRefusal(r) if r.reason == RefusalReason::Busy => {}
             WireMessage::KeyframeRefusal(r) => {
                 let q = self.requests.entry(from).or_default();
-                let mut unknown = Vec::new();
-                for id in r.keyframes {
-                    match r.reason {
-                        // Busy: leave it in flight; its timeout retries with back-off.
-                        RefusalReason::Busy => {}
-                        RefusalReason::Unknown => {
-                            q.in_flight.remove(&id);
-                            unknown.push(id);
-                        }
-                    }
+                for id in &r.keyframes {
+                    q.in_flight.remove(id);
                 }
-                if !unknown.is_empty() {
-                    links.unavailable.do_send(KeyframesUnavailable {
-                        robot: from,
-                        keyframes: unknown,
-                        reason: RefusalReason::Unknown,
-                    });
-                }
+                links.unavailable.do_send(KeyframesUnavailable {
+                    robot: from,
+                    keyframes: r.keyframes,
+                    reason: r.reason,
+                });
             }
         }
     }
