@@ -6,6 +6,7 @@
 
 use crate::clock::Clock;
 use crate::config::CommsConfig;
+use crate::containment::contained;
 use crate::messages::*;
 use crate::protocol::Wait;
 use crate::transport::{Delivered, Transport};
@@ -316,75 +317,90 @@ impl Supervised for Comms {
 
 impl Handler<Delivered> for Comms {
     type Result = ();
-    fn handle(&mut self, msg: Delivered, _: &mut Context<Self>) {
-        self.receive(&msg.bytes);
+    fn handle(&mut self, msg: Delivered, ctx: &mut Context<Self>) {
+        contained(ctx, "comms", || {
+            self.receive(&msg.bytes);
+        });
     }
 }
 
 impl Handler<LocalObjects> for Comms {
     type Result = ();
-    fn handle(&mut self, msg: LocalObjects, _: &mut Context<Self>) {
-        let significant = msg.objects.iter().any(|o| {
-            self.broadcast_centroids.get(&o.id).is_none_or(|c| (c - o.centroid).norm() > self.config.significant_move_m)
-        }) || msg.objects.len() != self.broadcast_centroids.len();
-        self.change_pending |= significant;
-        self.latest_objects = Some(msg);
-        self.try_broadcast(self.clock.now());
+    fn handle(&mut self, msg: LocalObjects, ctx: &mut Context<Self>) {
+        contained(ctx, "comms", || {
+            let significant = msg.objects.iter().any(|o| {
+                self.broadcast_centroids
+                    .get(&o.id)
+                    .is_none_or(|c| (c - o.centroid).norm() > self.config.significant_move_m)
+            }) || msg.objects.len() != self.broadcast_centroids.len();
+            self.change_pending |= significant;
+            self.latest_objects = Some(msg);
+            self.try_broadcast(self.clock.now());
+        });
     }
 }
 
 impl Handler<RequestObjectClouds> for Comms {
     type Result = ();
-    fn handle(&mut self, msg: RequestObjectClouds, _: &mut Context<Self>) {
-        for chunk in msg.objects.chunks(self.config.limits.max_ids) {
-            self.send(
-                Destination::Robot(msg.robot),
-                WireMessage::ObjectCloudRequest(ObjectCloudRequest { objects: chunk.to_vec() }),
-            );
-        }
+    fn handle(&mut self, msg: RequestObjectClouds, ctx: &mut Context<Self>) {
+        contained(ctx, "comms", || {
+            for chunk in msg.objects.chunks(self.config.limits.max_ids) {
+                self.send(
+                    Destination::Robot(msg.robot),
+                    WireMessage::ObjectCloudRequest(ObjectCloudRequest { objects: chunk.to_vec() }),
+                );
+            }
+        });
     }
 }
 
 impl Handler<RequestKeyframes> for Comms {
     type Result = ();
-    fn handle(&mut self, msg: RequestKeyframes, _: &mut Context<Self>) {
-        let now = self.clock.now();
-        let q = self.requests.entry(msg.robot).or_default();
-        for id in msg.keyframes {
-            if !q.held.contains(&id) && !q.in_flight.contains_key(&id) {
-                q.wanted.insert(id);
+    fn handle(&mut self, msg: RequestKeyframes, ctx: &mut Context<Self>) {
+        contained(ctx, "comms", || {
+            let now = self.clock.now();
+            let q = self.requests.entry(msg.robot).or_default();
+            for id in msg.keyframes {
+                if !q.held.contains(&id) && !q.in_flight.contains_key(&id) {
+                    q.wanted.insert(id);
+                }
             }
-        }
-        if !q.wanted.is_empty() && q.window_opened.is_none() {
-            q.window_opened = Some(now);
-        }
+            if !q.wanted.is_empty() && q.window_opened.is_none() {
+                q.window_opened = Some(now);
+            }
+        });
     }
 }
 
 impl Handler<Outgoing> for Comms {
     type Result = ();
-    fn handle(&mut self, msg: Outgoing, _: &mut Context<Self>) {
-        match msg.message {
-            WireMessage::KeyframeResponse(ref r) => {
-                // A retried request must not queue a second copy of a response still waiting.
-                let queued = self.responses.iter().any(|q| {
-                    q.to == msg.to && matches!(&q.message, WireMessage::KeyframeResponse(x) if x.keyframe == r.keyframe)
-                });
-                if !queued {
-                    self.responses.push_back(msg);
+    fn handle(&mut self, msg: Outgoing, ctx: &mut Context<Self>) {
+        contained(ctx, "comms", || {
+            match msg.message {
+                WireMessage::KeyframeResponse(ref r) => {
+                    // A retried request must not queue a second copy of a response still waiting.
+                    let queued = self.responses.iter().any(|q| {
+                        q.to == msg.to
+                            && matches!(&q.message, WireMessage::KeyframeResponse(x) if x.keyframe == r.keyframe)
+                    });
+                    if !queued {
+                        self.responses.push_back(msg);
+                    }
                 }
+                message => self.send(Destination::Robot(msg.to), message),
             }
-            message => self.send(Destination::Robot(msg.to), message),
-        }
+        });
     }
 }
 
 impl Handler<Tick> for Comms {
     type Result = ();
-    fn handle(&mut self, msg: Tick, _: &mut Context<Self>) {
-        self.try_broadcast(msg.now);
-        self.flush_requests(msg.now);
-        self.send_responses();
+    fn handle(&mut self, msg: Tick, ctx: &mut Context<Self>) {
+        contained(ctx, "comms", || {
+            self.try_broadcast(msg.now);
+            self.flush_requests(msg.now);
+            self.send_responses();
+        });
     }
 }
 

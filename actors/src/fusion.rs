@@ -4,6 +4,7 @@
 //! (`model::perception::clustering`). Out: a [`LabelledScan`] to the Tracker.
 
 use crate::config::FusionConfig;
+use crate::containment::contained;
 use crate::messages::{FrameLabels, LabelledScan, SensorFrame};
 use actix::{Actor, Context, Handler, Recipient, Supervised};
 use sgm_model::perception::classes::ClassTable;
@@ -34,34 +35,36 @@ impl Supervised for Fusion {}
 
 impl Handler<SensorFrame> for Fusion {
     type Result = ();
-    fn handle(&mut self, frame: SensorFrame, _: &mut Context<Self>) {
-        let labels = match &frame.labels {
-            FrameLabels::PerPoint(labels) => labels.clone(),
-            FrameLabels::Image { image, camera, camera_from_body } => {
-                match label_points(&frame.points_in_body, camera_from_body, camera, image) {
-                    Ok(l) => l,
-                    Err(e) => {
-                        tracing::warn!(stamp = frame.stamp, "label image unusable: {e}");
-                        vec![None; frame.points_in_body.len()]
+    fn handle(&mut self, frame: SensorFrame, ctx: &mut Context<Self>) {
+        contained(ctx, "fusion", || {
+            let labels = match &frame.labels {
+                FrameLabels::PerPoint(labels) => labels.clone(),
+                FrameLabels::Image { image, camera, camera_from_body } => {
+                    match label_points(&frame.points_in_body, camera_from_body, camera, image) {
+                        Ok(l) => l,
+                        Err(e) => {
+                            tracing::warn!(stamp = frame.stamp, "label image unusable: {e}");
+                            vec![None; frame.points_in_body.len()]
+                        }
                     }
                 }
+            };
+            let r2 = self.max_range_m * self.max_range_m;
+            let (mut points, mut kept) = (Vec::with_capacity(labels.len()), Vec::with_capacity(labels.len()));
+            for (p, l) in frame.points_in_body.iter().zip(labels) {
+                if p.coords.iter().all(|v| v.is_finite()) && p.coords.norm_squared() <= r2 {
+                    points.push(*p);
+                    kept.push(l.and_then(|LabelId(id)| self.classes.object_label(id)));
+                }
             }
-        };
-        let r2 = self.max_range_m * self.max_range_m;
-        let (mut points, mut kept) = (Vec::with_capacity(labels.len()), Vec::with_capacity(labels.len()));
-        for (p, l) in frame.points_in_body.iter().zip(labels) {
-            if p.coords.iter().all(|v| v.is_finite()) && p.coords.norm_squared() <= r2 {
-                points.push(*p);
-                kept.push(l.and_then(|LabelId(id)| self.classes.object_label(id)));
-            }
-        }
-        let candidates = cluster(&points, &kept, &self.clustering);
-        self.tracker.do_send(LabelledScan {
-            stamp: frame.stamp,
-            world_from_body: frame.world_from_body,
-            points_in_body: points,
-            labels: kept,
-            candidates,
+            let candidates = cluster(&points, &kept, &self.clustering);
+            self.tracker.do_send(LabelledScan {
+                stamp: frame.stamp,
+                world_from_body: frame.world_from_body,
+                points_in_body: points,
+                labels: kept,
+                candidates,
+            });
         });
     }
 }

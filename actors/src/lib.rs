@@ -7,14 +7,19 @@
 //!                  │                               └─► Comms
 //! ```
 
-/// The [`messages::InjectFailure`] handler of each listed actor: it stops, and its actix
-/// `Supervisor` restarts it with its state.
+/// The [`messages::InjectFailure`] handler of each listed actor: it stops, or panics inside
+/// [`containment::contained`]; either way its actix `Supervisor` restarts it with its state.
 macro_rules! stops_on_injected_failure {
     ($($actor:ty),*) => {$(
         impl actix::Handler<crate::messages::InjectFailure> for $actor {
             type Result = ();
-            fn handle(&mut self, _: crate::messages::InjectFailure, ctx: &mut actix::Context<Self>) {
-                actix::ActorContext::stop(ctx);
+            fn handle(&mut self, failure: crate::messages::InjectFailure, ctx: &mut actix::Context<Self>) {
+                match failure {
+                    crate::messages::InjectFailure::Stop => actix::ActorContext::stop(ctx),
+                    crate::messages::InjectFailure::Panic => {
+                        crate::containment::contained(ctx, stringify!($actor), || panic!("injected failure"));
+                    }
+                }
             }
         }
     )*};
@@ -35,6 +40,7 @@ macro_rules! connects {
 pub mod clock;
 pub mod comms;
 pub mod config;
+mod containment;
 pub mod fusion;
 pub mod matcher;
 pub mod messages;

@@ -7,6 +7,7 @@
 
 use crate::clock::Clock;
 use crate::config::MatcherSection;
+use crate::containment::contained;
 use crate::messages::*;
 use crate::protocol::{Neighbour, Protocol, RetryConfig};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
@@ -256,103 +257,127 @@ impl Actor for Matcher {
 impl Supervised for Matcher {
     fn restarting(&mut self, _: &mut Context<Self>) {
         tracing::warn!(robot = %self.robot, "matcher restarting with its neighbour states");
+        // A handler that panicked between taking a protocol state and putting the next one back
+        // left none: that neighbour starts over (its objects and keyframes are kept).
+        let now = self.clock.now();
+        for (robot, entry) in &mut self.neighbours {
+            if entry.protocol.is_none() {
+                entry.protocol = Some(Neighbour::discovered(*robot, now).into());
+            }
+        }
     }
 }
 
 impl Handler<LocalObjects> for Matcher {
     type Result = ();
-    fn handle(&mut self, msg: LocalObjects, _: &mut Context<Self>) {
-        self.local = msg;
-        let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
-        for robot in robots {
-            self.try_match(robot);
-        }
+    fn handle(&mut self, msg: LocalObjects, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            self.local = msg;
+            let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
+            for robot in robots {
+                self.try_match(robot);
+            }
+        });
     }
 }
 
 impl Handler<LocalKeyframe> for Matcher {
     type Result = ();
-    fn handle(&mut self, msg: LocalKeyframe, _: &mut Context<Self>) {
-        let labels = msg.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect();
-        let points = msg.points_in_body.iter().map(|p| p.cast::<f32>()).collect();
-        self.keyframes.insert(msg.id, LocalKeyframeData { world_from_body: msg.world_from_body, points, labels });
+    fn handle(&mut self, msg: LocalKeyframe, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            let labels = msg.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect();
+            let points = msg.points_in_body.iter().map(|p| p.cast::<f32>()).collect();
+            self.keyframes.insert(msg.id, LocalKeyframeData { world_from_body: msg.world_from_body, points, labels });
+        });
     }
 }
 
 impl Handler<PosesOptimised> for Matcher {
     type Result = ();
-    fn handle(&mut self, msg: PosesOptimised, _: &mut Context<Self>) {
-        for (id, pose) in msg.poses {
-            if let Some(k) = self.keyframes.get_mut(&id) {
-                k.world_from_body = pose;
+    fn handle(&mut self, msg: PosesOptimised, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            for (id, pose) in msg.poses {
+                if let Some(k) = self.keyframes.get_mut(&id) {
+                    k.world_from_body = pose;
+                }
             }
-        }
+        });
     }
 }
 
 impl Handler<NeighbourObjects> for Matcher {
     type Result = ();
-    fn handle(&mut self, msg: NeighbourObjects, _: &mut Context<Self>) {
-        let now = self.clock.now();
-        let entry = self.entry(msg.robot);
-        if entry.objects.as_ref().is_some_and(|d| d.revision >= msg.data.revision) {
-            return;
-        }
-        let revision = msg.data.revision;
-        entry.objects = Some(msg.data);
-        entry.protocol = entry.protocol.take().map(|p| p.on_objects(revision, now));
-        self.try_match(msg.robot);
+    fn handle(&mut self, msg: NeighbourObjects, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            let now = self.clock.now();
+            let entry = self.entry(msg.robot);
+            if entry.objects.as_ref().is_some_and(|d| d.revision >= msg.data.revision) {
+                return;
+            }
+            let revision = msg.data.revision;
+            entry.objects = Some(msg.data);
+            entry.protocol = entry.protocol.take().map(|p| p.on_objects(revision, now));
+            self.try_match(msg.robot);
+        });
     }
 }
 
 impl Handler<NeighbourObjectClouds> for Matcher {
     type Result = ();
-    fn handle(&mut self, msg: NeighbourObjectClouds, _: &mut Context<Self>) {
-        self.on_object_clouds(msg);
+    fn handle(&mut self, msg: NeighbourObjectClouds, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            self.on_object_clouds(msg);
+        });
     }
 }
 
 impl Handler<NeighbourKeyframe> for Matcher {
     type Result = ();
-    fn handle(&mut self, msg: NeighbourKeyframe, _: &mut Context<Self>) {
-        let (robot, id) = (msg.robot, msg.id);
-        self.entry(robot).keyframes.insert(id, msg);
-        self.on_keyframe_resolved(robot, id);
+    fn handle(&mut self, msg: NeighbourKeyframe, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            let (robot, id) = (msg.robot, msg.id);
+            self.entry(robot).keyframes.insert(id, msg);
+            self.on_keyframe_resolved(robot, id);
+        });
     }
 }
 
 impl Handler<KeyframesUnavailable> for Matcher {
     type Result = ();
-    fn handle(&mut self, msg: KeyframesUnavailable, _: &mut Context<Self>) {
-        for id in msg.keyframes {
-            self.on_keyframe_resolved(msg.robot, id);
-        }
+    fn handle(&mut self, msg: KeyframesUnavailable, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            for id in msg.keyframes {
+                self.on_keyframe_resolved(msg.robot, id);
+            }
+        });
     }
 }
 
 impl Handler<Tick> for Matcher {
     type Result = ();
-    fn handle(&mut self, msg: Tick, _: &mut Context<Self>) {
-        // Object clouds that never came: ask again with back-off, then start over.
-        let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
-        for robot in robots {
-            let Some(entry) = self.neighbours.get_mut(&robot) else { continue };
-            let Some(Protocol::Matched(mut n)) = entry.protocol.clone() else { continue };
-            if !n.state.wait.expired(msg.now) {
-                continue;
-            }
-            match n.state.wait.retry(msg.now, &self.retry) {
-                Some(next) => {
-                    n.state.wait = next;
-                    let objects = n.state.pairs.iter().map(|p| p.1).collect();
-                    entry.protocol = Some(n.into());
-                    if let Some(links) = &self.links {
-                        links.request_clouds.do_send(RequestObjectClouds { robot, objects });
-                    }
+    fn handle(&mut self, msg: Tick, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            // Object clouds that never came: ask again with back-off, then start over.
+            let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
+            for robot in robots {
+                let Some(entry) = self.neighbours.get_mut(&robot) else { continue };
+                let Some(Protocol::Matched(mut n)) = entry.protocol.clone() else { continue };
+                if !n.state.wait.expired(msg.now) {
+                    continue;
                 }
-                None => entry.protocol = Some(n.gave_up(msg.now).into()),
+                match n.state.wait.retry(msg.now, &self.retry) {
+                    Some(next) => {
+                        n.state.wait = next;
+                        let objects = n.state.pairs.iter().map(|p| p.1).collect();
+                        entry.protocol = Some(n.into());
+                        if let Some(links) = &self.links {
+                            links.request_clouds.do_send(RequestObjectClouds { robot, objects });
+                        }
+                    }
+                    None => entry.protocol = Some(n.gave_up(msg.now).into()),
+                }
             }
-        }
+        });
     }
 }
 

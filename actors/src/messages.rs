@@ -177,7 +177,12 @@ impl<L: 'static> Message for Connect<L> {
     type Result = ();
 }
 
-/// Tests and fault scenarios: make a child fail (stop), as a crash would.
-#[derive(Message, Clone, Copy, Debug)]
+/// Tests and fault scenarios: make a child fail, as a crash would.
+#[derive(Message, Clone, Copy, Debug, PartialEq, Eq)]
 #[rtype(result = "()")]
-pub struct InjectFailure;
+pub enum InjectFailure {
+    /// The child stops.
+    Stop,
+    /// A handler panics (contained: the child restarts, the process and the map survive).
+    Panic,
+}

@@ -5,6 +5,7 @@
 //! and marginal covariances to the Tracker and Matcher.
 
 use crate::config::OptimiserConfig;
+use crate::containment::contained;
 use crate::messages::*;
 use actix::{Actor, Context, Handler, Recipient, Supervised};
 use nalgebra::Matrix6;
@@ -109,51 +110,55 @@ impl Supervised for Optimiser {
 
 impl Handler<NewKeyframe> for Optimiser {
     type Result = ();
-    fn handle(&mut self, msg: NewKeyframe, _: &mut Context<Self>) {
-        let first = self.index.is_empty();
-        let i = self.variable(KeyframeRef::Local(msg.keyframe.id), msg.keyframe.world_from_body);
-        if first {
-            self.graph.add_prior_at_current(i, GTSAM_PRIOR_SIGMAS_3D);
-        }
-        for edge in &msg.edges {
-            self.add_edge(edge);
-        }
-        self.pending += 1;
-        // A loop closure's correction is worth a solve at once.
-        let has_loop = msg.edges.iter().any(|e| e.kind == sgm_model::scene_graph::KeyframeEdgeKind::Loop);
-        if has_loop || self.pending >= self.config.every_keyframes {
-            self.pending = 0;
-            self.solve_and_publish();
-        }
+    fn handle(&mut self, msg: NewKeyframe, ctx: &mut Context<Self>) {
+        contained(ctx, "optimiser", || {
+            let first = self.index.is_empty();
+            let i = self.variable(KeyframeRef::Local(msg.keyframe.id), msg.keyframe.world_from_body);
+            if first {
+                self.graph.add_prior_at_current(i, GTSAM_PRIOR_SIGMAS_3D);
+            }
+            for edge in &msg.edges {
+                self.add_edge(edge);
+            }
+            self.pending += 1;
+            // A loop closure's correction is worth a solve at once.
+            let has_loop = msg.edges.iter().any(|e| e.kind == sgm_model::scene_graph::KeyframeEdgeKind::Loop);
+            if has_loop || self.pending >= self.config.every_keyframes {
+                self.pending = 0;
+                self.solve_and_publish();
+            }
+        });
     }
 }
 
 impl Handler<InterRobotConstraints> for Optimiser {
     type Result = ();
-    fn handle(&mut self, msg: InterRobotConstraints, _: &mut Context<Self>) {
-        for (keyframe, pose_in_remote, covariance) in &msg.neighbour_keyframes {
-            let r = KeyframeRef::Remote { robot: msg.robot, keyframe: *keyframe };
-            let fresh = !self.index.contains_key(&r);
-            let mean = msg.local_from_remote * pose_in_remote;
-            let i = self.variable(r, mean);
-            // Right-perturbation covariance is unchanged by the left product with local_from_remote.
-            if fresh {
-                if let Some(prior) = Prior::from_covariance(i, mean, covariance) {
-                    self.graph.priors.push(prior);
+    fn handle(&mut self, msg: InterRobotConstraints, ctx: &mut Context<Self>) {
+        contained(ctx, "optimiser", || {
+            for (keyframe, pose_in_remote, covariance) in &msg.neighbour_keyframes {
+                let r = KeyframeRef::Remote { robot: msg.robot, keyframe: *keyframe };
+                let fresh = !self.index.contains_key(&r);
+                let mean = msg.local_from_remote * pose_in_remote;
+                let i = self.variable(r, mean);
+                // Right-perturbation covariance is unchanged by the left product with local_from_remote.
+                if fresh {
+                    if let Some(prior) = Prior::from_covariance(i, mean, covariance) {
+                        self.graph.priors.push(prior);
+                    }
                 }
             }
-        }
-        for (local, remote, measured, information) in &msg.factors {
-            let edge = KeyframeEdge {
-                kind: sgm_model::scene_graph::KeyframeEdgeKind::InterRobot,
-                from: *local,
-                to: KeyframeRef::Remote { robot: msg.robot, keyframe: *remote },
-                from_from_to: *measured,
-                information: *information,
-            };
-            self.add_edge(&edge);
-        }
-        self.solve_and_publish();
+            for (local, remote, measured, information) in &msg.factors {
+                let edge = KeyframeEdge {
+                    kind: sgm_model::scene_graph::KeyframeEdgeKind::InterRobot,
+                    from: *local,
+                    to: KeyframeRef::Remote { robot: msg.robot, keyframe: *remote },
+                    from_from_to: *measured,
+                    information: *information,
+                };
+                self.add_edge(&edge);
+            }
+            self.solve_and_publish();
+        });
     }
 }
 

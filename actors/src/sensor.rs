@@ -2,6 +2,7 @@
 //! [`SensorFrame`]s to `Fusion`. A frame with a non-finite pose or stamp, a label count that does
 //! not match its points, or an out-of-order stamp is dropped and counted; the robot keeps running.
 
+use crate::containment::contained;
 use crate::messages::SensorFrame;
 use actix::{Actor, Context, Handler, Message, Recipient, Supervised};
 use sgm_model::scene_graph::Stamp;
@@ -52,8 +53,8 @@ impl Supervised for Sensor {}
 
 impl Handler<SensorFrame> for Sensor {
     type Result = ();
-    fn handle(&mut self, frame: SensorFrame, _: &mut Context<Self>) {
-        match self.check(&frame) {
+    fn handle(&mut self, frame: SensorFrame, ctx: &mut Context<Self>) {
+        contained(ctx, "sensor", || match self.check(&frame) {
             Ok(()) => {
                 self.last_stamp = Some(frame.stamp);
                 self.fusion.do_send(frame);
@@ -62,7 +63,7 @@ impl Handler<SensorFrame> for Sensor {
                 self.dropped += 1;
                 tracing::warn!(stamp = frame.stamp, "sensor frame dropped: {why}");
             }
-        }
+        });
     }
 }
 

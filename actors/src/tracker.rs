@@ -5,6 +5,7 @@
 //! `SceneGraph`; a restart keeps it (the keyframe database survives).
 
 use crate::config::{OptimiserConfig, TrackerSection};
+use crate::containment::contained;
 use crate::messages::*;
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use nalgebra::{Matrix6, Point3};
@@ -214,58 +215,64 @@ impl Supervised for Tracker {
 
 impl Handler<LabelledScan> for Tracker {
     type Result = ();
-    fn handle(&mut self, scan: LabelledScan, _: &mut Context<Self>) {
-        let last = self.last_odometry.map(|(_, p)| p);
-        if !is_keyframe(last.as_ref(), &scan.world_from_body, &self.config.keyframes) {
-            return;
-        }
-        match self.add_keyframe(&scan) {
-            Ok(_) => self.publish_objects(),
-            Err(e) => tracing::warn!(robot = %self.robot, stamp = scan.stamp, "keyframe not added: {e}"),
-        }
+    fn handle(&mut self, scan: LabelledScan, ctx: &mut Context<Self>) {
+        contained(ctx, "tracker", || {
+            let last = self.last_odometry.map(|(_, p)| p);
+            if !is_keyframe(last.as_ref(), &scan.world_from_body, &self.config.keyframes) {
+                return;
+            }
+            match self.add_keyframe(&scan) {
+                Ok(_) => self.publish_objects(),
+                Err(e) => tracing::warn!(robot = %self.robot, stamp = scan.stamp, "keyframe not added: {e}"),
+            }
+        });
     }
 }
 
 impl Handler<PosesOptimised> for Tracker {
     type Result = ();
-    fn handle(&mut self, msg: PosesOptimised, _: &mut Context<Self>) {
-        let known: Vec<(KeyframeId, Pose3)> =
-            msg.poses.into_iter().filter(|(k, _)| self.graph.keyframe(*k).is_some()).collect();
-        if let Err(e) = self.graph.update_keyframe_poses(known.iter().map(|(k, p)| (*k, p))) {
-            tracing::warn!(robot = %self.robot, "optimised poses not applied: {e}");
-            return;
-        }
-        self.covariances.extend(msg.covariances);
-        self.publish_objects();
+    fn handle(&mut self, msg: PosesOptimised, ctx: &mut Context<Self>) {
+        contained(ctx, "tracker", || {
+            let known: Vec<(KeyframeId, Pose3)> =
+                msg.poses.into_iter().filter(|(k, _)| self.graph.keyframe(*k).is_some()).collect();
+            if let Err(e) = self.graph.update_keyframe_poses(known.iter().map(|(k, p)| (*k, p))) {
+                tracing::warn!(robot = %self.robot, "optimised poses not applied: {e}");
+                return;
+            }
+            self.covariances.extend(msg.covariances);
+            self.publish_objects();
+        });
     }
 }
 
 impl Handler<Serve> for Tracker {
     type Result = ();
-    fn handle(&mut self, msg: Serve, _: &mut Context<Self>) {
-        let Some(links) = self.links.clone() else { return };
-        match msg {
-            Serve::ObjectClouds { robot, objects } => {
-                links
-                    .comms_outgoing
-                    .do_send(Outgoing { to: robot, message: self.serve_object_clouds(robot, &objects) });
-            }
-            Serve::Keyframes { robot, keyframes } => {
-                let mut unknown = Vec::new();
-                for id in keyframes {
-                    match self.serve_keyframe(id) {
-                        Some(message) => links.comms_outgoing.do_send(Outgoing { to: robot, message }),
-                        None => unknown.push(id),
-                    }
-                }
-                if !unknown.is_empty() {
-                    let refusal = KeyframeRefusal { keyframes: unknown, reason: RefusalReason::Unknown };
+    fn handle(&mut self, msg: Serve, ctx: &mut Context<Self>) {
+        contained(ctx, "tracker", || {
+            let Some(links) = self.links.clone() else { return };
+            match msg {
+                Serve::ObjectClouds { robot, objects } => {
                     links
                         .comms_outgoing
-                        .do_send(Outgoing { to: robot, message: WireMessage::KeyframeRefusal(refusal) });
+                        .do_send(Outgoing { to: robot, message: self.serve_object_clouds(robot, &objects) });
+                }
+                Serve::Keyframes { robot, keyframes } => {
+                    let mut unknown = Vec::new();
+                    for id in keyframes {
+                        match self.serve_keyframe(id) {
+                            Some(message) => links.comms_outgoing.do_send(Outgoing { to: robot, message }),
+                            None => unknown.push(id),
+                        }
+                    }
+                    if !unknown.is_empty() {
+                        let refusal = KeyframeRefusal { keyframes: unknown, reason: RefusalReason::Unknown };
+                        links
+                            .comms_outgoing
+                            .do_send(Outgoing { to: robot, message: WireMessage::KeyframeRefusal(refusal) });
+                    }
                 }
             }
-        }
+        });
     }
 }
 

@@ -91,7 +91,20 @@ async fn settle() {
     }
 }
 
-async fn run_team(paths: Vec<(Vec<Point3<f64>>, Pose3)>, seconds: usize) -> Vec<Robot> {
+/// Every child of `robot` panics in a handler (contained: each restarts with its state).
+fn panic_every_child(robot: &RobotHandle) {
+    use sgm_actors::messages::InjectFailure::Panic;
+    robot.sensor.do_send(Panic);
+    robot.fusion.do_send(Panic);
+    robot.tracker.do_send(Panic);
+    robot.matcher.do_send(Panic);
+    robot.optimiser.do_send(Panic);
+    robot.comms.do_send(Panic);
+}
+
+/// Drives the team for `seconds` of virtual time; at `panic_at_s`, every child of the first
+/// robot panics.
+async fn run_team(paths: Vec<(Vec<Point3<f64>>, Pose3)>, seconds: usize, panic_at_s: Option<f64>) -> Vec<Robot> {
     let world = world(11);
     let radio = InProcessRadio::new(Box::new(PerfectLinks));
     let mut robots = Vec::new();
@@ -107,6 +120,9 @@ async fn run_team(paths: Vec<(Vec<Point3<f64>>, Pose3)>, seconds: usize) -> Vec<
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     for step in 1..=seconds * 2 {
         let t = step as f64 * 0.5;
+        if panic_at_s == Some(t) {
+            panic_every_child(&robots[0].handle);
+        }
         for r in &robots {
             r.handle.clock.advance_to(t);
             let (p, yaw) = position(&r.waypoints, t * 1.5);
@@ -158,6 +174,7 @@ async fn three_robots_align_pairwise() {
             (c, pose_from_yaw_translation(-2.0, Vector3::new(-5.0, 20.0, 0.0))),
         ],
         45,
+        None,
     )
     .await;
     let mut all = Vec::new();
@@ -169,13 +186,14 @@ async fn three_robots_align_pairwise() {
     assert_aligned(&robots, &all);
 }
 
+/// Also: every actor of the first robot panics 20 s in; the process, the map and the exchange
+/// carry on.
 #[actix_rt::test]
-async fn two_robots_align() {
+async fn two_robots_align_though_one_panics_mid_mission() {
     let a = vec![Point3::new(-25.0, -10.0, 0.0), Point3::new(25.0, -10.0, 0.0), Point3::new(25.0, 10.0, 0.0)];
     let b = vec![Point3::new(20.0, 15.0, 0.0), Point3::new(-20.0, 15.0, 0.0), Point3::new(-20.0, -15.0, 0.0)];
-    let robots =
-        run_team(vec![(a, Pose3::identity()), (b, pose_from_yaw_translation(0.8, Vector3::new(12.0, -7.0, 0.0)))], 60)
-            .await;
+    let paths = vec![(a, Pose3::identity()), (b, pose_from_yaw_translation(0.8, Vector3::new(12.0, -7.0, 0.0)))];
+    let robots = run_team(paths, 60, Some(20.0)).await;
     for (i, local) in robots.iter().enumerate() {
         let neighbours = local.handle.matcher.send(GetNeighbours).await.unwrap();
         let status = local.handle.comms.send(GetCommsStatus).await.unwrap();
@@ -271,9 +289,11 @@ async fn foreign_replayed_truncated_and_oversized_envelopes_are_refused_and_coun
     assert_eq!(status.rejected.bad_mac, 1, "{status:?}");
     assert_eq!(status.rejected.truncated, 2);
     assert_eq!(status.rejected.oversized, 1);
-    // A failed child restarts with its state: the keyframe database survives.
-    handle.tracker.do_send(InjectFailure);
-    settle().await;
-    let graph_after = handle.tracker.send(GetSceneGraph).await.unwrap();
-    assert_eq!(graph_after, graph_before);
+    // A failed child restarts with its state: the keyframe database survives a stop and a panic.
+    for failure in [InjectFailure::Stop, InjectFailure::Panic] {
+        handle.tracker.do_send(failure);
+        settle().await;
+        let graph_after = handle.tracker.send(GetSceneGraph).await.unwrap();
+        assert_eq!(graph_after, graph_before, "after {failure:?}");
+    }
 }
