@@ -43,6 +43,9 @@ pub struct CommsStatus {
     pub max_keyframes_in_flight: usize,
     /// Keyframes given up after every retry (reported to the Matcher, never silently dropped).
     pub keyframes_given_up: u64,
+    /// Keyframes not queued because `max_keyframes_waiting` were already waiting (reported to
+    /// the Matcher).
+    pub keyframes_refused_locally: u64,
     pub neighbours: Vec<RobotId>,
 }
 
@@ -146,6 +149,34 @@ impl Comms {
         self.change_pending = false;
         self.last_broadcast = Some(now);
         self.send(Destination::Broadcast, WireMessage::ObjectData(data));
+    }
+
+    /// Queues keyframes for the next request window: never one held, in flight or already
+    /// queued; beyond `max_keyframes_waiting`, reported unavailable at once.
+    fn want_keyframes(&mut self, msg: RequestKeyframes) {
+        let now = self.clock.now();
+        let q = self.requests.entry(msg.robot).or_default();
+        let mut overflow = Vec::new();
+        for id in msg.keyframes {
+            if q.held.contains(&id) || q.in_flight.contains_key(&id) || q.wanted.contains(&id) {
+                continue;
+            }
+            if q.wanted.len() < self.config.max_keyframes_waiting {
+                q.wanted.insert(id);
+            } else {
+                overflow.push(id);
+            }
+        }
+        if !q.wanted.is_empty() && q.window_opened.is_none() {
+            q.window_opened = Some(now);
+        }
+        if !overflow.is_empty() {
+            self.status.keyframes_refused_locally += overflow.len() as u64;
+            if let Some(links) = &self.links {
+                let reason = RefusalReason::Busy;
+                links.unavailable.do_send(KeyframesUnavailable { robot: msg.robot, keyframes: overflow, reason });
+            }
+        }
     }
 
     fn flush_requests(&mut self, now: Stamp) {
@@ -357,18 +388,7 @@ impl Handler<RequestObjectClouds> for Comms {
 impl Handler<RequestKeyframes> for Comms {
     type Result = ();
     fn handle(&mut self, msg: RequestKeyframes, ctx: &mut Context<Self>) {
-        contained(ctx, "comms", || {
-            let now = self.clock.now();
-            let q = self.requests.entry(msg.robot).or_default();
-            for id in msg.keyframes {
-                if !q.held.contains(&id) && !q.in_flight.contains_key(&id) {
-                    q.wanted.insert(id);
-                }
-            }
-            if !q.wanted.is_empty() && q.window_opened.is_none() {
-                q.window_opened = Some(now);
-            }
-        });
+        contained(ctx, "comms", || self.want_keyframes(msg));
     }
 }
 

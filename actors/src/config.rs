@@ -153,6 +153,9 @@ pub struct CommsConfig {
     pub request_window_s: f64,
     /// Keyframes requested but not yet received, per neighbour, at most. Default 32.
     pub max_keyframes_in_flight: usize,
+    /// Keyframes waiting to be requested, per neighbour, at most; more are reported unavailable
+    /// (reason busy) to the Matcher at once. Default 1024.
+    pub max_keyframes_waiting: usize,
     /// Keyframe ids per KeyframeRequest, at most. Default 16.
     pub max_keyframes_per_request: usize,
     /// Keyframe responses sent per tick, at most (the outgoing budget). Default 16.
@@ -177,6 +180,7 @@ impl Default for CommsConfig {
             centroid_resolution_mm: 20,
             request_window_s: 0.5,
             max_keyframes_in_flight: 32,
+            max_keyframes_waiting: 1024,
             max_keyframes_per_request: 16,
             max_responses_per_tick: 16,
             link_timeout_s: 30.0,
@@ -315,6 +319,7 @@ impl RobotConfig {
             "≥ 0",
         )?;
         check(c.max_keyframes_in_flight >= 1, "comms.max_keyframes_in_flight", c.max_keyframes_in_flight, "≥ 1")?;
+        check(c.max_keyframes_waiting >= 1, "comms.max_keyframes_waiting", c.max_keyframes_waiting, "≥ 1")?;
         check(
             (1..=c.limits.max_ids).contains(&c.max_keyframes_per_request),
             "comms.max_keyframes_per_request",

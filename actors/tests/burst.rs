@@ -1,0 +1,218 @@
+//! A burst of 100 matches within one second, each asking a neighbour for keyframes: the
+//! requests in flight stay within the configured bound, no keyframe is requested or sent twice,
+//! and every requested keyframe is either served or reported unavailable — over perfect links
+//! and over a radio losing 30 % of packets.
+
+use actix::{Actor, Addr, Context, Handler};
+use nalgebra::{Matrix6, Point3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use sgm_actors::clock::Clock;
+use sgm_actors::comms::{Comms, CommsLinks, CommsStatus, GetCommsStatus};
+use sgm_actors::config::CommsConfig;
+use sgm_actors::messages::*;
+use sgm_actors::transport::{InProcessRadio, PerfectLinks, RadioModel};
+use sgm_model::geometry::Pose3;
+use sgm_model::scene_graph::{KeyframeId, RobotId, Stamp};
+use sgm_model::wire::cloud_codec;
+use sgm_model::wire::messages::{pack_covariance, KeyframeRefusal, KeyframeResponse, RefusalReason, WirePose};
+use sgm_model::wire::{Message as WireMessage, TeamKey};
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::{Arc, Mutex};
+
+const REQUESTER: RobotId = RobotId(1);
+const SERVER: RobotId = RobotId(2);
+/// The server's map holds keyframes 0..KNOWN; requests reach up to 300.
+const KNOWN: u32 = 250;
+
+/// Loses each packet with probability `loss`; 20 ms latency. Seeded.
+struct LossyLinks {
+    rng: ChaCha8Rng,
+    loss: f64,
+}
+
+impl RadioModel for LossyLinks {
+    fn arrival(&mut self, _: RobotId, _: RobotId, _: usize, now: Stamp) -> Option<Stamp> {
+        (!self.rng.random_bool(self.loss)).then_some(now + 0.02)
+    }
+}
+
+/// What the requester's Comms handed to its (stand-in) Matcher.
+#[derive(Default)]
+struct Heard {
+    served: BTreeMap<KeyframeId, usize>,
+    reported: BTreeMap<KeyframeId, RefusalReason>,
+}
+
+struct Recorder(Arc<Mutex<Heard>>);
+impl Actor for Recorder {
+    type Context = Context<Self>;
+}
+impl Handler<NeighbourKeyframe> for Recorder {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourKeyframe, _: &mut Context<Self>) {
+        *self.0.lock().unwrap().served.entry(msg.id).or_default() += 1;
+    }
+}
+impl Handler<KeyframesUnavailable> for Recorder {
+    type Result = ();
+    fn handle(&mut self, msg: KeyframesUnavailable, _: &mut Context<Self>) {
+        let mut heard = self.0.lock().unwrap();
+        for id in msg.keyframes {
+            heard.reported.insert(id, msg.reason);
+        }
+    }
+}
+impl Handler<NeighbourObjects> for Recorder {
+    type Result = ();
+    fn handle(&mut self, _: NeighbourObjects, _: &mut Context<Self>) {}
+}
+impl Handler<NeighbourObjectClouds> for Recorder {
+    type Result = ();
+    fn handle(&mut self, _: NeighbourObjectClouds, _: &mut Context<Self>) {}
+}
+impl Handler<Serve> for Recorder {
+    type Result = ();
+    fn handle(&mut self, _: Serve, _: &mut Context<Self>) {}
+}
+
+/// Stands in for the server's Tracker: a map of keyframes 0..KNOWN with small clouds.
+struct Map {
+    comms: Addr<Comms>,
+}
+impl Actor for Map {
+    type Context = Context<Self>;
+}
+impl Handler<Serve> for Map {
+    type Result = ();
+    fn handle(&mut self, msg: Serve, _: &mut Context<Self>) {
+        let Serve::Keyframes { robot, keyframes } = msg else { return };
+        let (known, unknown): (Vec<KeyframeId>, Vec<KeyframeId>) = keyframes.into_iter().partition(|k| k.0 < KNOWN);
+        for id in known {
+            let points: Vec<Point3<f64>> = (0..20).map(|i| Point3::new(i as f64 * 0.1, f64::from(id.0), 0.0)).collect();
+            let message = WireMessage::KeyframeResponse(KeyframeResponse {
+                keyframe: id,
+                stamp: f64::from(id.0),
+                world_from_body: WirePose::from(&Pose3::identity()),
+                covariance: pack_covariance(&(Matrix6::identity() * 0.01)),
+                cloud: cloud_codec::encode(&points, 0.01).unwrap().bytes,
+            });
+            self.comms.do_send(Outgoing { to: robot, message });
+        }
+        if !unknown.is_empty() {
+            let refusal = KeyframeRefusal { keyframes: unknown, reason: RefusalReason::Unknown };
+            self.comms.do_send(Outgoing { to: robot, message: WireMessage::KeyframeRefusal(refusal) });
+        }
+    }
+}
+
+async fn settle() {
+    for _ in 0..100 {
+        actix_rt::task::yield_now().await;
+    }
+}
+
+struct Outcome {
+    requested: BTreeSet<KeyframeId>,
+    heard: Heard,
+    requester: CommsStatus,
+    server: CommsStatus,
+}
+
+/// 100 requests of 6 keyframes each, one every 10 ms, then `seconds` of ticks every 100 ms.
+async fn burst(model: Box<dyn RadioModel>, config: CommsConfig, seconds: u32) -> Outcome {
+    let radio = InProcessRadio::new(model);
+    let clock = Clock::starting_at(0.0);
+    let key = TeamKey::from_passphrase(&config.team_key).unwrap();
+    let start = |robot: RobotId| {
+        let (config, key, clock, transport) = (config.clone(), key.clone(), clock.clone(), radio.clone());
+        let comms = Comms::new(robot, config, key, clock, Box::new(transport), 0).start();
+        radio.attach(robot, comms.clone().recipient());
+        comms
+    };
+    let (requester, server) = (start(REQUESTER), start(SERVER));
+    let heard = Arc::new(Mutex::new(Heard::default()));
+    let recorder = Recorder(heard.clone()).start();
+    let map = Map { comms: server.clone() }.start();
+    let links = |serve: actix::Recipient<Serve>| CommsLinks {
+        objects: recorder.clone().recipient(),
+        object_clouds: recorder.clone().recipient(),
+        keyframes: recorder.clone().recipient(),
+        unavailable: recorder.clone().recipient(),
+        serve,
+    };
+    requester.do_send(Connect(links(recorder.clone().recipient())));
+    server.do_send(Connect(links(map.recipient())));
+
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut requested = BTreeSet::new();
+    for step in 0..100 {
+        let now = f64::from(step) * 0.01;
+        clock.advance_to(now);
+        let keyframes: Vec<KeyframeId> = (0..6).map(|_| KeyframeId(rng.random_range(0..300))).collect();
+        requested.extend(keyframes.iter().copied());
+        requester.do_send(RequestKeyframes { robot: SERVER, keyframes });
+        for comms in [&requester, &server] {
+            comms.do_send(Tick { now });
+        }
+        radio.deliver_due(now);
+        settle().await;
+    }
+    for step in 10..=seconds * 10 {
+        let now = f64::from(step) * 0.1;
+        clock.advance_to(now);
+        for comms in [&requester, &server] {
+            comms.do_send(Tick { now });
+        }
+        settle().await;
+        radio.deliver_due(now);
+        settle().await;
+    }
+    let requester = requester.send(GetCommsStatus).await.unwrap();
+    let server = server.send(GetCommsStatus).await.unwrap();
+    let heard = std::mem::take(&mut *heard.lock().unwrap());
+    Outcome { requested, heard, requester, server }
+}
+
+#[actix_rt::test]
+async fn a_burst_over_perfect_links_is_bounded_served_once_and_the_rest_reported() {
+    let config = CommsConfig { max_keyframes_in_flight: 8, ..CommsConfig::default() };
+    let o = burst(Box::new(PerfectLinks), config, 60).await;
+    assert!(o.requested.len() > 250, "the burst asks for most of 0..300: {}", o.requested.len());
+    // The bound holds, and the burst reaches it.
+    assert_eq!(o.requester.max_keyframes_in_flight, 8);
+    // Every known keyframe served exactly once, every unknown one reported as such.
+    for id in &o.requested {
+        if id.0 < KNOWN {
+            assert_eq!(o.heard.served.get(id), Some(&1), "{id:?}");
+            assert!(!o.heard.reported.contains_key(id), "{id:?}");
+        } else {
+            assert_eq!(o.heard.reported.get(id), Some(&RefusalReason::Unknown), "{id:?}");
+        }
+    }
+    assert_eq!(o.heard.served.len() + o.heard.reported.len(), o.requested.len());
+    assert_eq!(o.server.keyframes_sent_twice, 0);
+    assert_eq!((o.requester.keyframes_given_up, o.requester.keyframes_refused_locally), (0, 0));
+    // Coalescing: far fewer requests than the 100 matches asked for.
+    let requests = o.requester.sent.get(sgm_model::wire::MessageKind::KeyframeRequest).count;
+    assert!(requests < 100, "{requests} KeyframeRequests");
+}
+
+#[actix_rt::test]
+async fn a_burst_over_a_lossy_radio_is_bounded_and_nothing_is_silently_dropped() {
+    let config = CommsConfig { max_keyframes_in_flight: 16, max_keyframes_waiting: 200, ..CommsConfig::default() };
+    let model = LossyLinks { rng: ChaCha8Rng::seed_from_u64(8), loss: 0.3 };
+    // Long enough for every retry with back-off (5 + 10 + 20 + 40 + 80 s) of the last batch.
+    let o = burst(Box::new(model), config, 900).await;
+    assert!(o.requester.max_keyframes_in_flight <= 16);
+    assert!(o.requester.keyframes_refused_locally > 0, "the waiting bound bites");
+    assert!(o.requester.keyframes_given_up > 0 || o.server.keyframes_sent_twice > 0, "losses forced retries");
+    for id in &o.requested {
+        let served = o.heard.served.get(id).copied().unwrap_or(0);
+        assert!(served <= 1, "{id:?} handed over {served} times");
+        assert!(served == 1 || o.heard.reported.contains_key(id), "{id:?} neither served nor reported");
+        if id.0 >= KNOWN {
+            assert_eq!(served, 0);
+        }
+    }
+}
