@@ -2,8 +2,12 @@
 //! (labelled boxes on a ground plane), over the in-process radio: they must find each other and
 //! converge to the right `local_from_remote`.
 
+mod common;
+
+use common::{position, scan, settle, world};
+
 use nalgebra::{Point3, Vector3};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sgm_actors::clock::Clock;
 use sgm_actors::comms::GetCommsStatus;
@@ -13,82 +17,14 @@ use sgm_actors::messages::{FrameLabels, SensorFrame, Tick};
 use sgm_actors::supervisor::{start_robot, RobotHandle};
 use sgm_actors::transport::{InProcessRadio, PerfectLinks};
 use sgm_model::geometry::{pose_error, pose_from_yaw_translation, Pose3};
-use sgm_model::scene_graph::{LabelId, RobotId};
+use sgm_model::scene_graph::RobotId;
 use sgm_model::wire::MessageKind;
-
-struct WorldObject {
-    label: LabelId,
-    centre: Point3<f64>,
-    size: Vector3<f64>,
-}
-
-fn world(seed: u64) -> Vec<WorldObject> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    (0..40)
-        .map(|_| {
-            let label = LabelId(rng.random_range(2..9));
-            let size = Vector3::new(rng.random_range(0.4..1.5), rng.random_range(0.4..1.5), rng.random_range(0.5..3.0));
-            let centre = Point3::new(rng.random_range(-30.0..30.0), rng.random_range(-30.0..30.0), size.z / 2.0);
-            WorldObject { label, centre, size }
-        })
-        .collect()
-}
-
-/// Points on the objects within 20 m (box surfaces) and on the ground, labelled; body frame.
-fn scan(
-    world: &[WorldObject],
-    world_from_body: &Pose3,
-    rng: &mut ChaCha8Rng,
-) -> (Vec<Point3<f64>>, Vec<Option<LabelId>>) {
-    let body_from_world = world_from_body.inverse();
-    let here = world_from_body.translation.vector;
-    let (mut points, mut labels) = (Vec::new(), Vec::new());
-    for o in world {
-        if (o.centre.coords - here).xy().norm() > 20.0 {
-            continue;
-        }
-        for _ in 0..150 {
-            let mut u =
-                Vector3::new(rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5));
-            let axis = rng.random_range(0..3);
-            u[axis] = if rng.random_bool(0.5) { 0.5 } else { -0.5 };
-            points.push(body_from_world * (o.centre + u.component_mul(&o.size)));
-            labels.push(Some(o.label));
-        }
-    }
-    for _ in 0..1500 {
-        let p = Point3::new(here.x + rng.random_range(-20.0..20.0), here.y + rng.random_range(-20.0..20.0), 0.0);
-        points.push(body_from_world * p);
-        labels.push(Some(LabelId(0)));
-    }
-    (points, labels)
-}
 
 struct Robot {
     handle: RobotHandle,
     /// The robot's world frame in the true world: p_true = truth_from_world · p_world.
     truth_from_world: Pose3,
     waypoints: Vec<Point3<f64>>,
-}
-
-fn position(waypoints: &[Point3<f64>], s: f64) -> (Point3<f64>, f64) {
-    let legs: Vec<f64> = waypoints.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
-    let mut s = s;
-    for (k, len) in legs.iter().enumerate() {
-        if s <= *len || k == legs.len() - 1 {
-            let d = (waypoints[k + 1] - waypoints[k]) / *len;
-            let t = s.min(*len);
-            return (waypoints[k] + d * t, d.y.atan2(d.x));
-        }
-        s -= len;
-    }
-    (waypoints[0], 0.0)
-}
-
-async fn settle() {
-    for _ in 0..200 {
-        actix_rt::task::yield_now().await;
-    }
 }
 
 /// Every child of `robot` panics in a handler (contained: each restarts with its state).
