@@ -14,6 +14,7 @@ pub(crate) fn contained<A>(ctx: &mut Context<A>, actor: &'static str, body: impl
 where
     A: Actor<Context = Context<A>>,
 {
+    crate::quiescence::record_activity();
     match catch_unwind(AssertUnwindSafe(body)) {
         Ok(()) => true,
         Err(payload) => {

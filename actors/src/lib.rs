@@ -46,6 +46,7 @@ pub mod matcher;
 pub mod messages;
 pub mod optimiser;
 pub mod protocol;
+pub mod quiescence;
 pub mod sensor;
 pub mod supervisor;
 pub mod tracker;

@@ -107,9 +107,7 @@ impl Handler<Serve> for Map {
 }
 
 async fn settle() {
-    for _ in 0..100 {
-        actix_rt::task::yield_now().await;
-    }
+    sgm_actors::quiescence::until_quiet().await;
 }
 
 struct Outcome {

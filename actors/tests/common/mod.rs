@@ -70,9 +70,7 @@ pub fn position(waypoints: &[Point3<f64>], s: f64) -> (Point3<f64>, f64) {
     (waypoints[0], 0.0)
 }
 
-/// Lets every actor run until its mailbox is empty.
+/// Lets every actor run until no handler is running.
 pub async fn settle() {
-    for _ in 0..200 {
-        actix_rt::task::yield_now().await;
-    }
+    sgm_actors::quiescence::until_quiet().await;
 }
