@@ -41,6 +41,29 @@ pub struct TrackerLinks {
 #[rtype(result = "SceneGraph")]
 pub struct GetSceneGraph;
 
+/// The map without its clouds: cheap enough to ask for every few seconds (reports, status).
+#[derive(Message)]
+#[rtype(result = "MapSummary")]
+pub struct GetMapSummary;
+
+/// Keyframe poses (optimised, world frame) and every object, in id order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MapSummary {
+    pub keyframes: Vec<Keyframe>,
+    pub objects: Vec<MapObject>,
+}
+
+/// One object of the map, in the world frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MapObject {
+    pub id: ObjectId,
+    pub label: sgm_model::scene_graph::LabelId,
+    pub centroid: Point3<f64>,
+    pub size: nalgebra::Vector3<f64>,
+    /// Sightings reached the confirmation count: shared with and matched by other robots.
+    pub confirmed: bool,
+}
+
 /// A keyframe's pose, points (body) and labels, borrowed from the map.
 type ScanRef<'a> = (&'a Pose3, &'a [Point3<f32>], &'a [sgm_model::scene_graph::LabelId]);
 
@@ -280,6 +303,26 @@ impl Handler<GetSceneGraph> for Tracker {
     type Result = MessageResult<GetSceneGraph>;
     fn handle(&mut self, _: GetSceneGraph, _: &mut Context<Self>) -> Self::Result {
         MessageResult(self.graph.clone())
+    }
+}
+
+impl Handler<GetMapSummary> for Tracker {
+    type Result = MessageResult<GetMapSummary>;
+    fn handle(&mut self, _: GetMapSummary, _: &mut Context<Self>) -> Self::Result {
+        let objects = self
+            .graph
+            .objects()
+            .filter_map(|o| {
+                Some(MapObject {
+                    id: o.id,
+                    label: o.label,
+                    centroid: self.graph.centroid_in_world(o.id)?,
+                    size: o.size,
+                    confirmed: self.objects.is_confirmed(o.id, &self.config.tracking),
+                })
+            })
+            .collect();
+        MessageResult(MapSummary { keyframes: self.graph.keyframes().cloned().collect(), objects })
     }
 }
 
