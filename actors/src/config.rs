@@ -243,9 +243,13 @@ pub fn layered(
     if let Some(path) = file {
         builder = builder.add_source(config::File::from(path).format(config::FileFormat::Toml).required(true));
     }
-    builder = builder
-        .add_source(config::Environment::with_prefix(prefix).prefix_separator("__").separator("__").try_parsing(true));
-    builder.build().map_err(|e| load_error(file, e))
+    builder.add_source(environment(prefix)).build().map_err(|e| load_error(file, e))
+}
+
+/// `PREFIX__SECTION__KEY=value` variables (nested keys joined by `__`, values parsed as TOML
+/// scalars), the last layer of every SGM configuration.
+pub fn environment(prefix: &str) -> config::Environment {
+    config::Environment::with_prefix(prefix).prefix_separator("__").separator("__").try_parsing(true)
 }
 
 impl RobotConfig {

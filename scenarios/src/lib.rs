@@ -2,4 +2,6 @@
 //! later issues) simulated scenarios. The `sgm` binary is a thin shell over this library.
 
 pub mod object_file;
+pub mod scenario;
 pub mod settings;
+pub mod sim;

@@ -1,0 +1,19 @@
+//! The shipped scenarios (`scenarios/library/*.toml`), built into the binary so that `sgm run NAME`
+//! works from any directory.
+
+const LIBRARY: &[(&str, &str)] = &[
+    ("quickstart", include_str!("../../library/quickstart.toml")),
+    ("outdoor_two_robots", include_str!("../../library/outdoor_two_robots.toml")),
+    ("indoor_three_robots", include_str!("../../library/indoor_three_robots.toml")),
+    ("team_of_eight", include_str!("../../library/team_of_eight.toml")),
+];
+
+/// The TOML text of a library scenario.
+pub fn get(name: &str) -> Option<&'static str> {
+    LIBRARY.iter().find(|(n, _)| *n == name).map(|(_, text)| *text)
+}
+
+/// Every library scenario's name.
+pub fn names() -> Vec<&'static str> {
+    LIBRARY.iter().map(|(n, _)| *n).collect()
+}

@@ -1,0 +1,375 @@
+//! Scenario files: a simulated world, its sensors, the radio, the robots and their routes, and
+//! the robot configuration every robot shares — one TOML file, loaded with the `config` crate
+//! from built-in defaults, then the file, then `SGM__SECTION__KEY` environment variables (the same
+//! variables as a robot's configuration: `SGM__MATCHER__EDGE_SHARPNESS=2 sgm run` works on
+//! both). Validated before anything runs; errors name the key. The book's scenario chapter
+//! documents every key with its default and unit.
+
+pub mod library;
+mod validate;
+
+use serde::{Deserialize, Serialize};
+use sgm_actors::config::{
+    environment, CommsConfig, FusionConfig, MatcherSection, OptimiserConfig, RobotConfig, RobotSection, TrackerSection,
+};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// A scenario that cannot be loaded or is out of range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ScenarioError {
+    #[error("{source_name}: {message}")]
+    Load { source_name: String, message: String },
+    #[error("{source_name}: {key} = {value}: allowed {allowed}")]
+    Invalid { source_name: String, key: String, value: String, allowed: String },
+    #[error("no scenario named {name:?} in the library ({known}) and no file at that path")]
+    Unknown { name: String, known: String },
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Scenario {
+    pub scenario: ScenarioSection,
+    pub world: WorldSpec,
+    pub lidar: LidarSpec,
+    pub camera: CameraSpec,
+    pub odometry: OdometrySpec,
+    pub radio: RadioSpec,
+    pub robots: Vec<RobotSpec>,
+    /// The robot configuration every robot shares (`[fusion]`, `[tracker]`, `[matcher]`,
+    /// `[optimiser]`, `[comms]`, as in a robot configuration file).
+    pub fusion: FusionConfig,
+    pub tracker: TrackerSection,
+    pub matcher: MatcherSection,
+    pub optimiser: OptimiserConfig,
+    pub comms: CommsConfig,
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        let robot = RobotConfig::default();
+        Self {
+            scenario: ScenarioSection::default(),
+            world: WorldSpec::default(),
+            lidar: LidarSpec::default(),
+            camera: CameraSpec::default(),
+            odometry: OdometrySpec::default(),
+            radio: RadioSpec::default(),
+            robots: Vec::new(),
+            fusion: robot.fusion,
+            tracker: robot.tracker,
+            matcher: robot.matcher,
+            optimiser: robot.optimiser,
+            comms: robot.comms,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ScenarioSection {
+    /// Name in reports. Default "scenario".
+    pub name: String,
+    /// One line for reports. Default "".
+    pub description: String,
+    /// Simulated mission length, s. Default 120.
+    pub duration_s: f64,
+    /// Seed of every random choice (world, sensors, odometry, radio). Default 1.
+    pub seed: u64,
+    /// Interval between two sensor frames of one robot, s. Default 0.5.
+    pub frame_interval_s: f64,
+    /// Interval of the report's time series (alignment error, ATE, bytes), s. Default 10.
+    pub report_interval_s: f64,
+}
+
+impl Default for ScenarioSection {
+    fn default() -> Self {
+        Self {
+            name: "scenario".into(),
+            description: String::new(),
+            duration_s: 120.0,
+            seed: 1,
+            frame_interval_s: 0.5,
+            report_interval_s: 10.0,
+        }
+    }
+}
+
+/// What kind of place the world generator builds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WorldKind {
+    /// Open ground with scattered objects and a few buildings.
+    Campus,
+    /// A grid of rooms joined by doors, furniture along the walls and in the middle.
+    Indoor,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WorldSpec {
+    /// Default "campus".
+    pub kind: WorldKind,
+    /// Extent along x and y, centred on the origin, m. Default [80, 80].
+    pub size_m: [f64; 2],
+    /// Objects per class name (classes of `[fusion]` with a built-in shape: tree, lamp_post,
+    /// bench, trash_can, chair, table, bookshelf, car). Default 12 trees, 8 lamp posts,
+    /// 10 benches, 8 trash cans.
+    pub objects: BTreeMap<String, usize>,
+    /// Smallest distance between two objects' centres, m. Default 2.
+    pub min_spacing_m: f64,
+    /// Campus: rectangular buildings (labelled wall). Default 3.
+    pub buildings: usize,
+    /// Indoor: side of one square room, m. Default 8.
+    pub room_size_m: f64,
+    /// Height of walls and buildings, m. Default 3.
+    pub wall_height_m: f64,
+    /// Indoor: width of the door in each wall between rooms, m. Default 1.6.
+    pub door_width_m: f64,
+}
+
+impl Default for WorldSpec {
+    fn default() -> Self {
+        let objects = [("tree", 12), ("lamp_post", 8), ("bench", 10), ("trash_can", 8)];
+        Self {
+            kind: WorldKind::Campus,
+            size_m: [80.0, 80.0],
+            objects: objects.iter().map(|(k, n)| (k.to_string(), *n)).collect(),
+            min_spacing_m: 2.0,
+            buildings: 3,
+            room_size_m: 8.0,
+            wall_height_m: 3.0,
+            door_width_m: 1.6,
+        }
+    }
+}
+
+/// The LiDAR's scan pattern.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LidarPattern {
+    /// A spinning multi-beam LiDAR: `beams` rings evenly over the vertical field of view, one
+    /// return per `azimuth_step_deg`.
+    Spinning,
+    /// A Livox-Mid-360-like non-repetitive pattern: `points_per_frame` directions from a
+    /// low-discrepancy sequence continued from frame to frame.
+    Livox,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LidarSpec {
+    /// Default "spinning".
+    pub pattern: LidarPattern,
+    /// Spinning: rings. Default 32.
+    pub beams: usize,
+    /// Spinning: horizontal resolution, degrees. Default 0.4.
+    pub azimuth_step_deg: f64,
+    /// Lowest and highest beam elevation, degrees. Default [-15, 15] (spinning); a Livox
+    /// Mid-360 covers [-7, 52].
+    pub vertical_fov_deg: [f64; 2],
+    /// Livox: returns per frame. Default 20000.
+    pub points_per_frame: usize,
+    /// Farthest return, m. Default 60.
+    pub max_range_m: f64,
+    /// Standard deviation of range noise, m. Default 0.02.
+    pub range_noise_m: f64,
+}
+
+impl Default for LidarSpec {
+    fn default() -> Self {
+        Self {
+            pattern: LidarPattern::Spinning,
+            beams: 32,
+            azimuth_step_deg: 0.4,
+            vertical_fov_deg: [-15.0, 15.0],
+            points_per_frame: 20_000,
+            max_range_m: 60.0,
+            range_noise_m: 0.02,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraSpec {
+    /// A forward camera with a segmentation network; false: per-point labels from the
+    /// simulator (with the same mislabel rate). Default true.
+    pub enabled: bool,
+    /// Label image size, pixels. Default 320 × 240.
+    pub width: u32,
+    pub height: u32,
+    /// Horizontal field of view, degrees. Default 100.
+    pub horizontal_fov_deg: f64,
+    /// Probability that an object is given a wrong (matchable) class in one frame. Default 0.05.
+    pub mislabel_rate: f64,
+    /// Standard deviation of the label boundary jitter, pixels. Default 1.
+    pub boundary_noise_px: f64,
+}
+
+impl Default for CameraSpec {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            width: 320,
+            height: 240,
+            horizontal_fov_deg: 100.0,
+            mislabel_rate: 0.05,
+            boundary_noise_px: 1.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OdometrySpec {
+    /// Position random walk, m per √m travelled (each horizontal axis). Default 0.005.
+    pub position_walk_m: f64,
+    /// Yaw random walk, degrees per √m travelled. Default 0.03.
+    pub yaw_walk_deg: f64,
+    /// Height random walk, m per √m travelled. Default 0.002.
+    pub height_walk_m: f64,
+    /// Roll and pitch error: standard deviation of a slowly varying tilt, degrees. Default 0.1.
+    pub roll_pitch_deg: f64,
+}
+
+impl Default for OdometrySpec {
+    fn default() -> Self {
+        Self { position_walk_m: 0.005, yaw_walk_deg: 0.03, height_walk_m: 0.002, roll_pitch_deg: 0.1 }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RadioSpec {
+    /// Each robot's transmit rate, kbit/s (shared by everything it sends). Default 2000.
+    pub bandwidth_kbps: f64,
+    /// Propagation and stack latency, ms. Default 20.
+    pub latency_ms: f64,
+    /// Probability that a packet is lost (per destination). Default 0.
+    pub loss: f64,
+    /// Robots farther apart cannot hear each other, m (0: unlimited). Default 0.
+    pub range_m: f64,
+    /// A packet that would wait behind more than this many bytes in the sender's queue is
+    /// dropped. Default 4 000 000.
+    pub queue_bytes: usize,
+}
+
+impl Default for RadioSpec {
+    fn default() -> Self {
+        Self { bandwidth_kbps: 2000.0, latency_ms: 20.0, loss: 0.0, range_m: 0.0, queue_bytes: 4_000_000 }
+    }
+}
+
+/// A generated route: random waypoints in a rectangle.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RouteSpec {
+    /// [x_min, y_min, x_max, y_max], m.
+    pub region_m: [f64; 4],
+    /// Waypoints after the start.
+    pub legs: usize,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RobotSpec {
+    /// Default "robot<k>".
+    pub name: String,
+    /// [x, y] waypoints in the world, m; the robot starts at the first facing the second, and
+    /// stops at the last. Either `waypoints` or `route`.
+    pub waypoints: Vec<[f64; 2]>,
+    /// A generated route (seeded): the robot starts at a random point of the region.
+    pub route: Option<RouteSpec>,
+    /// Default 1.5 m/s.
+    pub speed_mps: f64,
+    /// Height of the LiDAR above the ground, m. Default 0.8.
+    pub sensor_height_m: f64,
+    /// The robot is switched on at this time, s. Default 0.
+    pub start_s: f64,
+}
+
+impl Default for RobotSpec {
+    fn default() -> Self {
+        Self {
+            name: String::new(),
+            waypoints: Vec::new(),
+            route: None,
+            speed_mps: 1.5,
+            sensor_height_m: 0.8,
+            start_s: 0.0,
+        }
+    }
+}
+
+impl Scenario {
+    /// `name_or_path`: a name from the library (`quickstart`, …) or a TOML file.
+    pub fn load(name_or_path: &str) -> Result<Self, ScenarioError> {
+        Self::load_with_env(name_or_path, "SGM")
+    }
+
+    /// As [`Scenario::load`] with another environment prefix (tests use their own).
+    pub fn load_with_env(name_or_path: &str, prefix: &str) -> Result<Self, ScenarioError> {
+        let path = PathBuf::from(name_or_path);
+        if path.is_file() {
+            let text = std::fs::read_to_string(&path)
+                .map_err(|e| ScenarioError::Load { source_name: path.display().to_string(), message: e.to_string() })?;
+            return Self::from_toml(&text, &path.display().to_string(), prefix);
+        }
+        match library::get(name_or_path) {
+            Some(text) => Self::from_toml(text, &format!("library/{name_or_path}.toml"), prefix),
+            None => Err(ScenarioError::Unknown { name: name_or_path.into(), known: library::names().join(", ") }),
+        }
+    }
+
+    /// Parses `text` (TOML) over the defaults, then the environment; validates.
+    pub fn from_toml(text: &str, source_name: &str, prefix: &str) -> Result<Self, ScenarioError> {
+        let load =
+            |e: config::ConfigError| ScenarioError::Load { source_name: source_name.into(), message: e.to_string() };
+        let defaults = config::Config::try_from(&Scenario::default()).map_err(load)?;
+        let merged = config::Config::builder()
+            .add_source(defaults)
+            .add_source(config::File::from_str(text, config::FileFormat::Toml))
+            .add_source(environment(prefix))
+            .build()
+            .map_err(load)?;
+        let scenario: Scenario = merged.try_deserialize().map_err(load)?;
+        scenario.validate().map_err(|(key, value, allowed)| ScenarioError::Invalid {
+            source_name: source_name.into(),
+            key,
+            value,
+            allowed,
+        })?;
+        Ok(scenario)
+    }
+
+    /// The configuration of robot `k` (id k + 1).
+    pub fn robot_config(&self, k: usize) -> RobotConfig {
+        RobotConfig {
+            robot: RobotSection { id: k as u16 + 1, name: self.robot_name(k) },
+            fusion: self.fusion.clone(),
+            tracker: self.tracker.clone(),
+            matcher: self.matcher.clone(),
+            optimiser: self.optimiser.clone(),
+            comms: self.comms.clone(),
+        }
+    }
+
+    pub fn robot_name(&self, k: usize) -> String {
+        match self.robots.get(k) {
+            Some(r) if !r.name.is_empty() => r.name.clone(),
+            _ => format!("robot{k}"),
+        }
+    }
+
+    /// The scenario with another seed.
+    pub fn with_seed(mut self, seed: u64) -> Self {
+        self.scenario.seed = seed;
+        self
+    }
+}
+
+/// Where the file of a library scenario would be in a checkout (for messages and docs).
+pub fn library_dir() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/library"))
+}

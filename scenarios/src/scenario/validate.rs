@@ -1,0 +1,167 @@
+//! Range checks of a scenario; each failure is (key, value, allowed).
+
+use super::Scenario;
+use crate::sim::shapes::shape_of;
+use sgm_actors::config::ConfigError;
+
+type Failure = (String, String, String);
+
+fn check(ok: bool, key: impl Into<String>, value: impl ToString, allowed: &str) -> Result<(), Failure> {
+    if ok {
+        Ok(())
+    } else {
+        Err((key.into(), value.to_string(), allowed.into()))
+    }
+}
+
+fn within(v: f64, lo: f64, hi: f64) -> bool {
+    v.is_finite() && v >= lo && v <= hi
+}
+
+impl Scenario {
+    pub(super) fn validate(&self) -> Result<(), Failure> {
+        let s = &self.scenario;
+        check(within(s.duration_s, 1.0, 1e6), "scenario.duration_s", s.duration_s, "1 ≤ x ≤ 1e6 s")?;
+        check(
+            within(s.frame_interval_s, 0.01, 10.0),
+            "scenario.frame_interval_s",
+            s.frame_interval_s,
+            "0.01 ≤ x ≤ 10 s",
+        )?;
+        check(
+            within(s.report_interval_s, s.frame_interval_s, 1e6),
+            "scenario.report_interval_s",
+            s.report_interval_s,
+            "≥ scenario.frame_interval_s",
+        )?;
+
+        let w = &self.world;
+        for (k, v) in w.size_m.iter().enumerate() {
+            check(within(*v, 5.0, 1e4), format!("world.size_m[{k}]"), v, "5 ≤ x ≤ 10000 m")?;
+        }
+        for (name, count) in &w.objects {
+            let key = format!("world.objects.{name}");
+            check(self.fusion.classes.iter().any(|c| &c.name == name), &key, count, "a class of [fusion].classes")?;
+            check(shape_of(name).is_some(), &key, count, crate::sim::shapes::KNOWN_SHAPES)?;
+            check(*count <= 100_000, &key, count, "≤ 100000")?;
+        }
+        check(within(w.min_spacing_m, 0.0, 100.0), "world.min_spacing_m", w.min_spacing_m, "0 ≤ x ≤ 100 m")?;
+        check(w.buildings <= 1000, "world.buildings", w.buildings, "≤ 1000")?;
+        check(within(w.room_size_m, 3.0, 100.0), "world.room_size_m", w.room_size_m, "3 ≤ x ≤ 100 m")?;
+        check(within(w.wall_height_m, 0.5, 50.0), "world.wall_height_m", w.wall_height_m, "0.5 ≤ x ≤ 50 m")?;
+        check(
+            within(w.door_width_m, 0.5, w.room_size_m - 1.0),
+            "world.door_width_m",
+            w.door_width_m,
+            "0.5 m ≤ x ≤ world.room_size_m − 1 m",
+        )?;
+
+        let l = &self.lidar;
+        check((1..=256).contains(&l.beams), "lidar.beams", l.beams, "1 ≤ x ≤ 256")?;
+        check(within(l.azimuth_step_deg, 0.05, 10.0), "lidar.azimuth_step_deg", l.azimuth_step_deg, "0.05 ≤ x ≤ 10°")?;
+        let [lo, hi] = l.vertical_fov_deg;
+        check(
+            within(lo, -90.0, 90.0) && within(hi, lo, 90.0),
+            "lidar.vertical_fov_deg",
+            format!("[{lo}, {hi}]"),
+            "−90 ≤ low ≤ high ≤ 90°",
+        )?;
+        check(
+            (1..=500_000).contains(&l.points_per_frame),
+            "lidar.points_per_frame",
+            l.points_per_frame,
+            "1 ≤ x ≤ 500000",
+        )?;
+        check(within(l.max_range_m, 1.0, 500.0), "lidar.max_range_m", l.max_range_m, "1 ≤ x ≤ 500 m")?;
+        check(within(l.range_noise_m, 0.0, 1.0), "lidar.range_noise_m", l.range_noise_m, "0 ≤ x ≤ 1 m")?;
+
+        let c = &self.camera;
+        check((16..=4096).contains(&c.width), "camera.width", c.width, "16 ≤ x ≤ 4096 px")?;
+        check((16..=4096).contains(&c.height), "camera.height", c.height, "16 ≤ x ≤ 4096 px")?;
+        check(
+            within(c.horizontal_fov_deg, 10.0, 170.0),
+            "camera.horizontal_fov_deg",
+            c.horizontal_fov_deg,
+            "10 ≤ x ≤ 170°",
+        )?;
+        check(within(c.mislabel_rate, 0.0, 1.0), "camera.mislabel_rate", c.mislabel_rate, "0 ≤ x ≤ 1")?;
+        check(
+            within(c.boundary_noise_px, 0.0, 50.0),
+            "camera.boundary_noise_px",
+            c.boundary_noise_px,
+            "0 ≤ x ≤ 50 px",
+        )?;
+
+        let o = &self.odometry;
+        for (key, v) in [
+            ("odometry.position_walk_m", o.position_walk_m),
+            ("odometry.yaw_walk_deg", o.yaw_walk_deg),
+            ("odometry.height_walk_m", o.height_walk_m),
+            ("odometry.roll_pitch_deg", o.roll_pitch_deg),
+        ] {
+            check(within(v, 0.0, 10.0), key, v, "0 ≤ x ≤ 10")?;
+        }
+
+        let r = &self.radio;
+        check(within(r.bandwidth_kbps, 1.0, 1e7), "radio.bandwidth_kbps", r.bandwidth_kbps, "1 ≤ x ≤ 1e7 kbit/s")?;
+        check(within(r.latency_ms, 0.0, 60_000.0), "radio.latency_ms", r.latency_ms, "0 ≤ x ≤ 60000 ms")?;
+        check(within(r.loss, 0.0, 1.0), "radio.loss", r.loss, "0 ≤ x ≤ 1")?;
+        check(within(r.range_m, 0.0, 1e6), "radio.range_m", r.range_m, "0 (unlimited) ≤ x ≤ 1e6 m")?;
+        check(r.queue_bytes >= 1024, "radio.queue_bytes", r.queue_bytes, "≥ 1024")?;
+
+        check(!self.robots.is_empty(), "robots", "[]", "at least one [[robots]] table")?;
+        check(self.robots.len() <= 64, "robots", self.robots.len(), "at most 64 robots")?;
+        for (k, robot) in self.robots.iter().enumerate() {
+            let key = |field: &str| format!("robots[{k}].{field}");
+            let has_waypoints = robot.waypoints.len() >= 2;
+            check(
+                has_waypoints != robot.route.is_some(),
+                key("waypoints"),
+                robot.waypoints.len(),
+                "≥ 2 waypoints, or a route instead (not both)",
+            )?;
+            for (i, p) in robot.waypoints.iter().enumerate() {
+                check(
+                    p.iter().all(|v| within(*v, -1e5, 1e5)),
+                    key(&format!("waypoints[{i}]")),
+                    format!("{p:?}"),
+                    "finite, |x| ≤ 1e5 m",
+                )?;
+            }
+            if let Some(route) = &robot.route {
+                let [x0, y0, x1, y1] = route.region_m;
+                check(
+                    [x0, y0, x1, y1].iter().all(|v| v.is_finite()) && x1 > x0 && y1 > y0,
+                    key("route.region_m"),
+                    format!("{:?}", route.region_m),
+                    "[x_min, y_min, x_max, y_max] with min < max",
+                )?;
+                check((1..=10_000).contains(&route.legs), key("route.legs"), route.legs, "1 ≤ x ≤ 10000")?;
+            }
+            check(within(robot.speed_mps, 0.05, 30.0), key("speed_mps"), robot.speed_mps, "0.05 ≤ x ≤ 30 m/s")?;
+            check(
+                within(robot.sensor_height_m, 0.1, 10.0),
+                key("sensor_height_m"),
+                robot.sensor_height_m,
+                "0.1 ≤ x ≤ 10 m",
+            )?;
+            check(
+                within(robot.start_s, 0.0, s.duration_s - s.frame_interval_s),
+                key("start_s"),
+                robot.start_s,
+                "0 ≤ x < scenario.duration_s",
+            )?;
+            let name = self.robot_name(k);
+            check(
+                (0..k).all(|j| self.robot_name(j) != name),
+                key("name"),
+                format!("{name:?}"),
+                "a name no other robot has",
+            )?;
+        }
+        self.robot_config(0).validate().map_err(|e| match e {
+            ConfigError::Invalid { key, value, allowed } => (key, value, allowed),
+            ConfigError::Load { source_name, message } => (source_name, String::new(), message),
+        })
+    }
+}

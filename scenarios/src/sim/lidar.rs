@@ -1,0 +1,202 @@
+//! The LiDAR simulator: a spinning multi-beam pattern or a Livox-Mid-360-like non-repetitive
+//! one, ray-cast against the world's solids and the ground plane z = 0. Solids are culled per
+//! frame by azimuth: each solid within range covers the azimuth bins its footprint subtends from
+//! the sensor, and a ray tests only the solids of its bin.
+
+use crate::scenario::{LidarPattern, LidarSpec};
+use crate::sim::world::World;
+use nalgebra::{Point3, Vector3};
+use rand::Rng;
+use rand_distr::{Distribution, Normal};
+use sgm_model::geometry::Pose3;
+
+const BINS: usize = 720;
+
+/// One simulated frame, sensor (= body) frame, with the truth of every return.
+#[derive(Clone, Debug, Default)]
+pub struct LidarFrame {
+    pub points: Vec<Point3<f64>>,
+    pub labels: Vec<u16>,
+    /// Object instance of each return (`u32::MAX`: ground).
+    pub instances: Vec<u32>,
+}
+
+pub struct Lidar {
+    spec: LidarSpec,
+    /// Spinning: the fixed unit directions, sensor frame.
+    fixed: Vec<Vector3<f64>>,
+    /// Livox: index of the next direction of the low-discrepancy sequence.
+    next: u64,
+}
+
+fn direction(azimuth: f64, elevation: f64) -> Vector3<f64> {
+    let (se, ce) = elevation.sin_cos();
+    let (sa, ca) = azimuth.sin_cos();
+    Vector3::new(ce * ca, ce * sa, se)
+}
+
+impl Lidar {
+    pub fn new(spec: &LidarSpec) -> Self {
+        let [lo, hi] = spec.vertical_fov_deg.map(f64::to_radians);
+        let fixed = match spec.pattern {
+            LidarPattern::Spinning => {
+                let columns = (360.0 / spec.azimuth_step_deg).round().max(1.0) as usize;
+                let rings = spec.beams;
+                let mut d = Vec::with_capacity(columns * rings);
+                for c in 0..columns {
+                    let azimuth = (c as f64 * spec.azimuth_step_deg).to_radians();
+                    for r in 0..rings {
+                        let elevation = if rings == 1 { lo } else { lo + (hi - lo) * r as f64 / (rings - 1) as f64 };
+                        d.push(direction(azimuth, elevation));
+                    }
+                }
+                d
+            }
+            LidarPattern::Livox => Vec::new(),
+        };
+        Self { spec: spec.clone(), fixed, next: 0 }
+    }
+
+    /// This frame's directions: the fixed pattern, or the next `points_per_frame` of the R2
+    /// sequence (Roberts 2018) — it never repeats and covers the field of view ever more densely,
+    /// as a Livox's rosette does.
+    fn directions(&mut self) -> Vec<Vector3<f64>> {
+        if self.spec.pattern == LidarPattern::Spinning {
+            return self.fixed.clone();
+        }
+        const A1: f64 = 0.754_877_666_246_692_8; // 1/g, g the plastic number
+        const A2: f64 = 0.569_840_290_998_053_3; // 1/g²
+        let [lo, hi] = self.spec.vertical_fov_deg.map(f64::to_radians);
+        let (s_lo, s_hi) = (lo.sin(), hi.sin());
+        let n = self.spec.points_per_frame as u64;
+        let out = (self.next..self.next + n)
+            .map(|k| {
+                let (u, v) = ((0.5 + A1 * k as f64).fract(), (0.5 + A2 * k as f64).fract());
+                // Uniform over the sphere band: sin(elevation) uniform.
+                direction(u * std::f64::consts::TAU, (s_lo + (s_hi - s_lo) * v).asin())
+            })
+            .collect();
+        self.next += n;
+        out
+    }
+
+    /// Casts one frame from `world_from_sensor`.
+    pub fn scan(&mut self, world: &World, world_from_sensor: &Pose3, rng: &mut impl Rng) -> LidarFrame {
+        let origin = Point3::from(world_from_sensor.translation.vector);
+        let rotation = world_from_sensor.rotation;
+        let max_range = self.spec.max_range_m;
+        // Azimuth bins of the solids in range.
+        let mut bins: Vec<Vec<u32>> = vec![Vec::new(); BINS];
+        let bin_width = std::f64::consts::TAU / BINS as f64;
+        for (k, solid) in world.solids.iter().enumerate() {
+            let (x, y, r) = solid.primitive.footprint();
+            let d = (x - origin.x).hypot(y - origin.y);
+            if d - r > max_range {
+                continue;
+            }
+            if d <= r + 0.05 {
+                for bin in &mut bins {
+                    bin.push(k as u32);
+                }
+                continue;
+            }
+            let centre = (y - origin.y).atan2(x - origin.x);
+            let half = (r / d).min(1.0).asin() + bin_width;
+            let (first, last) =
+                (((centre - half) / bin_width).floor() as i64, ((centre + half) / bin_width).ceil() as i64);
+            for b in first..=last {
+                bins[b.rem_euclid(BINS as i64) as usize].push(k as u32);
+            }
+        }
+        let noise = Normal::new(0.0, self.spec.range_noise_m.max(0.0)).ok();
+        let directions = self.directions();
+        let mut frame = LidarFrame::default();
+        for d in &directions {
+            let dw = rotation * d;
+            let bin = (dw.y.atan2(dw.x).rem_euclid(std::f64::consts::TAU) / bin_width) as usize % BINS;
+            let mut best = (f64::INFINITY, world.ground_label, u32::MAX);
+            if dw.z < -1e-9 {
+                best.0 = -origin.z / dw.z;
+            }
+            for &k in &bins[bin] {
+                let solid = &world.solids[k as usize];
+                if let Some(t) = solid.primitive.intersect(&origin, &dw) {
+                    if t < best.0 {
+                        best = (t, solid.label, solid.instance);
+                    }
+                }
+            }
+            let (t, label, instance) = best;
+            if t > max_range || t < 0.3 {
+                continue;
+            }
+            let t = t + noise.map_or(0.0, |n| n.sample(rng));
+            frame.points.push(Point3::from(d * t));
+            frame.labels.push(label);
+            frame.instances.push(instance);
+        }
+        frame
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::shapes::{Primitive, Solid};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    fn world_with_a_wall() -> World {
+        World {
+            solids: vec![Solid {
+                primitive: Primitive::Box {
+                    centre: Point3::new(10.0, 0.0, 2.0),
+                    half: Vector3::new(0.1, 5.0, 2.0),
+                    yaw: 0.0,
+                },
+                label: 1,
+                instance: 0,
+            }],
+            ground_label: 0,
+            ..World::default()
+        }
+    }
+
+    #[test]
+    fn returns_lie_on_the_surfaces_they_hit() {
+        let spec = LidarSpec { range_noise_m: 0.0, ..LidarSpec::default() };
+        let mut lidar = Lidar::new(&spec);
+        let pose = Pose3::translation(0.0, 0.0, 1.0);
+        let frame = lidar.scan(&world_with_a_wall(), &pose, &mut ChaCha8Rng::seed_from_u64(1));
+        assert_eq!(frame.points.len(), frame.labels.len());
+        let (mut wall, mut ground) = (0, 0);
+        for (p, l) in frame.points.iter().zip(&frame.labels) {
+            let w = pose * p;
+            match l {
+                1 => {
+                    wall += 1;
+                    assert!((w.x - 9.9).abs() < 1e-9 && w.y.abs() <= 5.0 + 1e-9, "{w}");
+                }
+                0 => {
+                    ground += 1;
+                    assert!(w.z.abs() < 1e-9, "{w}");
+                    // Nothing on the ground behind the wall.
+                    assert!(!(w.x > 9.9 && w.y.abs() < 4.0), "{w}");
+                }
+                _ => panic!("label {l}"),
+            }
+        }
+        assert!(wall > 100 && ground > 1000, "{wall} {ground}");
+    }
+
+    #[test]
+    fn a_livox_pattern_never_repeats() {
+        let spec = LidarSpec { pattern: LidarPattern::Livox, points_per_frame: 100, ..LidarSpec::default() };
+        let mut lidar = Lidar::new(&spec);
+        let (a, b) = (lidar.directions(), lidar.directions());
+        assert_eq!(a.len(), 100);
+        assert!(a.iter().all(|d| b.iter().all(|e| (d - e).norm() > 1e-9)));
+        let [lo, hi] = spec.vertical_fov_deg.map(f64::to_radians);
+        assert!(a.iter().all(|d| d.z.asin() >= lo - 1e-9 && d.z.asin() <= hi + 1e-9));
+    }
+}

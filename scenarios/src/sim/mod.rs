@@ -1,0 +1,10 @@
+//! The simulator: a seeded world, routes, the LiDAR, the camera with its segmentation errors,
+//! drifting odometry and the radio — everything a robot would get from hardware.
+
+pub mod camera;
+pub mod lidar;
+pub mod odometry;
+pub mod radio;
+pub mod shapes;
+pub mod trajectory;
+pub mod world;

@@ -1,0 +1,109 @@
+//! Odometry with drift, as a LiDAR-inertial odometry would report it: each step's true motion
+//! plus random walks in position (m per √m travelled), height and yaw (° per √m), and a slowly
+//! varying roll/pitch error (a first-order Gauss–Markov tilt that does not accumulate). The
+//! robot's world frame is where it started: its start position on the ground, its start
+//! heading along x.
+
+use crate::scenario::OdometrySpec;
+use nalgebra::{UnitQuaternion, Vector3};
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+use sgm_model::geometry::{pose_from_yaw_translation, yaw_of, Pose3};
+
+pub struct Odometry {
+    spec: OdometrySpec,
+    last_truth: Option<Pose3>,
+    estimate: Pose3,
+    tilt: [f64; 2],
+    /// p_true = truth_from_world · p_world.
+    pub truth_from_world: Pose3,
+}
+
+/// Correlation of the tilt error from one frame to the next.
+const TILT_MEMORY: f64 = 0.95;
+
+impl Odometry {
+    pub fn new(spec: &OdometrySpec) -> Self {
+        Self {
+            spec: spec.clone(),
+            last_truth: None,
+            estimate: Pose3::identity(),
+            tilt: [0.0; 2],
+            truth_from_world: Pose3::identity(),
+        }
+    }
+
+    /// The odometry's report for the body's true pose `truth` (world_from_body in the robot's
+    /// world frame).
+    pub fn step(&mut self, truth: &Pose3, rng: &mut impl Rng) -> Pose3 {
+        let mut n = || -> f64 { StandardNormal.sample(rng) };
+        match self.last_truth {
+            None => {
+                let t = truth.translation.vector;
+                self.truth_from_world = pose_from_yaw_translation(yaw_of(truth), Vector3::new(t.x, t.y, 0.0));
+                self.estimate = self.truth_from_world.inverse() * truth;
+            }
+            Some(last) => {
+                let increment = last.inverse() * truth;
+                let root = increment.translation.vector.norm().sqrt();
+                let s = &self.spec;
+                let mut noisy = increment;
+                noisy.translation.vector += Vector3::new(
+                    s.position_walk_m * root * n(),
+                    s.position_walk_m * root * n(),
+                    s.height_walk_m * root * n(),
+                );
+                let yaw = s.yaw_walk_deg.to_radians() * root * n();
+                noisy.rotation = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw) * noisy.rotation;
+                self.estimate *= noisy;
+            }
+        }
+        self.last_truth = Some(*truth);
+        let sigma = self.spec.roll_pitch_deg.to_radians() * (1.0 - TILT_MEMORY * TILT_MEMORY).sqrt();
+        for k in 0..2 {
+            self.tilt[k] = TILT_MEMORY * self.tilt[k] + sigma * n();
+        }
+        let mut reported = self.estimate;
+        reported.rotation *= UnitQuaternion::from_euler_angles(self.tilt[0], self.tilt[1], 0.0);
+        reported
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn noiseless_odometry_is_the_truth_in_the_start_frame() {
+        let spec = OdometrySpec { position_walk_m: 0.0, yaw_walk_deg: 0.0, height_walk_m: 0.0, roll_pitch_deg: 0.0 };
+        let mut o = Odometry::new(&spec);
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        for k in 0..20 {
+            let truth = pose_from_yaw_translation(0.3 + 0.1 * k as f64, Vector3::new(5.0 + k as f64, -2.0, 0.8));
+            let reported = o.step(&truth, &mut rng);
+            let e = sgm_model::geometry::pose_error(&(o.truth_from_world * reported), &truth);
+            assert!(e.translation_m < 1e-9 && e.max_axis_rotation_deg() < 1e-9);
+        }
+        assert!((o.truth_from_world.translation.vector - Vector3::new(5.0, -2.0, 0.0)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn the_yaw_walk_grows_with_the_square_root_of_distance() {
+        // 400 runs of 100 one-metre steps: the yaw error's spread is σ·√100.
+        let spec = OdometrySpec { position_walk_m: 0.0, yaw_walk_deg: 0.1, height_walk_m: 0.0, roll_pitch_deg: 0.0 };
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let mut sum_sq = 0.0;
+        for _ in 0..400 {
+            let mut o = Odometry::new(&spec);
+            let mut last = Pose3::identity();
+            for k in 0..=100 {
+                last = o.step(&pose_from_yaw_translation(0.0, Vector3::new(k as f64, 0.0, 0.0)), &mut rng);
+            }
+            sum_sq += yaw_of(&last).to_degrees().powi(2);
+        }
+        let sd = (sum_sq / 400.0).sqrt();
+        assert!((sd - 1.0).abs() < 0.1, "{sd}");
+    }
+}
