@@ -49,13 +49,20 @@ pub struct FusionConfig {
     pub cluster_tolerance_m: f64,
     /// LiDAR returns farther than this are ignored, m. Default 60.
     pub max_range_m: f64,
+    /// Objects are clustered from labelled returns within this range only (farther ones keep
+    /// their labels in the keyframe cloud): distant objects are seen by too few, too sparse
+    /// returns for a trustworthy centroid, m. Default 30.
+    pub object_range_m: f64,
+    /// Clusters flatter than this are not objects: labels that bled onto the ground behind an
+    /// object in the image, m. Default 0.2.
+    pub min_object_height_m: f64,
     /// The class table. Default: [`default_classes`].
     pub classes: Vec<ClassSpec>,
 }
 
 impl Default for FusionConfig {
     fn default() -> Self {
-        Self { cluster_tolerance_m: 0.3, max_range_m: 60.0, classes: default_classes() }
+        Self { cluster_tolerance_m: 0.3, max_range_m: 60.0, object_range_m: 30.0, min_object_height_m: 0.2, classes: default_classes() }
     }
 }
 
@@ -282,6 +289,13 @@ impl RobotConfig {
         let f = &self.fusion;
         check(positive(f.cluster_tolerance_m), "fusion.cluster_tolerance_m", f.cluster_tolerance_m, "finite and > 0")?;
         check(positive(f.max_range_m), "fusion.max_range_m", f.max_range_m, "finite and > 0")?;
+        check(positive(f.object_range_m), "fusion.object_range_m", f.object_range_m, "finite and > 0")?;
+        check(
+            f.min_object_height_m.is_finite() && f.min_object_height_m >= 0.0,
+            "fusion.min_object_height_m",
+            f.min_object_height_m,
+            "finite and ≥ 0",
+        )?;
         let k = &self.tracker.keyframes;
         check(positive(k.min_translation_m), "tracker.keyframes.min_translation_m", k.min_translation_m, "> 0")?;
         check(positive(k.min_rotation_rad), "tracker.keyframes.min_rotation_rad", k.min_rotation_rad, "> 0")?;

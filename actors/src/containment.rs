@@ -6,7 +6,20 @@
 
 use actix::{Actor, ActorContext, Context};
 use std::any::Any;
+use std::cell::RefCell;
+use std::collections::BTreeMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::time::{Duration, Instant};
+
+thread_local! {
+    static BUSY: RefCell<BTreeMap<&'static str, Duration>> = const { RefCell::new(BTreeMap::new()) };
+}
+
+/// Time spent in handlers on this thread, per actor kind (for `timing.json`; never read by a
+/// handler, so it cannot make a run depend on the machine's speed).
+pub fn busy_time() -> BTreeMap<&'static str, Duration> {
+    BUSY.with(|b| b.borrow().clone())
+}
 
 /// Runs `body`; if it panics, logs, and stops `ctx`'s actor so that its supervisor restarts it.
 /// Returns whether the body completed.
@@ -15,7 +28,10 @@ where
     A: Actor<Context = Context<A>>,
 {
     crate::quiescence::record_activity();
-    match catch_unwind(AssertUnwindSafe(body)) {
+    let started = Instant::now();
+    let outcome = catch_unwind(AssertUnwindSafe(body));
+    BUSY.with(|b| *b.borrow_mut().entry(actor).or_default() += started.elapsed());
+    match outcome {
         Ok(()) => true,
         Err(payload) => {
             tracing::error!(actor, "handler panicked ({}); message dropped, actor restarting", panic_text(&*payload));

@@ -16,14 +16,16 @@ pub struct Fusion {
     classes: ClassTable,
     clustering: ClusterConfig,
     max_range_m: f64,
+    object_range_m: f64,
     tracker: Recipient<LabelledScan>,
 }
 
 impl Fusion {
     /// `classes`: the validated table of `config.classes`.
     pub fn new(config: &FusionConfig, classes: ClassTable, tracker: Recipient<LabelledScan>) -> Self {
-        let clustering = classes.cluster_config(config.cluster_tolerance_m);
-        Self { classes, clustering, max_range_m: config.max_range_m, tracker }
+        let mut clustering = classes.cluster_config(config.cluster_tolerance_m);
+        clustering.min_height_m = config.min_object_height_m;
+        Self { classes, clustering, max_range_m: config.max_range_m, object_range_m: config.object_range_m, tracker }
     }
 }
 
@@ -57,7 +59,10 @@ impl Handler<SensorFrame> for Fusion {
                     kept.push(l.and_then(|LabelId(id)| self.classes.object_label(id)));
                 }
             }
-            let candidates = cluster(&points, &kept, &self.clustering);
+            let near = self.object_range_m * self.object_range_m;
+            let clustered: Vec<Option<LabelId>> =
+                points.iter().zip(&kept).map(|(p, l)| if p.coords.norm_squared() <= near { *l } else { None }).collect();
+            let candidates = cluster(&points, &clustered, &self.clustering);
             self.tracker.do_send(LabelledScan {
                 stamp: frame.stamp,
                 world_from_body: frame.world_from_body,

@@ -40,7 +40,7 @@ macro_rules! connects {
 pub mod clock;
 pub mod comms;
 pub mod config;
-mod containment;
+pub mod containment;
 pub mod fusion;
 pub mod matcher;
 pub mod messages;

@@ -2,6 +2,8 @@
 //! later issues) simulated scenarios. The `sgm` binary is a thin shell over this library.
 
 pub mod object_file;
+pub mod report;
+pub mod runner;
 pub mod scenario;
 pub mod settings;
 pub mod sim;

@@ -1,5 +1,6 @@
 //! `sgm`: the SGM command line.
 //!
+//! * `sgm run [SCENARIO] [--out DIR] [--seed N]`: a simulated multi-robot mission and its report.
 //! * `sgm match LOCAL.json REMOTE.json [--config FILE]`: match two object graphs (stable contract).
 //! * `sgm optimize IN.g2o … [-o OUT] [--robust …] [--json]`: pose-graph optimisation.
 //! * `sgm icp SOURCE.pcd TARGET.pcd [...]`: ICP registration.
@@ -23,6 +24,20 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run a scenario (a library name or a TOML file; default quickstart) and write its report.
+    Run {
+        /// quickstart, outdoor_two_robots, indoor_three_robots, team_of_eight, or a path.
+        scenario: Option<String>,
+        /// Report directory (default: a fresh folder under runs/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Override the scenario's seed.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Match two object graphs; prints one JSON object (p_local = T · p_remote).
     Match {
         /// The local robot's objects (JSON).
@@ -143,6 +158,15 @@ enum BenchCommand {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Run { scenario, out, seed, quiet } => {
+            match cli::run_cmd::execute(cli::run_cmd::Options { scenario, out, seed, quiet }) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("sgm run: {e:#}");
+                    ExitCode::from(2)
+                }
+            }
+        }
         Command::Match { local, remote, config } => cli::match_cmd::run(&local, &remote, config.as_deref()),
         Command::Optimize { inputs, output, robust, json, gauss_newton } => {
             use sgm_model::optim::robust::RobustKernel;

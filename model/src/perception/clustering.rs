@@ -37,11 +37,14 @@ pub struct ClusterConfig {
     pub default_limits: ClassLimits,
     /// Per-class limits, by class id.
     pub classes: BTreeMap<u16, ClassLimits>,
+    /// Clusters flatter than this along z are refused (labels bleeding onto the ground behind
+    /// an object, in the sensor's upright frame), m. Default 0: off.
+    pub min_height_m: f64,
 }
 
 impl Default for ClusterConfig {
     fn default() -> Self {
-        Self { tolerance_m: 0.3, default_limits: ClassLimits::default(), classes: BTreeMap::new() }
+        Self { tolerance_m: 0.3, default_limits: ClassLimits::default(), classes: BTreeMap::new(), min_height_m: 0.0 }
     }
 }
 
@@ -138,7 +141,7 @@ pub fn cluster(points: &[Point3<f64>], labels: &[Option<LabelId>], config: &Clus
                 sum += p;
             }
             let extent = hi - lo;
-            if extent.max() > limits.max_extent_m {
+            if extent.max() > limits.max_extent_m || extent.z < config.min_height_m {
                 continue;
             }
             out.push(ObjectCandidate {
@@ -168,6 +171,21 @@ mod tests {
                 )
             })
             .collect()
+    }
+
+    #[test]
+    fn flat_clusters_are_refused_when_asked() {
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        // A 2 m × 2 m patch of "object" labels on the ground, and a real 1 m box.
+        let mut points: Vec<Point3<f64>> =
+            (0..200).map(|_| Point3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), -0.8)).collect();
+        points.extend(boxed(&mut rng, [10.0, 0.0, 0.0], 0.5, 200));
+        let labels = vec![Some(LabelId(3)); points.len()];
+        let all = cluster(&points, &labels, &ClusterConfig::default());
+        assert_eq!(all.len(), 2);
+        let upright = cluster(&points, &labels, &ClusterConfig { min_height_m: 0.2, ..ClusterConfig::default() });
+        assert_eq!(upright.len(), 1);
+        assert!((upright[0].centroid.x - 10.0).abs() < 0.1);
     }
 
     #[test]

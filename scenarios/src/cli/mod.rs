@@ -3,3 +3,4 @@ pub mod icp_cmd;
 pub mod match_cmd;
 pub mod optimize_cmd;
 pub mod pcd_convert_cmd;
+pub mod run_cmd;

@@ -113,7 +113,7 @@ pub enum Part {
 pub const KNOWN_SHAPES: &str = "one of tree, lamp_post, bench, trash_can, chair, table, bookshelf, car";
 
 const TREE: &[Part] =
-    &[Part::Cylinder { radius: 0.2, z0: 0.0, z1: 2.5 }, Part::Cylinder { radius: 1.5, z0: 2.5, z1: 5.5 }];
+    &[Part::Cylinder { radius: 0.25, z0: 0.0, z1: 2.5 }, Part::Cylinder { radius: 1.0, z0: 2.5, z1: 5.0 }];
 const LAMP_POST: &[Part] = &[
     Part::Cylinder { radius: 0.1, z0: 0.0, z1: 4.5 },
     Part::Box { centre: [0.2, 0.0, 4.55], half: [0.35, 0.15, 0.1] },

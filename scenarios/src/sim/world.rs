@@ -30,6 +30,8 @@ pub struct World {
     pub matchable_labels: Vec<u16>,
     /// [x_min, y_min, x_max, y_max].
     pub bounds: [f64; 4],
+    /// RGB of each class id (for plots).
+    pub colours: std::collections::BTreeMap<u16, [u8; 3]>,
 }
 
 fn label_of(classes: &[ClassSpec], name: &str) -> u16 {
@@ -53,6 +55,7 @@ pub fn generate(spec: &WorldSpec, classes: &[ClassSpec], routes: &[Vec<Point2<f6
         ground_label: label_of(classes, "ground"),
         matchable_labels: classes.iter().filter(|c| c.matchable).map(|c| c.id).collect(),
         bounds,
+        colours: classes.iter().map(|c| (c.id, c.colour)).collect(),
         ..World::default()
     };
     let mut instance = 0u32;

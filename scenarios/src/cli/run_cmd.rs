@@ -1,0 +1,96 @@
+//! `sgm run [SCENARIO] [--out DIR] [--seed N] [--quiet]`: runs a scenario (a library name or a
+//! TOML file; default `quickstart`) on the virtual clock and writes its report directory
+//! (default: a fresh folder under `runs/`). Prints a one-screen summary.
+
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use sgm_scenarios::report::{self, Report};
+use sgm_scenarios::runner::{run, Timing};
+use sgm_scenarios::scenario::Scenario;
+use std::path::{Path, PathBuf};
+
+pub struct Options {
+    pub scenario: Option<String>,
+    pub out: Option<PathBuf>,
+    pub seed: Option<u64>,
+    pub quiet: bool,
+}
+
+/// `runs/NAME-seedS`, or with `-2`, `-3`, … if taken.
+fn fresh_dir(name: &str, seed: u64) -> PathBuf {
+    let base = Path::new("runs").join(format!("{name}-seed{seed}"));
+    if !base.exists() {
+        return base;
+    }
+    (2..).map(|k| Path::new("runs").join(format!("{name}-seed{seed}-{k}"))).find(|p| !p.exists()).unwrap_or(base)
+}
+
+pub fn execute(options: Options) -> Result<()> {
+    let name = options.scenario.as_deref().unwrap_or("quickstart");
+    let mut scenario = Scenario::load(name).with_context(|| format!("scenario {name}"))?;
+    if let Some(seed) = options.seed {
+        scenario = scenario.with_seed(seed);
+    }
+    let dir = options.out.unwrap_or_else(|| fresh_dir(&scenario.scenario.name, scenario.scenario.seed));
+    let bar = if options.quiet { ProgressBar::hidden() } else { ProgressBar::new(0) };
+    bar.set_style(
+        ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} steps, {elapsed} wall, eta {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.set_prefix(format!("{} (seed {})", scenario.scenario.name, scenario.scenario.seed));
+    let system = actix_rt::System::new();
+    let outcome = system.block_on(run(&scenario, Some(&bar))).context("the run failed")?;
+    bar.finish_and_clear();
+    let report = report::write(&outcome, &dir).context("writing the report")?;
+    print!("{}", summary(&report, &outcome.timing, &dir));
+    Ok(())
+}
+
+fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let m = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.2} m"));
+    let _ = writeln!(
+        s,
+        "{}: {:.0} s simulated in {:.1} s ({:.0}× real time)",
+        report.scenario, report.sim_s, timing.wall_s, timing.realtime_factor
+    );
+    let _ = writeln!(s, "team ATE RMSE {} over {}", m(report.team_ate_rmse_m), report.team_ate_robots.join(", "));
+    for r in &report.robots {
+        let _ = writeln!(
+            s,
+            "  {:<10} ATE {:>8}  {:>4} keyframes  {:>3} objects ({} found, {} spurious)  {:>5.0} m",
+            r.name,
+            m(r.ate_rmse_m),
+            r.keyframes,
+            r.confirmed_objects,
+            r.objects_found,
+            r.objects_spurious,
+            r.distance_m
+        );
+    }
+    for a in &report.alignments {
+        let _ = writeln!(
+            s,
+            "  {} ← {}: {}{}",
+            a.local,
+            a.remote,
+            a.state,
+            match (a.first_aligned_s, a.translation_error_m, a.rotation_error_deg) {
+                (Some(t), Some(e), Some(r)) => format!(" at {t:.0} s, error {e:.2} m / {r:.2}°"),
+                _ => String::new(),
+            }
+        );
+    }
+    let total: u64 = report.messages.values().map(|m| m.bytes_total).sum();
+    let _ = writeln!(
+        s,
+        "radio: {:.1} KB sent, {:.3} % of raw point-cloud sharing ({:.1} MB)",
+        total as f64 / 1024.0,
+        report.bytes_ratio_to_raw * 100.0,
+        report.point_cloud_raw.bytes_total as f64 / 1024.0 / 1024.0
+    );
+    let _ = writeln!(s, "report: {}", dir.join("report.md").display());
+    s
+}

@@ -1,0 +1,299 @@
+//! The report's figures. ATE by the paper's convention: each robot's optimised keyframe
+//! positions against the truth at the same stamps, aligned by SE(3) Umeyama
+//! (`model::eval::ate`, what `evo_ape tum -a` does); for the team, every robot's trajectory is
+//! brought into the reference robot's (the first robot's) world by that robot's own estimate of
+//! `local_from_remote`, merged into one, and aligned once. A robot the reference has not aligned
+//! cannot be merged: it is listed in `team_ate_robots` only once it is.
+
+use super::{Observation, RobotTruth, RunRecord};
+use crate::sim::radio::RadioStats;
+use nalgebra::Point3;
+use serde::Serialize;
+use sgm_model::eval::ate::ate;
+use sgm_model::geometry::{pose_error, Pose3};
+use sgm_model::scene_graph::RobotId;
+use sgm_model::wire::{MessageKind, TrafficAccount};
+use std::collections::BTreeMap;
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RobotReport {
+    pub name: String,
+    /// ATE RMSE of the robot's own trajectory, m (`None` with fewer than 3 keyframes).
+    pub ate_rmse_m: Option<f64>,
+    pub keyframes: usize,
+    /// Objects in the map (confirmed or not).
+    pub objects: usize,
+    pub confirmed_objects: usize,
+    /// Confirmed objects whose class has a world object within 2 m (the robot's start frame
+    /// placed on the truth), counted once per world object.
+    pub objects_found: usize,
+    /// Confirmed objects beyond the first for one world object, or with nothing of their class
+    /// within 2 m.
+    pub objects_spurious: usize,
+    /// Mean distance of the found objects to their world object, m.
+    pub object_error_m: Option<f64>,
+    pub distance_m: f64,
+    pub frames: u64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AlignmentReport {
+    pub local: String,
+    pub remote: String,
+    /// Protocol state at the end.
+    pub state: String,
+    pub first_aligned_s: Option<f64>,
+    pub translation_error_m: Option<f64>,
+    pub rotation_error_deg: Option<f64>,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct MessageRow {
+    pub count: u64,
+    pub bytes_total: u64,
+    pub bytes_mean: f64,
+    pub bytes_max: u64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PairError {
+    pub local: String,
+    pub remote: String,
+    pub translation_error_m: f64,
+    pub rotation_error_deg: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SeriesPoint {
+    pub t: f64,
+    pub team_ate_rmse_m: Option<f64>,
+    /// Bytes sent by the whole team so far.
+    pub bytes_total: u64,
+    pub alignments: Vec<PairError>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Report {
+    pub scenario: String,
+    pub seed: u64,
+    pub sim_s: f64,
+    pub team_ate_rmse_m: Option<f64>,
+    /// Robots merged into the team ATE (the reference first).
+    pub team_ate_robots: Vec<String>,
+    pub robots: Vec<RobotReport>,
+    pub alignments: Vec<AlignmentReport>,
+    /// Sent by the whole team, per message type (paper Table 4).
+    pub messages: BTreeMap<String, MessageRow>,
+    /// Sending every LiDAR frame as a raw PointCloud2 instead (16 bytes per point).
+    pub point_cloud_raw: MessageRow,
+    /// Total SGM bytes ÷ raw point-cloud bytes.
+    pub bytes_ratio_to_raw: f64,
+    pub radio: RadioStats,
+    pub world_objects: usize,
+    pub series: Vec<SeriesPoint>,
+}
+
+fn row(stats: &sgm_model::wire::TrafficStats) -> MessageRow {
+    MessageRow {
+        count: stats.count,
+        bytes_total: stats.bytes_total,
+        bytes_mean: stats.bytes_mean(),
+        bytes_max: stats.bytes_max,
+    }
+}
+
+/// Keyframe positions of a robot's map (its world) and the true positions at their stamps.
+pub(crate) fn trajectory(
+    observation: &Observation,
+    k: usize,
+    truth: &RobotTruth,
+) -> Vec<(f64, Pose3, Pose3)> {
+    let Some(Some((map, _, _))) = observation.maps.get(k) else { return Vec::new() };
+    map.keyframes
+        .iter()
+        .filter_map(|kf| Some((kf.stamp, kf.world_from_body, truth.route.pose_at(kf.stamp)?)))
+        .collect()
+}
+
+/// The reference robot's estimate of robot k's world: reference_world_from_k_world.
+pub(crate) fn reference_from(observation: &Observation, k: usize) -> Option<Pose3> {
+    if k == 0 {
+        return Some(Pose3::identity());
+    }
+    let Some(Some((_, neighbours, _))) = observation.maps.first() else { return None };
+    let id = RobotId(k as u16 + 1);
+    neighbours.iter().find(|n| n.robot == id && n.state == "Aligned").and_then(|n| n.local_from_remote)
+}
+
+fn positions(samples: &[(f64, Pose3, Pose3)], transform: &Pose3) -> (Vec<Point3<f64>>, Vec<Point3<f64>>) {
+    samples
+        .iter()
+        .map(|(_, estimate, truth)| {
+            (Point3::from((transform * estimate).translation.vector), Point3::from(truth.translation.vector))
+        })
+        .unzip()
+}
+
+/// Team ATE at one observation, and the robots it merged.
+fn team_ate(observation: &Observation, record: &RunRecord) -> (Option<f64>, Vec<String>) {
+    let (mut estimate, mut truth, mut names) = (Vec::new(), Vec::new(), Vec::new());
+    for (k, robot) in record.robots.iter().enumerate() {
+        let Some(transform) = reference_from(observation, k) else { continue };
+        let samples = trajectory(observation, k, robot);
+        if samples.is_empty() {
+            continue;
+        }
+        let (e, t) = positions(&samples, &transform);
+        estimate.extend(e);
+        truth.extend(t);
+        names.push(robot.name.clone());
+    }
+    (ate(&estimate, &truth).map(|a| a.rmse_m), names)
+}
+
+fn pair_errors(observation: &Observation, record: &RunRecord) -> Vec<PairError> {
+    let mut out = Vec::new();
+    for (k, local) in record.robots.iter().enumerate() {
+        let Some(Some((_, neighbours, _))) = observation.maps.get(k) else { continue };
+        for n in neighbours {
+            let r = usize::from(n.robot.0).wrapping_sub(1);
+            let (Some(remote), Some(estimate)) = (record.robots.get(r), n.local_from_remote) else { continue };
+            let truth = local.truth_from_world.inverse() * remote.truth_from_world;
+            let e = pose_error(&estimate, &truth);
+            out.push(PairError {
+                local: local.name.clone(),
+                remote: remote.name.clone(),
+                translation_error_m: e.translation_m,
+                rotation_error_deg: e.max_axis_rotation_deg(),
+            });
+        }
+    }
+    out
+}
+
+fn bytes_sent(observation: &Observation) -> TrafficAccount {
+    let mut total = TrafficAccount::default();
+    for (_, _, comms) in observation.maps.iter().flatten() {
+        total.merge(&comms.sent);
+    }
+    total
+}
+
+/// (found, spurious, mean error of the found) of a map's confirmed objects against the world.
+fn object_quality(
+    map: &sgm_actors::tracker::MapSummary,
+    truth: &RobotTruth,
+    world: &[(u16, Point3<f64>)],
+) -> (usize, usize, Option<f64>) {
+    let mut claimed = vec![false; world.len()];
+    let (mut found, mut spurious, mut error_sum) = (0, 0, 0.0);
+    for o in map.objects.iter().filter(|o| o.confirmed) {
+        let p = truth.truth_from_world * o.centroid;
+        let nearest = world
+            .iter()
+            .enumerate()
+            .filter(|(_, (label, _))| *label == o.label.0)
+            .map(|(w, (_, c))| (w, (c.xy() - p.xy()).norm()))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        match nearest {
+            Some((w, d)) if d <= 2.0 && !claimed[w] => {
+                claimed[w] = true;
+                found += 1;
+                error_sum += d;
+            }
+            _ => spurious += 1,
+        }
+    }
+    (found, spurious, (found > 0).then(|| error_sum / found as f64))
+}
+
+pub fn compute(record: &RunRecord) -> Report {
+    let last = record.observations.last().cloned().unwrap_or_default();
+    let robots = record
+        .robots
+        .iter()
+        .enumerate()
+        .map(|(k, truth)| {
+            let samples = trajectory(&last, k, truth);
+            let (e, t) = positions(&samples, &Pose3::identity());
+            let (keyframes, objects, confirmed) = match last.maps.get(k) {
+                Some(Some((map, _, _))) => {
+                    (map.keyframes.len(), map.objects.len(), map.objects.iter().filter(|o| o.confirmed).count())
+                }
+                _ => (0, 0, 0),
+            };
+            let distance_m = t.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+            let (found, spurious, error) = match last.maps.get(k) {
+                Some(Some((map, _, _))) => object_quality(map, truth, &record.world_objects),
+                _ => (0, 0, None),
+            };
+            RobotReport {
+                name: truth.name.clone(),
+                ate_rmse_m: ate(&e, &t).map(|a| a.rmse_m),
+                keyframes,
+                objects,
+                confirmed_objects: confirmed,
+                objects_found: found,
+                objects_spurious: spurious,
+                object_error_m: error,
+                distance_m,
+                frames: truth.frames,
+            }
+        })
+        .collect();
+    let mut alignments = Vec::new();
+    for (k, local) in record.robots.iter().enumerate() {
+        let Some(Some((_, neighbours, _))) = last.maps.get(k) else { continue };
+        for n in neighbours {
+            let Some(remote) = record.robots.get(usize::from(n.robot.0).wrapping_sub(1)) else { continue };
+            let error = n.local_from_remote.map(|estimate| {
+                pose_error(&estimate, &(local.truth_from_world.inverse() * remote.truth_from_world))
+            });
+            alignments.push(AlignmentReport {
+                local: local.name.clone(),
+                remote: remote.name.clone(),
+                state: n.state.to_string(),
+                first_aligned_s: n.first_aligned,
+                translation_error_m: error.map(|e| e.translation_m),
+                rotation_error_deg: error.map(|e| e.max_axis_rotation_deg()),
+            });
+        }
+    }
+    let sent = bytes_sent(&last);
+    let messages: BTreeMap<String, MessageRow> =
+        MessageKind::ALL.iter().map(|kind| (format!("{kind:?}"), row(&sent.get(*kind)))).collect();
+    let raw_total: u64 = record.robots.iter().map(|r| r.raw_bytes).sum();
+    let frames: u64 = record.robots.iter().map(|r| r.frames).sum();
+    let point_cloud_raw = MessageRow {
+        count: frames,
+        bytes_total: raw_total,
+        bytes_mean: if frames == 0 { 0.0 } else { raw_total as f64 / frames as f64 },
+        bytes_max: record.robots.iter().map(|r| r.raw_max_bytes).max().unwrap_or(0),
+    };
+    let (team_ate_rmse_m, team_ate_robots) = team_ate(&last, record);
+    let series = record
+        .observations
+        .iter()
+        .map(|o| SeriesPoint {
+            t: o.t,
+            team_ate_rmse_m: team_ate(o, record).0,
+            bytes_total: bytes_sent(o).bytes_total(),
+            alignments: pair_errors(o, record),
+        })
+        .collect();
+    Report {
+        scenario: record.scenario.clone(),
+        seed: record.seed,
+        sim_s: record.sim_s,
+        team_ate_rmse_m,
+        team_ate_robots,
+        robots,
+        alignments,
+        messages,
+        point_cloud_raw,
+        bytes_ratio_to_raw: if raw_total == 0 { 0.0 } else { sent.bytes_total() as f64 / raw_total as f64 },
+        radio: record.radio.clone(),
+        world_objects: record.world_objects.len(),
+        series,
+    }
+}

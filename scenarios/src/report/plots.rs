@@ -1,0 +1,230 @@
+//! PNG plots (plotters): `map.png` — top-down, the world's objects and each robot's mapped
+//! objects coloured by class, true and estimated trajectories; `ate.png` — team ATE and
+//! inter-robot translation errors over time; `bytes.png` — bytes sent by the team over time
+//! against raw point-cloud sharing (log scale). Text uses DejaVu Sans from the system
+//! (`fonts-dejavu-core`); without it the plots are drawn without text.
+
+use super::Report;
+use crate::runner::RunOutcome;
+use plotters::prelude::*;
+use std::path::Path;
+use std::sync::OnceLock;
+
+const FONT_PATHS: &[&str] = &[
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+];
+
+/// Registers a system font for plot text once; whether one was found.
+fn font() -> bool {
+    static FONT: OnceLock<bool> = OnceLock::new();
+    *FONT.get_or_init(|| {
+        for path in FONT_PATHS {
+            if let Ok(bytes) = std::fs::read(path) {
+                let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+                if plotters::style::register_font("sans-serif", FontStyle::Normal, bytes).is_ok() {
+                    return true;
+                }
+            }
+        }
+        tracing::warn!("no DejaVu Sans font found: plots are drawn without text");
+        false
+    })
+}
+
+const ROBOT_COLOURS: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
+];
+
+fn err(e: impl std::fmt::Display) -> String {
+    e.to_string()
+}
+
+pub fn draw(outcome: &RunOutcome, report: &Report, dir: &Path) -> Result<(), String> {
+    let text = font();
+    map(outcome, &dir.join("map.png"), text)?;
+    ate(report, &dir.join("ate.png"), text)?;
+    bytes(report, &dir.join("bytes.png"), text)
+}
+
+fn map(outcome: &RunOutcome, path: &Path, text: bool) -> Result<(), String> {
+    let [x0, y0, x1, y1] = outcome.world.bounds;
+    let root = BitMapBackend::new(path, (1000, 1000)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let mut builder = ChartBuilder::on(&root);
+    builder.margin(20).x_label_area_size(if text { 40 } else { 5 }).y_label_area_size(if text { 50 } else { 5 });
+    if text {
+        builder.caption("Top-down map: truth (thin) and estimates (thick); objects by class", ("sans-serif", 20));
+    }
+    let mut chart = builder.build_cartesian_2d(x0..x1, y0..y1).map_err(err)?;
+    let mut mesh = chart.configure_mesh();
+    mesh.disable_mesh();
+    if text {
+        mesh.x_desc("x (m)").y_desc("y (m)");
+    } else {
+        mesh.x_labels(0).y_labels(0);
+    }
+    mesh.draw().map_err(err)?;
+    let colour = |label: u16| {
+        let [r, g, b] = outcome.world.colours.get(&label).copied().unwrap_or([128, 128, 128]);
+        RGBColor(r, g, b)
+    };
+    // World: objects as hollow squares.
+    chart
+        .draw_series(outcome.world.objects.iter().map(|o| {
+            let (x, y) = (o.centre.x, o.centre.y);
+            Rectangle::new([(x - 0.6, y - 0.6), (x + 0.6, y + 0.6)], colour(o.label).stroke_width(1))
+        }))
+        .map_err(err)?;
+    let last = outcome.record.observations.last().cloned().unwrap_or_default();
+    for (k, robot) in outcome.record.robots.iter().enumerate() {
+        let c = ROBOT_COLOURS[k % ROBOT_COLOURS.len()];
+        let samples = super::figures::trajectory(&last, k, robot);
+        chart
+            .draw_series(LineSeries::new(
+                samples.iter().map(|(_, _, t)| (t.translation.x, t.translation.y)),
+                c.mix(0.4).stroke_width(1),
+            ))
+            .map_err(err)?;
+        let series = chart
+            .draw_series(LineSeries::new(
+                samples.iter().map(|(_, e, _)| {
+                    let p = robot.truth_from_world * e;
+                    (p.translation.x, p.translation.y)
+                }),
+                c.stroke_width(3),
+            ))
+            .map_err(err)?;
+        if text {
+            series.label(robot.name.clone()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
+        }
+        // Mapped objects, placed in the truth frame by the robot's start.
+        if let Some(Some((summary, _, _))) = last.maps.get(k) {
+            chart
+                .draw_series(summary.objects.iter().filter(|o| o.confirmed).map(|o| {
+                    let p = robot.truth_from_world * o.centroid;
+                    Circle::new((p.x, p.y), 3, colour(o.label.0).filled())
+                }))
+                .map_err(err)?;
+        }
+    }
+    if text {
+        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+    }
+    root.present().map_err(err)
+}
+
+fn ate(report: &Report, path: &Path, text: bool) -> Result<(), String> {
+    let root = BitMapBackend::new(path, (1000, 500)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let t_max = report.sim_s.max(1.0);
+    let mut y_max: f64 = 0.5;
+    for p in &report.series {
+        y_max = y_max.max(p.team_ate_rmse_m.unwrap_or(0.0));
+        for a in &p.alignments {
+            y_max = y_max.max(a.translation_error_m.min(10.0));
+        }
+    }
+    let mut builder = ChartBuilder::on(&root);
+    builder.margin(20).x_label_area_size(if text { 40 } else { 5 }).y_label_area_size(if text { 60 } else { 5 });
+    if text {
+        builder.caption("Team ATE and inter-robot translation error", ("sans-serif", 20));
+    }
+    let mut chart = builder.build_cartesian_2d(0.0..t_max, 0.0..y_max * 1.1).map_err(err)?;
+    let mut mesh = chart.configure_mesh();
+    if text {
+        mesh.x_desc("time (s)").y_desc("error (m)");
+    } else {
+        mesh.x_labels(0).y_labels(0);
+    }
+    mesh.draw().map_err(err)?;
+    let team = chart
+        .draw_series(LineSeries::new(
+            report.series.iter().filter_map(|p| p.team_ate_rmse_m.map(|v| (p.t, v))),
+            BLACK.stroke_width(3),
+        ))
+        .map_err(err)?;
+    if text {
+        team.label("team ATE RMSE").legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(3)));
+    }
+    let mut pairs: Vec<(String, String)> = Vec::new();
+    for p in &report.series {
+        for a in &p.alignments {
+            if !pairs.contains(&(a.local.clone(), a.remote.clone())) {
+                pairs.push((a.local.clone(), a.remote.clone()));
+            }
+        }
+    }
+    for (k, (local, remote)) in pairs.iter().enumerate() {
+        let c = ROBOT_COLOURS[k % ROBOT_COLOURS.len()];
+        let points = report.series.iter().filter_map(|p| {
+            p.alignments
+                .iter()
+                .find(|a| &a.local == local && &a.remote == remote)
+                .map(|a| (p.t, a.translation_error_m.min(y_max)))
+        });
+        let series = chart.draw_series(LineSeries::new(points, c.stroke_width(1))).map_err(err)?;
+        if text {
+            series
+                .label(format!("{local} ← {remote}"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(1)));
+        }
+    }
+    if text {
+        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+    }
+    root.present().map_err(err)
+}
+
+fn bytes(report: &Report, path: &Path, text: bool) -> Result<(), String> {
+    let root = BitMapBackend::new(path, (1000, 500)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let t_max = report.sim_s.max(1.0);
+    let raw_total = report.point_cloud_raw.bytes_total.max(1) as f64;
+    let mut builder = ChartBuilder::on(&root);
+    builder.margin(20).x_label_area_size(if text { 40 } else { 5 }).y_label_area_size(if text { 70 } else { 5 });
+    if text {
+        builder.caption("Bytes sent by the team (log scale)", ("sans-serif", 20));
+    }
+    let mut chart =
+        builder.build_cartesian_2d(0.0..t_max, (1.0..raw_total * 2.0).log_scale()).map_err(err)?;
+    let mut mesh = chart.configure_mesh();
+    if text {
+        mesh.x_desc("time (s)").y_desc("bytes");
+    } else {
+        mesh.x_labels(0).y_labels(0);
+    }
+    mesh.draw().map_err(err)?;
+    let sgm_colour = ROBOT_COLOURS[0];
+    let raw_colour = ROBOT_COLOURS[3];
+    let sgm = chart
+        .draw_series(LineSeries::new(
+            report.series.iter().map(|p| (p.t, (p.bytes_total as f64).max(1.0))),
+            sgm_colour.stroke_width(3),
+        ))
+        .map_err(err)?;
+    if text {
+        sgm.label("SGM").legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], sgm_colour.stroke_width(3)));
+    }
+    // Raw sharing grows with the frames: linear in time to its total.
+    let raw = chart
+        .draw_series(LineSeries::new(
+            report.series.iter().map(|p| (p.t, (raw_total * p.t / t_max).max(1.0))),
+            raw_colour.stroke_width(2),
+        ))
+        .map_err(err)?;
+    if text {
+        raw.label("raw point clouds")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], raw_colour.stroke_width(2)));
+        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+    }
+    root.present().map_err(err)
+}
