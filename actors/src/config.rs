@@ -113,6 +113,9 @@ pub struct MatcherSection {
     /// Neighbour keyframes around each observing keyframe that are requested (paper: ±5).
     /// Default 5.
     pub keyframe_neighbourhood: usize,
+    /// Voxel size of keyframe-to-keyframe ICP (`icp.voxel_m` is for object clouds), m.
+    /// Default 0.3.
+    pub keyframe_voxel_m: f64,
 }
 
 impl Default for MatcherSection {
@@ -122,6 +125,7 @@ impl Default for MatcherSection {
             min_matched_objects: 4,
             icp: IcpConfig { max_correspondence_distance_m: 1.0, voxel_m: 0.1, ..IcpConfig::default() },
             keyframe_neighbourhood: 5,
+            keyframe_voxel_m: 0.3,
         }
     }
 }
@@ -317,6 +321,12 @@ impl RobotConfig {
             "> 0",
         )?;
         check(m.keyframe_neighbourhood <= 50, "matcher.keyframe_neighbourhood", m.keyframe_neighbourhood, "0–50")?;
+        check(
+            m.keyframe_voxel_m.is_finite() && (0.0..=5.0).contains(&m.keyframe_voxel_m),
+            "matcher.keyframe_voxel_m",
+            m.keyframe_voxel_m,
+            "0 ≤ x ≤ 5 m",
+        )?;
         let o = &self.optimiser;
         check(
             o.odometry_sigmas.iter().all(|s| positive(*s)),

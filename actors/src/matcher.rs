@@ -14,7 +14,7 @@ use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervis
 use nalgebra::Point3;
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
-use sgm_model::perception::icp::register;
+use sgm_model::perception::icp::{register, IcpConfig};
 use sgm_model::perception::object_cloud::{object_cloud, UNLABELLED};
 use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId};
 use sgm_model::wire::cloud_codec;
@@ -217,6 +217,7 @@ impl Matcher {
         let mut factors = Vec::new();
         let mut neighbour_keyframes = Vec::new();
         let mut best_rmse = f64::INFINITY;
+        let keyframe_icp = IcpConfig { voxel_m: self.config.keyframe_voxel_m, ..self.config.icp.clone() };
         for (id, kf) in &entry.keyframes {
             let in_local = local_from_remote * kf.world_from_body;
             let nearest = local_ids.iter().filter_map(|l| self.keyframes.get(l).map(|d| (*l, d))).min_by(|a, b| {
@@ -227,7 +228,7 @@ impl Matcher {
             let Some((local_id, local)) = nearest else { continue };
             let target: Vec<Point3<f64>> = local.points.iter().map(|p| p.cast::<f64>()).collect();
             let initial = local.world_from_body.inverse() * in_local;
-            let Ok(result) = register(&kf.points_in_body, &target, &initial, &self.config.icp) else { continue };
+            let Ok(result) = register(&kf.points_in_body, &target, &initial, &keyframe_icp) else { continue };
             if !result.converged {
                 continue;
             }
