@@ -62,7 +62,13 @@ pub struct FusionConfig {
 
 impl Default for FusionConfig {
     fn default() -> Self {
-        Self { cluster_tolerance_m: 0.3, max_range_m: 60.0, object_range_m: 30.0, min_object_height_m: 0.2, classes: default_classes() }
+        Self {
+            cluster_tolerance_m: 0.3,
+            max_range_m: 60.0,
+            object_range_m: 30.0,
+            min_object_height_m: 0.2,
+            classes: default_classes(),
+        }
     }
 }
 

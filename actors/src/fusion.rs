@@ -60,8 +60,11 @@ impl Handler<SensorFrame> for Fusion {
                 }
             }
             let near = self.object_range_m * self.object_range_m;
-            let clustered: Vec<Option<LabelId>> =
-                points.iter().zip(&kept).map(|(p, l)| if p.coords.norm_squared() <= near { *l } else { None }).collect();
+            let clustered: Vec<Option<LabelId>> = points
+                .iter()
+                .zip(&kept)
+                .map(|(p, l)| if p.coords.norm_squared() <= near { *l } else { None })
+                .collect();
             let candidates = cluster(&points, &clustered, &self.clustering);
             self.tracker.do_send(LabelledScan {
                 stamp: frame.stamp,

@@ -27,7 +27,7 @@ fn fresh_dir(name: &str, seed: u64) -> PathBuf {
 
 pub fn execute(options: Options) -> Result<()> {
     let name = options.scenario.as_deref().unwrap_or("quickstart");
-    let mut scenario = Scenario::load(name).with_context(|| format!("scenario {name}"))?;
+    let mut scenario = Scenario::load(name)?;
     if let Some(seed) = options.seed {
         scenario = scenario.with_seed(seed);
     }

@@ -103,16 +103,9 @@ fn row(stats: &sgm_model::wire::TrafficStats) -> MessageRow {
 }
 
 /// Keyframe positions of a robot's map (its world) and the true positions at their stamps.
-pub(crate) fn trajectory(
-    observation: &Observation,
-    k: usize,
-    truth: &RobotTruth,
-) -> Vec<(f64, Pose3, Pose3)> {
+pub(crate) fn trajectory(observation: &Observation, k: usize, truth: &RobotTruth) -> Vec<(f64, Pose3, Pose3)> {
     let Some(Some((map, _, _))) = observation.maps.get(k) else { return Vec::new() };
-    map.keyframes
-        .iter()
-        .filter_map(|kf| Some((kf.stamp, kf.world_from_body, truth.route.pose_at(kf.stamp)?)))
-        .collect()
+    map.keyframes.iter().filter_map(|kf| Some((kf.stamp, kf.world_from_body, truth.route.pose_at(kf.stamp)?))).collect()
 }
 
 /// The reference robot's estimate of robot k's world: reference_world_from_k_world.
@@ -246,9 +239,9 @@ pub fn compute(record: &RunRecord) -> Report {
         let Some(Some((_, neighbours, _))) = last.maps.get(k) else { continue };
         for n in neighbours {
             let Some(remote) = record.robots.get(usize::from(n.robot.0).wrapping_sub(1)) else { continue };
-            let error = n.local_from_remote.map(|estimate| {
-                pose_error(&estimate, &(local.truth_from_world.inverse() * remote.truth_from_world))
-            });
+            let error = n
+                .local_from_remote
+                .map(|estimate| pose_error(&estimate, &(local.truth_from_world.inverse() * remote.truth_from_world)));
             alignments.push(AlignmentReport {
                 local: local.name.clone(),
                 remote: remote.name.clone(),

@@ -19,13 +19,14 @@ pub fn merged_map(outcome: &RunOutcome) -> Vec<u8> {
             let pose = reference_from_robot * keyframe.world_from_body;
             for (p, label) in scan.points_in_body.iter().zip(&scan.labels) {
                 let w = pose * p.cast::<f64>();
-                let key = ((w.x / VOXEL_M).floor() as i64, (w.y / VOXEL_M).floor() as i64, (w.z / VOXEL_M).floor() as i64);
+                let key =
+                    ((w.x / VOXEL_M).floor() as i64, (w.y / VOXEL_M).floor() as i64, (w.z / VOXEL_M).floor() as i64);
                 voxels.entry(key).or_insert(([w.x, w.y, w.z], label.0));
             }
         }
     }
     let float = |name: &str| PcdField { name: name.into(), size: 4, kind: FieldKind::Float, count: 1 };
-    let mut columns = vec![Vec::with_capacity(voxels.len()); 4];
+    let mut columns: Vec<Vec<f64>> = (0..4).map(|_| Vec::with_capacity(voxels.len())).collect();
     for (p, label) in voxels.values() {
         for (c, v) in p.iter().enumerate() {
             columns[c].push(*v);

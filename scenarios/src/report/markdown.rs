@@ -76,7 +76,8 @@ pub fn render(report: &Report, timing: &Timing) -> String {
         kib(raw.bytes_max as f64),
         kib(raw.bytes_total as f64)
     );
-    let _ = writeln!(s, "\nSGM sent {:.3} % of what raw point-cloud sharing would.\n", report.bytes_ratio_to_raw * 100.0);
+    let _ =
+        writeln!(s, "\nSGM sent {:.3} % of what raw point-cloud sharing would.\n", report.bytes_ratio_to_raw * 100.0);
     let r = &report.radio;
     let _ = writeln!(
         s,

@@ -3,8 +3,8 @@
 //! `report.md`, TUM trajectories, PNG plots and the merged semantic map.
 
 mod figures;
-mod markdown;
 mod map_cloud;
+mod markdown;
 mod plots;
 mod tum;
 
@@ -69,7 +69,8 @@ fn write_file(dir: &Path, name: &str, bytes: &[u8]) -> Result<(), WriteError> {
 pub fn write(outcome: &RunOutcome, dir: &Path) -> Result<Report, WriteError> {
     std::fs::create_dir_all(dir).map_err(|e| WriteError { path: dir.display().to_string(), message: e.to_string() })?;
     let report = compute(&outcome.record);
-    let json = serde_json::to_string_pretty(&report).map_err(|e| WriteError { path: "report.json".into(), message: e.to_string() })?;
+    let json = serde_json::to_string_pretty(&report)
+        .map_err(|e| WriteError { path: "report.json".into(), message: e.to_string() })?;
     write_file(dir, "report.json", json.as_bytes())?;
     write_file(dir, "report.md", markdown::render(&report, &outcome.timing).as_bytes())?;
     write_file(dir, "timing.json", timing_json(&outcome.timing).as_bytes())?;

@@ -104,7 +104,9 @@ fn map(outcome: &RunOutcome, path: &Path, text: bool) -> Result<(), String> {
             ))
             .map_err(err)?;
         if text {
-            series.label(robot.name.clone()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
+            series
+                .label(robot.name.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
         }
         // Mapped objects, placed in the truth frame by the robot's start.
         if let Some(Some((summary, _, _))) = last.maps.get(k) {
@@ -194,8 +196,7 @@ fn bytes(report: &Report, path: &Path, text: bool) -> Result<(), String> {
     if text {
         builder.caption("Bytes sent by the team (log scale)", ("sans-serif", 20));
     }
-    let mut chart =
-        builder.build_cartesian_2d(0.0..t_max, (1.0..raw_total * 2.0).log_scale()).map_err(err)?;
+    let mut chart = builder.build_cartesian_2d(0.0..t_max, (1.0..raw_total * 2.0).log_scale()).map_err(err)?;
     let mut mesh = chart.configure_mesh();
     if text {
         mesh.x_desc("time (s)").y_desc("bytes");

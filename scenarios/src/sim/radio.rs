@@ -23,14 +23,17 @@ pub struct RadioStats {
     pub queue_full: u64,
 }
 
+/// True positions (set by the runner) and what happened to the packets.
+type Medium = (BTreeMap<RobotId, Point3<f64>>, RadioStats);
+
 /// State the runner shares with the model: true positions in, statistics out.
 #[derive(Clone, Default)]
 pub struct RadioShared {
-    inner: Arc<Mutex<(BTreeMap<RobotId, Point3<f64>>, RadioStats)>>,
+    inner: Arc<Mutex<Medium>>,
 }
 
 impl RadioShared {
-    fn lock(&self) -> std::sync::MutexGuard<'_, (BTreeMap<RobotId, Point3<f64>>, RadioStats)> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Medium> {
         self.inner.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
@@ -54,7 +57,7 @@ impl SimulatedRadio {
     pub fn new(spec: &RadioSpec, seed: u64, shared: RadioShared) -> Self {
         Self {
             spec: spec.clone(),
-            rng: ChaCha8Rng::seed_from_u64(seed ^ 0x5241_4449_4f),
+            rng: ChaCha8Rng::seed_from_u64(seed ^ 0x0052_4144_494f),
             channel_free: BTreeMap::new(),
             shared,
         }

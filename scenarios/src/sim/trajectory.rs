@@ -20,7 +20,7 @@ impl Route {
     pub fn of(spec: &RobotSpec, robot: usize, seed: u64) -> Self {
         let points = match &spec.route {
             Some(route) => {
-                let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (0x524f_5554_45 + robot as u64));
+                let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (0x0052_4f55_5445 + robot as u64));
                 let [x0, y0, x1, y1] = route.region_m;
                 (0..=route.legs).map(|_| Point2::new(rng.random_range(x0..x1), rng.random_range(y0..y1))).collect()
             }

@@ -1,0 +1,77 @@
+//! Scenario files: every shipped scenario parses; bad files give an error naming the key.
+
+use sgm_scenarios::scenario::{library, Scenario, ScenarioError};
+
+fn parse(text: &str) -> Result<Scenario, ScenarioError> {
+    Scenario::from_toml(text, "test.toml", "SGM_SCENARIO_TEST")
+}
+
+const ONE_ROBOT: &str = "[[robots]]\nwaypoints = [[0.0, 0.0], [10.0, 0.0]]\n";
+
+#[test]
+fn every_shipped_scenario_parses_and_is_what_its_name_says() {
+    for name in library::names() {
+        let s = Scenario::load_with_env(name, "SGM_SCENARIO_TEST").unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(s.scenario.name, name);
+        assert!(!s.robots.is_empty());
+        let file = library::get(name).unwrap();
+        let on_disk =
+            std::fs::read_to_string(sgm_scenarios::scenario::library_dir().join(format!("{name}.toml"))).unwrap();
+        assert_eq!(file, on_disk, "{name}: the built-in copy is the file");
+    }
+    let outdoor = Scenario::load_with_env("outdoor_two_robots", "SGM_SCENARIO_TEST").unwrap();
+    assert_eq!((outdoor.robots.len(), outdoor.scenario.duration_s, outdoor.world.size_m), (2, 600.0, [150.0, 150.0]));
+    let indoor = Scenario::load_with_env("indoor_three_robots", "SGM_SCENARIO_TEST").unwrap();
+    let heights: Vec<f64> = indoor.robots.iter().map(|r| r.sensor_height_m).collect();
+    assert!(heights.iter().any(|h| (h - heights[0]).abs() > 0.5), "one robot carried higher: {heights:?}");
+    assert_eq!(Scenario::load_with_env("team_of_eight", "SGM_SCENARIO_TEST").unwrap().robots.len(), 8);
+}
+
+#[test]
+fn a_file_path_loads_too_and_unknown_names_list_the_library() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("mine.toml");
+    std::fs::write(&path, format!("[scenario]\nname = \"mine\"\n{ONE_ROBOT}")).unwrap();
+    assert_eq!(Scenario::load_with_env(path.to_str().unwrap(), "SGM_SCENARIO_TEST").unwrap().scenario.name, "mine");
+    let e = Scenario::load_with_env("no_such_scenario", "SGM_SCENARIO_TEST").unwrap_err().to_string();
+    assert!(e.contains("no_such_scenario") && e.contains("quickstart"), "{e}");
+}
+
+#[test]
+fn an_unknown_key_is_named() {
+    let e = parse(&format!("[world]\nsize = [10.0, 10.0]\n{ONE_ROBOT}")).unwrap_err().to_string();
+    assert!(e.contains("size") && e.contains("test.toml"), "{e}");
+    let e = parse(&format!("[wolrd]\nkind = \"campus\"\n{ONE_ROBOT}")).unwrap_err().to_string();
+    assert!(e.contains("wolrd"), "{e}");
+}
+
+#[test]
+fn a_wrong_unit_or_type_is_named() {
+    let e = parse(&format!("[scenario]\nduration_s = \"10 min\"\n{ONE_ROBOT}")).unwrap_err().to_string();
+    assert!(e.contains("duration_s"), "{e}");
+    let e = parse(&format!("[radio]\nloss = 30.0\n{ONE_ROBOT}")).unwrap_err().to_string();
+    assert_eq!(e, "test.toml: radio.loss = 30: allowed 0 ≤ x ≤ 1");
+    let e = parse(&format!("[world.objects]\nunicorn = 3\n{ONE_ROBOT}")).unwrap_err().to_string();
+    assert!(e.contains("world.objects.unicorn"), "{e}");
+}
+
+#[test]
+fn a_missing_robot_is_named() {
+    let e = parse("[scenario]\nduration_s = 60.0\n").unwrap_err().to_string();
+    assert!(e.contains("robots") && e.contains("at least one"), "{e}");
+    let e = parse("[[robots]]\nwaypoints = [[0.0, 0.0]]\n").unwrap_err().to_string();
+    assert!(e.contains("robots[0].waypoints"), "{e}");
+    let e = parse("[[robots]]\nname = \"a\"\nwaypoints = [[0.0, 0.0], [1.0, 0.0]]\n[[robots]]\nname = \"a\"\nwaypoints = [[0.0, 0.0], [1.0, 0.0]]\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("robots[1].name"), "{e}");
+}
+
+#[test]
+fn robot_configuration_sections_are_shared_and_checked() {
+    let s = parse(&format!("[matcher]\nedge_sharpness = 2.5\n{ONE_ROBOT}")).unwrap();
+    assert_eq!(s.robot_config(0).matcher.matching.edge_sharpness, 2.5);
+    assert_eq!(s.robot_config(0).robot.id, 1);
+    let e = parse(&format!("[comms]\nmax_keyframes_in_flight = 0\n{ONE_ROBOT}")).unwrap_err().to_string();
+    assert!(e.contains("comms.max_keyframes_in_flight"), "{e}");
+}
