@@ -10,6 +10,7 @@ use sgm_model::perception::classes::{ClassSpec, ClassTable};
 use sgm_model::perception::icp::IcpConfig;
 use sgm_model::perception::keyframes::KeyframeConfig;
 use sgm_model::perception::loop_closure::LoopClosureConfig;
+use sgm_model::perception::structure_check::StructureCheck;
 use sgm_model::perception::tracker::TrackerConfig;
 use sgm_model::wire::{TeamKey, WireLimits};
 use std::path::Path;
@@ -122,6 +123,15 @@ pub struct MatcherSection {
     /// Voxel size of keyframe-to-keyframe ICP (`icp.voxel_m` is for object clouds), m.
     /// Default 0.3.
     pub keyframe_voxel_m: f64,
+    /// Verification of keyframe registrations with the ground left out
+    /// (`model::perception::structure_check`).
+    pub structure_check: StructureCheck,
+    /// A keyframe registration counts when this fraction of its structure points agree.
+    /// Default 0.3.
+    pub min_structure_agreement: f64,
+    /// Registrations that must count before an alignment is accepted; fewer refute the object
+    /// match (the neighbour goes back to waiting for object data). Default 2.
+    pub min_keyframe_factors: usize,
 }
 
 impl Default for MatcherSection {
@@ -132,6 +142,9 @@ impl Default for MatcherSection {
             icp: IcpConfig { max_correspondence_distance_m: 1.0, voxel_m: 0.1, ..IcpConfig::default() },
             keyframe_neighbourhood: 5,
             keyframe_voxel_m: 0.3,
+            structure_check: StructureCheck::default(),
+            min_structure_agreement: 0.3,
+            min_keyframe_factors: 2,
         }
     }
 }
@@ -333,6 +346,21 @@ impl RobotConfig {
             m.keyframe_voxel_m,
             "0 ≤ x ≤ 5 m",
         )?;
+        check(
+            (0.0..=1.0).contains(&m.min_structure_agreement),
+            "matcher.min_structure_agreement",
+            m.min_structure_agreement,
+            "0 ≤ x ≤ 1",
+        )?;
+        check(m.min_keyframe_factors >= 1, "matcher.min_keyframe_factors", m.min_keyframe_factors, "≥ 1")?;
+        let sc = &m.structure_check;
+        for (key, v) in [
+            ("matcher.structure_check.voxel_m", sc.voxel_m),
+            ("matcher.structure_check.ground_clearance_m", sc.ground_clearance_m),
+            ("matcher.structure_check.inlier_m", sc.inlier_m),
+        ] {
+            check(v.is_finite() && (0.0..=10.0).contains(&v), key, v, "0 ≤ x ≤ 10 m")?;
+        }
         let o = &self.optimiser;
         check(
             o.odometry_sigmas.iter().all(|s| positive(*s)),

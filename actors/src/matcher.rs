@@ -12,11 +12,12 @@ use crate::messages::*;
 use crate::protocol::{Neighbour, Protocol, RetryConfig};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use nalgebra::Point3;
-use sgm_model::geometry::Pose3;
+use sgm_model::geometry::{pose_error, Pose3};
 use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
 use sgm_model::perception::icp::{register, IcpConfig};
+use sgm_model::perception::structure_check::structure_agreement;
 use sgm_model::perception::object_cloud::{object_cloud, UNLABELLED};
-use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId};
+use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::ObjectData;
 use std::collections::{BTreeMap, BTreeSet};
@@ -57,7 +58,27 @@ struct NeighbourEntry {
     first_aligned: Option<f64>,
     /// Remote object → keyframes that observed it (from the object-cloud response).
     observed_in: BTreeMap<ObjectId, Vec<KeyframeId>>,
+    /// Transforms refuted by keyframe registration, and when: a match landing near one of them
+    /// within [`REFUTED_FOR_S`] is not pursued again.
+    refuted: Vec<(Pose3, Stamp)>,
 }
+
+/// The pose with the smallest summed distance to the others (translation in m plus rotation in
+/// rad × 10 m): a robust average of a handful of estimates.
+fn medoid(poses: &[Pose3]) -> Option<Pose3> {
+    let distance = |a: &Pose3, b: &Pose3| {
+        let e = a.inverse() * b;
+        e.translation.vector.norm() + 10.0 * e.rotation.angle()
+    };
+    poses
+        .iter()
+        .map(|p| (p, poses.iter().map(|q| distance(p, q)).sum::<f64>()))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(p, _)| *p)
+}
+
+/// How long a refuted transform is remembered, s.
+const REFUTED_FOR_S: f64 = 120.0;
 
 pub struct Matcher {
     robot: RobotId,
@@ -94,6 +115,7 @@ impl Matcher {
             keyframes: BTreeMap::new(),
             first_aligned: None,
             observed_in: BTreeMap::new(),
+            refuted: Vec::new(),
         })
     }
 
@@ -134,6 +156,13 @@ impl Matcher {
         let report = match_graphs(&local, &remote, &self.labels, &self.config.matching);
         let MatchOutcome::Aligned(alignment) = report.outcome else { return };
         if alignment.matches.len() < min_matched {
+            return;
+        }
+        let refuted_recently = entry.refuted.iter().any(|(t, when)| {
+            let e = pose_error(&alignment.local_from_remote, t);
+            now - when < REFUTED_FOR_S && e.translation_m < 2.0 && e.max_axis_rotation_deg() < 5.0
+        });
+        if refuted_recently {
             return;
         }
         let pairs: Vec<(ObjectId, ObjectId)> = alignment.matches.iter().map(|m| (m.local, m.remote)).collect();
@@ -216,8 +245,9 @@ impl Matcher {
             n.state.pairs.iter().filter_map(|(l, _)| self.local.observed_in.get(l)).flatten().copied().collect();
         let mut factors = Vec::new();
         let mut neighbour_keyframes = Vec::new();
-        let mut best_rmse = f64::INFINITY;
+        let mut implied = Vec::new();
         let keyframe_icp = IcpConfig { voxel_m: self.config.keyframe_voxel_m, ..self.config.icp.clone() };
+        let (check, min_agreement) = (&self.config.structure_check, self.config.min_structure_agreement);
         for (id, kf) in &entry.keyframes {
             let in_local = local_from_remote * kf.world_from_body;
             let nearest = local_ids.iter().filter_map(|l| self.keyframes.get(l).map(|d| (*l, d))).min_by(|a, b| {
@@ -232,14 +262,28 @@ impl Matcher {
             if !result.converged {
                 continue;
             }
+            let agreement = structure_agreement(&kf.points_in_body, &target, &result.target_from_source, check);
+            if agreement.is_none_or(|a| a < min_agreement) {
+                continue;
+            }
             neighbour_keyframes.push((*id, kf.world_from_body, kf.covariance));
             factors.push((local_id, *id, result.target_from_source, result.information));
-            if result.rmse_m < best_rmse {
-                best_rmse = result.rmse_m;
-                local_from_remote = local.world_from_body * result.target_from_source * kf.world_from_body.inverse();
-            }
+            implied.push(local.world_from_body * result.target_from_source * kf.world_from_body.inverse());
         }
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
+        if factors.len() < self.config.min_keyframe_factors {
+            tracing::info!(robot = %self.robot, neighbour = %robot, factors = factors.len(), "object match refuted");
+            entry.refuted.push((n.state.local_from_remote, now));
+            if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
+                entry.protocol = Some(n.refuted(now).into());
+            }
+            return;
+        }
+        // Each registration implies a local_from_remote; their medoid is robust to one that
+        // slid along a degenerate direction.
+        if let Some(m) = medoid(&implied) {
+            local_from_remote = m;
+        }
         if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
             entry.protocol = Some(n.aligned(local_from_remote, now).into());
             entry.first_aligned.get_or_insert(now);

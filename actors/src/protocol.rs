@@ -175,6 +175,12 @@ impl Neighbour<KeyframesRequested> {
         let revision = self.state.revision;
         self.to(now, ObjectsReceived { revision })
     }
+
+    /// The keyframes arrived but too few registrations confirm the object match: it was wrong.
+    pub fn refuted(self, now: Stamp) -> Neighbour<ObjectsReceived> {
+        let revision = self.state.revision;
+        self.to(now, ObjectsReceived { revision })
+    }
 }
 
 impl Neighbour<Aligned> {

@@ -11,5 +11,6 @@ pub mod normals;
 pub mod object_cloud;
 pub mod point_tree;
 pub mod projection;
+pub mod structure_check;
 pub mod tracker;
 pub mod voxel;

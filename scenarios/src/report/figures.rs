@@ -44,6 +44,11 @@ pub struct AlignmentReport {
     pub state: String,
     pub first_aligned_s: Option<f64>,
     pub translation_error_m: Option<f64>,
+    /// estimate − truth of local_from_remote's translation, local world axes, m.
+    pub translation_error_xyz_m: Option<[f64; 3]>,
+    /// Against the robots' start frames instead: includes the odometry drift of both maps up
+    /// to where they met, m.
+    pub start_frame_translation_error_m: Option<f64>,
     pub rotation_error_deg: Option<f64>,
 }
 
@@ -108,6 +113,26 @@ pub(crate) fn trajectory(observation: &Observation, k: usize, truth: &RobotTruth
     map.keyframes.iter().filter_map(|kf| Some((kf.stamp, kf.world_from_body, truth.route.pose_at(kf.stamp)?))).collect()
 }
 
+/// Where robot k's map sits on the truth: the SE(3) fit of its keyframes to their true
+/// positions (`None` before 3 keyframes).
+fn map_on_truth(observation: &Observation, k: usize, truth: &RobotTruth) -> Option<Pose3> {
+    let samples = trajectory(observation, k, truth);
+    let (e, t) = positions(&samples, &Pose3::identity());
+    ate(&e, &t).map(|a| a.truth_from_estimate)
+}
+
+/// The true local_from_remote between two drifting maps: each map placed on the truth by its
+/// best fit, so that what is measured is how well the maps were joined, not how far each
+/// drifted from its start (that is `start_frame_translation_error_m`). Falls back to the start
+/// frames before a map has 3 keyframes.
+fn true_local_from_remote(observation: &Observation, record: &RunRecord, l: usize, r: usize) -> Pose3 {
+    let (local, remote) = (&record.robots[l], &record.robots[r]);
+    match (map_on_truth(observation, l, local), map_on_truth(observation, r, remote)) {
+        (Some(a), Some(b)) => a.inverse() * b,
+        _ => local.truth_from_world.inverse() * remote.truth_from_world,
+    }
+}
+
 /// The reference robot's estimate of robot k's world: reference_world_from_k_world.
 pub(crate) fn reference_from(observation: &Observation, k: usize) -> Option<Pose3> {
     if k == 0 {
@@ -151,7 +176,7 @@ fn pair_errors(observation: &Observation, record: &RunRecord) -> Vec<PairError> 
         for n in neighbours {
             let r = usize::from(n.robot.0).wrapping_sub(1);
             let (Some(remote), Some(estimate)) = (record.robots.get(r), n.local_from_remote) else { continue };
-            let truth = local.truth_from_world.inverse() * remote.truth_from_world;
+            let truth = true_local_from_remote(observation, record, k, r);
             let e = pose_error(&estimate, &truth);
             out.push(PairError {
                 local: local.name.clone(),
@@ -239,15 +264,23 @@ pub fn compute(record: &RunRecord) -> Report {
         let Some(Some((_, neighbours, _))) = last.maps.get(k) else { continue };
         for n in neighbours {
             let Some(remote) = record.robots.get(usize::from(n.robot.0).wrapping_sub(1)) else { continue };
-            let error = n
-                .local_from_remote
-                .map(|estimate| pose_error(&estimate, &(local.truth_from_world.inverse() * remote.truth_from_world)));
+            let r = usize::from(n.robot.0).wrapping_sub(1);
+            let truth = true_local_from_remote(&last, record, k, r);
+            let error = n.local_from_remote.map(|estimate| pose_error(&estimate, &truth));
+            let start_truth = local.truth_from_world.inverse() * remote.truth_from_world;
+            let start_error = n.local_from_remote.map(|estimate| pose_error(&estimate, &start_truth).translation_m);
+            let xyz = n.local_from_remote.map(|estimate| {
+                let d = estimate.translation.vector - truth.translation.vector;
+                [d.x, d.y, d.z]
+            });
             alignments.push(AlignmentReport {
                 local: local.name.clone(),
                 remote: remote.name.clone(),
                 state: n.state.to_string(),
                 first_aligned_s: n.first_aligned,
                 translation_error_m: error.map(|e| e.translation_m),
+                translation_error_xyz_m: xyz,
+                start_frame_translation_error_m: start_error,
                 rotation_error_deg: error.map(|e| e.max_axis_rotation_deg()),
             });
         }
