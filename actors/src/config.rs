@@ -120,6 +120,9 @@ pub struct MatcherSection {
     /// Neighbour keyframes around each observing keyframe that are requested (paper: ±5).
     /// Default 5.
     pub keyframe_neighbourhood: usize,
+    /// Neighbour keyframes registered per alignment round, at most (spread evenly over those
+    /// the neighbourhood names): bounds radio bytes and ICP time. Default 16.
+    pub max_keyframes_per_alignment: usize,
     /// Voxel size of keyframe-to-keyframe ICP (`icp.voxel_m` is for object clouds), m.
     /// Default 0.3.
     pub keyframe_voxel_m: f64,
@@ -141,6 +144,7 @@ impl Default for MatcherSection {
             min_matched_objects: 4,
             icp: IcpConfig { max_correspondence_distance_m: 1.0, voxel_m: 0.1, ..IcpConfig::default() },
             keyframe_neighbourhood: 5,
+            max_keyframes_per_alignment: 16,
             keyframe_voxel_m: 0.3,
             structure_check: StructureCheck::default(),
             min_structure_agreement: 0.3,
@@ -353,6 +357,12 @@ impl RobotConfig {
             "0 ≤ x ≤ 1",
         )?;
         check(m.min_keyframe_factors >= 1, "matcher.min_keyframe_factors", m.min_keyframe_factors, "≥ 1")?;
+        check(
+            m.max_keyframes_per_alignment >= m.min_keyframe_factors,
+            "matcher.max_keyframes_per_alignment",
+            m.max_keyframes_per_alignment,
+            "≥ matcher.min_keyframe_factors",
+        )?;
         let sc = &m.structure_check;
         for (key, v) in [
             ("matcher.structure_check.voxel_m", sc.voxel_m),

@@ -61,6 +61,17 @@ struct NeighbourEntry {
     /// Transforms refuted by keyframe registration, and when: a match landing near one of them
     /// within [`REFUTED_FOR_S`] is not pursued again.
     refuted: Vec<(Pose3, Stamp)>,
+    /// The neighbour keyframes of the current alignment round (requested or already held).
+    round: BTreeSet<KeyframeId>,
+}
+
+/// At most `n` of `ids`, spread evenly over them (deterministic).
+fn evenly(ids: BTreeSet<KeyframeId>, n: usize) -> BTreeSet<KeyframeId> {
+    if ids.len() <= n {
+        return ids;
+    }
+    let all: Vec<KeyframeId> = ids.into_iter().collect();
+    (0..n).map(|i| all[i * all.len() / n]).collect()
 }
 
 /// The pose with the smallest summed distance to the others (translation in m plus rotation in
@@ -116,6 +127,7 @@ impl Matcher {
             first_aligned: None,
             observed_in: BTreeMap::new(),
             refuted: Vec::new(),
+            round: BTreeSet::new(),
         })
     }
 
@@ -205,15 +217,17 @@ impl Matcher {
         }
         // Neighbour keyframes that observed the matched objects, ± the neighbourhood.
         let k = self.config.keyframe_neighbourhood as u32;
-        let wanted: BTreeSet<KeyframeId> = observed_in
+        let around: BTreeSet<KeyframeId> = observed_in
             .values()
             .flatten()
             .flat_map(|id| (id.0.saturating_sub(k)..=id.0.saturating_add(k)).map(KeyframeId))
             .collect();
+        let round = evenly(around, self.config.max_keyframes_per_alignment);
         let retry = self.retry.clone();
         let entry = self.entry(msg.robot);
         entry.observed_in = observed_in;
-        let wanted: BTreeSet<KeyframeId> = wanted.into_iter().filter(|id| !entry.keyframes.contains_key(id)).collect();
+        let wanted: BTreeSet<KeyframeId> = round.iter().filter(|id| !entry.keyframes.contains_key(id)).copied().collect();
+        entry.round = round;
         entry.protocol = Some(matched.keyframes_requested(local_from_remote, wanted.clone(), now, &retry).into());
         if wanted.is_empty() {
             self.finish_alignment(msg.robot);
@@ -248,7 +262,7 @@ impl Matcher {
         let mut implied = Vec::new();
         let keyframe_icp = IcpConfig { voxel_m: self.config.keyframe_voxel_m, ..self.config.icp.clone() };
         let (check, min_agreement) = (&self.config.structure_check, self.config.min_structure_agreement);
-        for (id, kf) in &entry.keyframes {
+        for (id, kf) in entry.keyframes.iter().filter(|(id, _)| entry.round.contains(id)) {
             let in_local = local_from_remote * kf.world_from_body;
             let nearest = local_ids.iter().filter_map(|l| self.keyframes.get(l).map(|d| (*l, d))).min_by(|a, b| {
                 let da = (a.1.world_from_body.translation.vector - in_local.translation.vector).norm();
