@@ -115,6 +115,9 @@ pub struct MatcherSection {
     pub matching: MatcherConfig,
     /// Matched objects needed before object clouds are requested. Default 4.
     pub min_matched_objects: usize,
+    /// Matching against one neighbour is tried at most this often (on new local objects or
+    /// new neighbour data), s. Default 2.
+    pub match_interval_s: f64,
     /// Object-cloud ICP (paper §IV-D).
     pub icp: IcpConfig,
     /// Neighbour keyframes around each observing keyframe that are requested (paper: ±5).
@@ -126,6 +129,9 @@ pub struct MatcherSection {
     /// Voxel size of keyframe-to-keyframe ICP (`icp.voxel_m` is for object clouds), m.
     /// Default 0.3.
     pub keyframe_voxel_m: f64,
+    /// Iteration cap of keyframe-to-keyframe ICP (it starts from the object-cloud estimate and
+    /// converges in a few; a wrong match is refuted sooner). Default 20.
+    pub keyframe_max_iterations: usize,
     /// Verification of keyframe registrations with the ground left out
     /// (`model::perception::structure_check`).
     pub structure_check: StructureCheck,
@@ -142,10 +148,12 @@ impl Default for MatcherSection {
         Self {
             matching: MatcherConfig::default(),
             min_matched_objects: 4,
+            match_interval_s: 2.0,
             icp: IcpConfig { max_correspondence_distance_m: 1.0, voxel_m: 0.1, ..IcpConfig::default() },
             keyframe_neighbourhood: 5,
             max_keyframes_per_alignment: 16,
             keyframe_voxel_m: 0.3,
+            keyframe_max_iterations: 20,
             structure_check: StructureCheck::default(),
             min_structure_agreement: 0.3,
             min_keyframe_factors: 2,
@@ -355,6 +363,18 @@ impl RobotConfig {
             "matcher.min_structure_agreement",
             m.min_structure_agreement,
             "0 ≤ x ≤ 1",
+        )?;
+        check(
+            m.match_interval_s.is_finite() && (0.0..=3600.0).contains(&m.match_interval_s),
+            "matcher.match_interval_s",
+            m.match_interval_s,
+            "0 ≤ x ≤ 3600 s",
+        )?;
+        check(
+            (1..=1000).contains(&m.keyframe_max_iterations),
+            "matcher.keyframe_max_iterations",
+            m.keyframe_max_iterations,
+            "1 ≤ x ≤ 1000",
         )?;
         check(m.min_keyframe_factors >= 1, "matcher.min_keyframe_factors", m.min_keyframe_factors, "≥ 1")?;
         check(

@@ -15,8 +15,8 @@ use nalgebra::Point3;
 use sgm_model::geometry::{pose_error, Pose3};
 use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
 use sgm_model::perception::icp::{register, IcpConfig};
-use sgm_model::perception::structure_check::structure_agreement;
 use sgm_model::perception::object_cloud::{object_cloud, UNLABELLED};
+use sgm_model::perception::structure_check::structure_agreement;
 use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::ObjectData;
@@ -63,6 +63,8 @@ struct NeighbourEntry {
     refuted: Vec<(Pose3, Stamp)>,
     /// The neighbour keyframes of the current alignment round (requested or already held).
     round: BTreeSet<KeyframeId>,
+    /// When matching against this neighbour was last tried.
+    last_attempt: Option<Stamp>,
 }
 
 /// At most `n` of `ids`, spread evenly over them (deterministic).
@@ -128,6 +130,7 @@ impl Matcher {
             observed_in: BTreeMap::new(),
             refuted: Vec::new(),
             round: BTreeSet::new(),
+            last_attempt: None,
         })
     }
 
@@ -147,7 +150,8 @@ impl Matcher {
         let Some(entry) = self.neighbours.get(&robot) else { return };
         let Some(data) = &entry.objects else { return };
         let waiting = matches!(entry.protocol, Some(Protocol::ObjectsReceived(_)));
-        if !waiting {
+        let due = entry.last_attempt.is_none_or(|t| now - t >= self.config.match_interval_s);
+        if !waiting || !due {
             return;
         }
         let remote_objects: Vec<GraphObject> = data
@@ -165,12 +169,16 @@ impl Matcher {
         else {
             return;
         };
+        let refuted = entry.refuted.clone();
+        if let Some(entry) = self.neighbours.get_mut(&robot) {
+            entry.last_attempt = Some(now);
+        }
         let report = match_graphs(&local, &remote, &self.labels, &self.config.matching);
         let MatchOutcome::Aligned(alignment) = report.outcome else { return };
         if alignment.matches.len() < min_matched {
             return;
         }
-        let refuted_recently = entry.refuted.iter().any(|(t, when)| {
+        let refuted_recently = refuted.iter().any(|(t, when)| {
             let e = pose_error(&alignment.local_from_remote, t);
             now - when < REFUTED_FOR_S && e.translation_m < 2.0 && e.max_axis_rotation_deg() < 5.0
         });
@@ -226,7 +234,8 @@ impl Matcher {
         let retry = self.retry.clone();
         let entry = self.entry(msg.robot);
         entry.observed_in = observed_in;
-        let wanted: BTreeSet<KeyframeId> = round.iter().filter(|id| !entry.keyframes.contains_key(id)).copied().collect();
+        let wanted: BTreeSet<KeyframeId> =
+            round.iter().filter(|id| !entry.keyframes.contains_key(id)).copied().collect();
         entry.round = round;
         entry.protocol = Some(matched.keyframes_requested(local_from_remote, wanted.clone(), now, &retry).into());
         if wanted.is_empty() {
@@ -260,7 +269,11 @@ impl Matcher {
         let mut factors = Vec::new();
         let mut neighbour_keyframes = Vec::new();
         let mut implied = Vec::new();
-        let keyframe_icp = IcpConfig { voxel_m: self.config.keyframe_voxel_m, ..self.config.icp.clone() };
+        let keyframe_icp = IcpConfig {
+            voxel_m: self.config.keyframe_voxel_m,
+            max_iterations: self.config.keyframe_max_iterations,
+            ..self.config.icp.clone()
+        };
         let (check, min_agreement) = (&self.config.structure_check, self.config.min_structure_agreement);
         for (id, kf) in entry.keyframes.iter().filter(|(id, _)| entry.round.contains(id)) {
             let in_local = local_from_remote * kf.world_from_body;
