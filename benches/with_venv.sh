@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 venv=target/bench-venv
 if [ ! -x "$venv/bin/python" ]; then
   python3 -m venv "$venv"
-  "$venv/bin/pip" install --quiet "gtsam==4.3.0" "small_gicp==1.0.1" numpy scipy
+  "$venv/bin/pip" install --quiet "gtsam==4.3.0" "small_gicp==1.0.1" evo numpy scipy
 fi
 cargo build --release --quiet --bin sgm
 script=$1
