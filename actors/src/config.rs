@@ -343,6 +343,21 @@ impl RobotConfig {
         )?;
         check(positive(t.search_radius_m), "tracker.tracking.search_radius_m", t.search_radius_m, "> 0")?;
         check(t.confirm_after >= 1, "tracker.tracking.confirm_after", t.confirm_after, "≥ 1")?;
+        let l = &self.tracker.loop_closure;
+        check(positive(l.search_radius_m), "tracker.loop_closure.search_radius_m", l.search_radius_m, "> 0")?;
+        check(
+            l.time_gap_s.is_finite() && l.time_gap_s >= 0.0,
+            "tracker.loop_closure.time_gap_s",
+            l.time_gap_s,
+            "finite and ≥ 0",
+        )?;
+        check(positive(l.max_rmse_m), "tracker.loop_closure.max_rmse_m", l.max_rmse_m, "> 0")?;
+        check(
+            l.min_interval_s.is_finite() && l.min_interval_s >= 0.0,
+            "tracker.loop_closure.min_interval_s",
+            l.min_interval_s,
+            "finite and ≥ 0",
+        )?;
         let m = &self.matcher;
         check(m.min_matched_objects >= 3, "matcher.min_matched_objects", m.min_matched_objects, "≥ 3")?;
         check(

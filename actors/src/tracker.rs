@@ -80,6 +80,8 @@ pub struct Tracker {
     /// Odometry pose of the latest keyframe (for increments).
     last_odometry: Option<(KeyframeId, Pose3)>,
     covariances: BTreeMap<KeyframeId, Matrix6<f64>>,
+    /// Stamp of the latest loop-closure attempt.
+    last_loop_attempt: Option<f64>,
 }
 
 impl Tracker {
@@ -105,6 +107,7 @@ impl Tracker {
             next_keyframe: 0,
             last_odometry: None,
             covariances: BTreeMap::new(),
+            last_loop_attempt: None,
         }
     }
 
@@ -152,7 +155,11 @@ impl Tracker {
             edges.push(edge);
         }
         self.objects.update(&mut self.graph, id, &scan.candidates, &self.config.tracking).map_err(|e| e.to_string())?;
-        if let Some(edge) = loop_closure::detect(&self.graph, id, &self.config.loop_closure) {
+        let due = self.last_loop_attempt.is_none_or(|t| scan.stamp - t >= self.config.loop_closure.min_interval_s);
+        if due {
+            self.last_loop_attempt = Some(scan.stamp);
+        }
+        if let Some(edge) = due.then(|| loop_closure::detect(&self.graph, id, &self.config.loop_closure)).flatten() {
             if self.graph.add_edge(edge.clone()).is_ok() {
                 edges.push(edge);
             }

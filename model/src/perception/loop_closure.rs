@@ -25,6 +25,10 @@ pub struct LoopClosureConfig {
     /// Largest inlier RMSE of an accepted registration, m. Default 0.3 (LIO-SAM
     /// `historyKeyframeFitnessScore`).
     pub max_rmse_m: f64,
+    /// Shortest interval between two detection attempts, s: a submap registration is the
+    /// mapper's most expensive step, and LIO-SAM runs it at 1 Hz for the same reason.
+    /// Default 2.
+    pub min_interval_s: f64,
     pub icp: IcpConfig,
 }
 
@@ -35,6 +39,7 @@ impl Default for LoopClosureConfig {
             time_gap_s: 30.0,
             submap_neighbours: 12,
             max_rmse_m: 0.3,
+            min_interval_s: 2.0,
             icp: IcpConfig { max_correspondence_distance_m: 2.0, voxel_m: 0.2, ..IcpConfig::default() },
         }
     }
