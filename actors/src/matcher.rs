@@ -15,7 +15,7 @@ use nalgebra::Point3;
 use sgm_model::geometry::{pose_error, Pose3};
 use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
 use sgm_model::perception::icp::{register, IcpConfig};
-use sgm_model::perception::object_cloud::{object_cloud, UNLABELLED};
+use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS, UNLABELLED};
 use sgm_model::perception::structure_check::structure_agreement;
 use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
@@ -138,6 +138,8 @@ impl Matcher {
         let observed = self.local.observed_in.get(&object.id).cloned().unwrap_or_default();
         let scans = observed
             .iter()
+            .rev()
+            .take(MAX_VIEWS)
             .filter_map(|k| self.keyframes.get(k))
             .map(|k| (&k.world_from_body, &k.points[..], &k.labels[..]));
         object_cloud(scans, object.label, &object.centroid, &object.size.unwrap_or_default(), 0.3, 0.1)

@@ -14,7 +14,7 @@ use sgm_model::matching::GraphObject;
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::perception::keyframes::is_keyframe;
 use sgm_model::perception::loop_closure;
-use sgm_model::perception::object_cloud::{object_cloud, UNLABELLED};
+use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS, UNLABELLED};
 use sgm_model::perception::tracker::Tracker as ObjectTracker;
 use sgm_model::scene_graph::{
     Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, ObjectId, RobotId, SceneGraph, SemanticScan,
@@ -203,8 +203,14 @@ impl Tracker {
             .filter_map(|id| {
                 let o = self.graph.object(*id)?;
                 let centroid = self.graph.centroid_in_world(*id)?;
-                let points =
-                    object_cloud(self.scans_of(o.observed_in.iter().copied()), o.label, &centroid, &o.size, 0.3, 0.1);
+                let points = object_cloud(
+                    self.scans_of(o.observed_in.iter().rev().take(MAX_VIEWS).copied()),
+                    o.label,
+                    &centroid,
+                    &o.size,
+                    0.3,
+                    0.1,
+                );
                 let cloud = cloud_codec::encode(&points, self.cloud_resolution_m).map(|c| c.bytes).unwrap_or_default();
                 Some(ObjectCloud { id: *id, keyframes: o.observed_in.iter().copied().collect(), cloud })
             })

@@ -7,6 +7,11 @@ use crate::geometry::Pose3;
 use crate::scene_graph::LabelId;
 use nalgebra::{Point3, Vector3};
 
+/// Object clouds are built from at most this many keyframes that saw the object — the latest:
+/// the cloud is a sparse sample for ICP (paper §IV-D), and an object seen for minutes would
+/// otherwise cost a pass over every scan that saw it.
+pub const MAX_VIEWS: usize = 8;
+
 /// The label of points that belong to no class.
 pub const UNLABELLED: LabelId = LabelId(u16::MAX);
 
