@@ -32,6 +32,8 @@ pub fn execute(options: Options) -> Result<()> {
         scenario = scenario.with_seed(seed);
     }
     let dir = options.out.unwrap_or_else(|| fresh_dir(&scenario.scenario.name, scenario.scenario.seed));
+    // Fail before the run, not after it, when the report cannot be written.
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create the report directory {}", dir.display()))?;
     let bar = if options.quiet { ProgressBar::hidden() } else { ProgressBar::new(0) };
     bar.set_style(
         ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} steps, {elapsed} wall, eta {eta}")
