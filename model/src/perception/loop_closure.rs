@@ -40,7 +40,7 @@ impl Default for LoopClosureConfig {
             submap_neighbours: 12,
             max_rmse_m: 0.3,
             min_interval_s: 2.0,
-            icp: IcpConfig { max_correspondence_distance_m: 2.0, voxel_m: 0.2, ..IcpConfig::default() },
+            icp: IcpConfig { max_correspondence_distance_m: 2.0, voxel_m: 0.4, ..IcpConfig::default() },
         }
     }
 }
