@@ -432,4 +432,4 @@ impl Handler<GetCommsStatus> for Comms {
 }
 
 connects!(Comms => CommsLinks);
-stops_on_injected_failure!(Comms);
+stops_on_injected_failure!(Comms => "comms");

@@ -77,4 +77,4 @@ impl Handler<SensorFrame> for Fusion {
     }
 }
 
-stops_on_injected_failure!(Fusion);
+stops_on_injected_failure!(Fusion => "fusion");

@@ -8,16 +8,17 @@
 //! ```
 
 /// The [`messages::InjectFailure`] handler of each listed actor: it stops, or panics inside
-/// [`containment::contained`]; either way its actix `Supervisor` restarts it with its state.
+/// [`containment::contained`] under the actor's handler name; either way its actix `Supervisor`
+/// restarts it with its state.
 macro_rules! stops_on_injected_failure {
-    ($($actor:ty),*) => {$(
+    ($($actor:ty => $name:literal),*) => {$(
         impl actix::Handler<crate::messages::InjectFailure> for $actor {
             type Result = ();
             fn handle(&mut self, failure: crate::messages::InjectFailure, ctx: &mut actix::Context<Self>) {
                 match failure {
                     crate::messages::InjectFailure::Stop => actix::ActorContext::stop(ctx),
                     crate::messages::InjectFailure::Panic => {
-                        crate::containment::contained(ctx, stringify!($actor), || panic!("injected failure"));
+                        crate::containment::contained(ctx, $name, || panic!("injected failure"));
                     }
                 }
             }

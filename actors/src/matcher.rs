@@ -474,4 +474,4 @@ impl Handler<GetNeighbours> for Matcher {
 }
 
 connects!(Matcher => MatcherLinks);
-stops_on_injected_failure!(Matcher);
+stops_on_injected_failure!(Matcher => "matcher");

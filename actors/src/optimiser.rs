@@ -163,4 +163,4 @@ impl Handler<InterRobotConstraints> for Optimiser {
 }
 
 connects!(Optimiser => OptimiserLinks);
-stops_on_injected_failure!(Optimiser);
+stops_on_injected_failure!(Optimiser => "optimiser");

@@ -74,4 +74,4 @@ impl Handler<GetDroppedFrames> for Sensor {
     }
 }
 
-stops_on_injected_failure!(Sensor);
+stops_on_injected_failure!(Sensor => "sensor");

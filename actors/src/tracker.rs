@@ -340,4 +340,4 @@ impl Handler<GetMapSummary> for Tracker {
 }
 
 connects!(Tracker => TrackerLinks);
-stops_on_injected_failure!(Tracker);
+stops_on_injected_failure!(Tracker => "tracker");

@@ -194,7 +194,7 @@ pub async fn run(scenario: &Scenario, progress: Option<&ProgressBar>) -> Result<
         realtime_factor: sim_s / wall_s.max(1e-9),
         actor_busy_s: sgm_actors::containment::busy_time()
             .into_iter()
-            .map(|(k, v)| (k.to_lowercase(), v.as_secs_f64()))
+            .map(|(k, v)| (k.to_string(), v.as_secs_f64()))
             .collect(),
         simulation_s: simulation.as_secs_f64(),
     };
