@@ -9,6 +9,7 @@ use nalgebra::{Point3, Vector3};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use sgm_model::geometry::Pose3;
+use std::borrow::Cow;
 
 const BINS: usize = 720;
 
@@ -60,16 +61,16 @@ impl Lidar {
     /// This frame's directions: the fixed pattern, or the next `points_per_frame` of the R2
     /// sequence (Roberts 2018) — it never repeats and covers the field of view ever more densely,
     /// as a Livox's rosette does.
-    fn directions(&mut self) -> Vec<Vector3<f64>> {
+    fn directions(&mut self) -> Cow<'_, [Vector3<f64>]> {
         if self.spec.pattern == LidarPattern::Spinning {
-            return self.fixed.clone();
+            return Cow::Borrowed(&self.fixed);
         }
         const A1: f64 = 0.754_877_666_246_692_8; // 1/g, g the plastic number
         const A2: f64 = 0.569_840_290_998_053_3; // 1/g²
         let [lo, hi] = self.spec.vertical_fov_deg.map(f64::to_radians);
         let (s_lo, s_hi) = (lo.sin(), hi.sin());
         let n = self.spec.points_per_frame as u64;
-        let out = (self.next..self.next + n)
+        let out: Vec<Vector3<f64>> = (self.next..self.next + n)
             .map(|k| {
                 let (u, v) = ((0.5 + A1 * k as f64).fract(), (0.5 + A2 * k as f64).fract());
                 // Uniform over the sphere band: sin(elevation) uniform.
@@ -77,7 +78,7 @@ impl Lidar {
             })
             .collect();
         self.next += n;
-        out
+        Cow::Owned(out)
     }
 
     /// Casts one frame from `world_from_sensor`.
@@ -111,7 +112,7 @@ impl Lidar {
         let noise = Normal::new(0.0, self.spec.range_noise_m.max(0.0)).ok();
         let directions = self.directions();
         let mut frame = LidarFrame::default();
-        for d in &directions {
+        for d in directions.iter() {
             let dw = rotation * d;
             let bin = (dw.y.atan2(dw.x).rem_euclid(std::f64::consts::TAU) / bin_width) as usize % BINS;
             let mut best = (f64::INFINITY, world.ground_label, u32::MAX);
@@ -193,7 +194,7 @@ mod tests {
     fn a_livox_pattern_never_repeats() {
         let spec = LidarSpec { pattern: LidarPattern::Livox, points_per_frame: 100, ..LidarSpec::default() };
         let mut lidar = Lidar::new(&spec);
-        let (a, b) = (lidar.directions(), lidar.directions());
+        let (a, b) = (lidar.directions().into_owned(), lidar.directions().into_owned());
         assert_eq!(a.len(), 100);
         assert!(a.iter().all(|d| b.iter().all(|e| (d - e).norm() > 1e-9)));
         let [lo, hi] = spec.vertical_fov_deg.map(f64::to_radians);
