@@ -277,6 +277,8 @@ impl Matcher {
             ..self.config.icp.clone()
         };
         let (check, min_agreement) = (&self.config.structure_check, self.config.min_structure_agreement);
+        // Several neighbour keyframes usually register to one local keyframe: widen it once.
+        let mut targets: BTreeMap<KeyframeId, Vec<Point3<f64>>> = BTreeMap::new();
         for (id, kf) in entry.keyframes.iter().filter(|(id, _)| entry.round.contains(id)) {
             let in_local = local_from_remote * kf.world_from_body;
             let nearest = local_ids.iter().filter_map(|l| self.keyframes.get(l).map(|d| (*l, d))).min_by(|a, b| {
@@ -285,13 +287,14 @@ impl Matcher {
                 da.total_cmp(&db)
             });
             let Some((local_id, local)) = nearest else { continue };
-            let target: Vec<Point3<f64>> = local.points.iter().map(|p| p.cast::<f64>()).collect();
+            let target =
+                targets.entry(local_id).or_insert_with(|| local.points.iter().map(|p| p.cast::<f64>()).collect());
             let initial = local.world_from_body.inverse() * in_local;
-            let Ok(result) = register(&kf.points_in_body, &target, &initial, &keyframe_icp) else { continue };
+            let Ok(result) = register(&kf.points_in_body, target, &initial, &keyframe_icp) else { continue };
             if !result.converged {
                 continue;
             }
-            let agreement = structure_agreement(&kf.points_in_body, &target, &result.target_from_source, check);
+            let agreement = structure_agreement(&kf.points_in_body, target, &result.target_from_source, check);
             if agreement.is_none_or(|a| a < min_agreement) {
                 continue;
             }
