@@ -113,21 +113,25 @@ pub(crate) fn trajectory(observation: &Observation, k: usize, truth: &RobotTruth
     map.keyframes.iter().filter_map(|kf| Some((kf.stamp, kf.world_from_body, truth.route.pose_at(kf.stamp)?))).collect()
 }
 
-/// Where robot k's map sits on the truth: the SE(3) fit of its keyframes to their true
-/// positions (`None` before 3 keyframes).
-fn map_on_truth(observation: &Observation, k: usize, truth: &RobotTruth) -> Option<Pose3> {
-    let samples = trajectory(observation, k, truth);
-    let (e, t) = positions(&samples, &Pose3::identity());
-    ate(&e, &t).map(|a| a.truth_from_estimate)
+/// Where each robot's map sits on the truth at one observation: the SE(3) fit of its keyframes
+/// to their true positions (`None` before 3 keyframes).
+fn maps_on_truth(observation: &Observation, record: &RunRecord) -> Vec<Option<Pose3>> {
+    (0..record.robots.len())
+        .map(|k| {
+            let samples = trajectory(observation, k, &record.robots[k]);
+            let (e, t) = positions(&samples, &Pose3::identity());
+            ate(&e, &t).map(|a| a.truth_from_estimate)
+        })
+        .collect()
 }
 
 /// The true local_from_remote between two drifting maps: each map placed on the truth by its
 /// best fit, so that what is measured is how well the maps were joined, not how far each
 /// drifted from its start (that is `start_frame_translation_error_m`). Falls back to the start
 /// frames before a map has 3 keyframes.
-fn true_local_from_remote(observation: &Observation, record: &RunRecord, l: usize, r: usize) -> Pose3 {
+fn true_local_from_remote(fits: &[Option<Pose3>], record: &RunRecord, l: usize, r: usize) -> Pose3 {
     let (local, remote) = (&record.robots[l], &record.robots[r]);
-    match (map_on_truth(observation, l, local), map_on_truth(observation, r, remote)) {
+    match (fits[l], fits[r]) {
         (Some(a), Some(b)) => a.inverse() * b,
         _ => local.truth_from_world.inverse() * remote.truth_from_world,
     }
@@ -170,13 +174,14 @@ fn team_ate(observation: &Observation, record: &RunRecord) -> (Option<f64>, Vec<
 }
 
 fn pair_errors(observation: &Observation, record: &RunRecord) -> Vec<PairError> {
+    let fits = maps_on_truth(observation, record);
     let mut out = Vec::new();
     for (k, local) in record.robots.iter().enumerate() {
         let Some(Some((_, neighbours, _))) = observation.maps.get(k) else { continue };
         for n in neighbours {
             let r = usize::from(n.robot.0).wrapping_sub(1);
             let (Some(remote), Some(estimate)) = (record.robots.get(r), n.local_from_remote) else { continue };
-            let truth = true_local_from_remote(observation, record, k, r);
+            let truth = true_local_from_remote(&fits, record, k, r);
             let e = pose_error(&estimate, &truth);
             out.push(PairError {
                 local: local.name.clone(),
@@ -259,13 +264,14 @@ pub fn compute(record: &RunRecord) -> Report {
             }
         })
         .collect();
+    let fits = maps_on_truth(&last, record);
     let mut alignments = Vec::new();
     for (k, local) in record.robots.iter().enumerate() {
         let Some(Some((_, neighbours, _))) = last.maps.get(k) else { continue };
         for n in neighbours {
-            let Some(remote) = record.robots.get(usize::from(n.robot.0).wrapping_sub(1)) else { continue };
             let r = usize::from(n.robot.0).wrapping_sub(1);
-            let truth = true_local_from_remote(&last, record, k, r);
+            let Some(remote) = record.robots.get(r) else { continue };
+            let truth = true_local_from_remote(&fits, record, k, r);
             let error = n.local_from_remote.map(|estimate| pose_error(&estimate, &truth));
             let start_truth = local.truth_from_world.inverse() * remote.truth_from_world;
             let start_error = n.local_from_remote.map(|estimate| pose_error(&estimate, &start_truth).translation_m);
