@@ -1,0 +1,137 @@
+//! The book's reference chapters against the code. `book/src/configuration.md`: every key of
+//! `RobotConfig` is listed with its true default, nothing listed is unknown, and every TOML
+//! example loads. `book/src/scenarios.md`: the same for the scenario file's own sections and a
+//! robot entry.
+
+use serde_json::Value;
+use sgm_actors::config::RobotConfig;
+use sgm_scenarios::scenario::{RobotSpec, Scenario};
+use std::collections::BTreeMap;
+
+const CONFIGURATION: &str = include_str!("../../book/src/configuration.md");
+const SCENARIOS: &str = include_str!("../../book/src/scenarios.md");
+const OWN_SECTIONS: [&str; 6] = ["scenario", "world", "lidar", "camera", "odometry", "radio"];
+/// Tables documented as a whole rather than key by key.
+const WHOLE: [&str; 3] = ["fusion.classes", "world.objects", "robots[].route"];
+
+/// Dotted key → default value; arrays and the `WHOLE` tables are leaves.
+fn flatten(prefix: &str, value: &Value, out: &mut BTreeMap<String, Value>) {
+    match value {
+        Value::Object(map) if !WHOLE.contains(&prefix) => {
+            for (k, v) in map {
+                let key = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+                flatten(&key, v, out);
+            }
+        }
+        _ => {
+            out.insert(prefix.to_string(), value.clone());
+        }
+    }
+}
+
+/// A default as written in the book (a TOML value), as JSON.
+fn parse_toml_value(text: &str) -> Option<Value> {
+    let source = config::File::from_str(&format!("v = {text}"), config::FileFormat::Toml);
+    config::Config::builder().add_source(source).build().ok()?.get::<Value>("v").ok()
+}
+
+fn same(a: &Value, b: &Value) -> bool {
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap_or(f64::NAN), y.as_f64().unwrap_or(f64::NAN));
+            (x - y).abs() <= 1e-12 * x.abs().max(y.abs())
+        }
+        (Value::Array(x), Value::Array(y)) => x.len() == y.len() && x.iter().zip(y).all(|(x, y)| same(x, y)),
+        _ => a == b,
+    }
+}
+
+/// Every key of `defaults` is listed with its default, and every listed key exists.
+fn check_reference(chapter: &str, listed: &[(String, String)], defaults: &BTreeMap<String, Value>) {
+    let by_key: BTreeMap<&str, &str> = listed.iter().map(|(k, d)| (k.as_str(), d.as_str())).collect();
+    for (key, value) in defaults {
+        let Some(text) = by_key.get(key.as_str()) else { panic!("`{key}` is not in book/src/{chapter}") };
+        if WHOLE.contains(&key.as_str()) {
+            continue;
+        }
+        let written = parse_toml_value(text).unwrap_or_else(|| panic!("`{key}`: default {text:?} is not a TOML value"));
+        assert!(same(&written, value), "`{key}`: the book says {text}, the code {value}");
+    }
+    for (key, _) in listed {
+        assert!(defaults.contains_key(key), "book/src/{chapter} lists `{key}`, which the code does not have");
+    }
+}
+
+/// (key, default text) of every table row whose first cell is a key in backticks.
+fn rows(text: &str) -> Vec<(String, String)> {
+    text.lines()
+        .filter_map(|line| {
+            let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+            let key = cells.get(1)?.strip_prefix('`')?.strip_suffix('`')?;
+            Some((key.to_string(), cells.get(2)?.to_string()))
+        })
+        .collect()
+}
+
+/// The ```toml blocks of a chapter.
+fn toml_blocks(chapter: &str) -> Vec<&str> {
+    chapter.split("```toml\n").skip(1).filter_map(|b| b.split("```").next()).collect()
+}
+
+/// Rows of the configuration chapter; the ICP table's relative keys ("matcher / loop closure"
+/// defaults) expand to both sections, and `section.icp.*` pointers are skipped.
+fn configuration_rows() -> Vec<(String, String)> {
+    let (main, icp) = CONFIGURATION.split_once("## ICP tables").unwrap_or((CONFIGURATION, ""));
+    let mut out: Vec<(String, String)> = rows(main).into_iter().filter(|(k, _)| !k.ends_with(".*")).collect();
+    for (key, default) in rows(icp) {
+        let (matcher, loops) = default.split_once(" / ").unwrap_or((&default, &default));
+        out.push((format!("matcher.icp.{key}"), matcher.to_string()));
+        out.push((format!("tracker.loop_closure.icp.{key}"), loops.to_string()));
+    }
+    out
+}
+
+#[test]
+fn book_configuration_reference() {
+    let mut defaults = BTreeMap::new();
+    flatten("", &serde_json::to_value(RobotConfig::default()).unwrap(), &mut defaults);
+    assert!(defaults.len() > 50, "{} keys flattened", defaults.len());
+    check_reference("configuration.md", &configuration_rows(), &defaults);
+}
+
+#[test]
+fn book_scenario_reference() {
+    let mut defaults = BTreeMap::new();
+    let scenario = serde_json::to_value(Scenario::default()).unwrap();
+    for section in OWN_SECTIONS {
+        flatten(section, &scenario[section], &mut defaults);
+    }
+    flatten("robots[]", &serde_json::to_value(RobotSpec::default()).unwrap(), &mut defaults);
+    assert!(defaults.len() > 30, "{} keys", defaults.len());
+    let reference = SCENARIOS.split("## Scenario file reference").nth(1).unwrap_or("");
+    check_reference("scenarios.md", &rows(reference), &defaults);
+}
+
+#[test]
+fn every_toml_example_in_the_configuration_chapter_loads() {
+    let blocks = toml_blocks(CONFIGURATION);
+    assert!(blocks.len() >= 2);
+    for block in blocks {
+        let file = tempfile::Builder::new().suffix(".toml").tempfile().unwrap();
+        std::fs::write(file.path(), block).unwrap();
+        if let Err(e) = RobotConfig::load_with_env(Some(file.path()), "SGM_BOOK_TEST") {
+            panic!("{e}\n{block}");
+        }
+    }
+}
+
+#[test]
+fn every_toml_example_in_the_scenarios_chapter_loads() {
+    let blocks = toml_blocks(SCENARIOS);
+    assert!(!blocks.is_empty());
+    for block in blocks {
+        if let Err(e) = Scenario::from_toml(block, "book", "SGM_BOOK_SCENARIO_TEST") {
+            panic!("{e}\n{block}");
+        }
+    }
+}
