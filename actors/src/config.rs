@@ -266,6 +266,10 @@ fn positive(v: f64) -> bool {
     v.is_finite() && v > 0.0
 }
 
+fn non_negative(v: f64) -> bool {
+    v.is_finite() && v >= 0.0
+}
+
 fn load_error(file: Option<&Path>, e: config::ConfigError) -> ConfigError {
     let source_name = file.map(|p| p.display().to_string()).unwrap_or_else(|| "environment".into());
     ConfigError::Load { source_name, message: e.to_string() }
@@ -326,7 +330,7 @@ impl RobotConfig {
         check(positive(f.max_range_m), "fusion.max_range_m", f.max_range_m, "finite and > 0")?;
         check(positive(f.object_range_m), "fusion.object_range_m", f.object_range_m, "finite and > 0")?;
         check(
-            f.min_object_height_m.is_finite() && f.min_object_height_m >= 0.0,
+            non_negative(f.min_object_height_m),
             "fusion.min_object_height_m",
             f.min_object_height_m,
             "finite and ≥ 0",
@@ -345,15 +349,10 @@ impl RobotConfig {
         check(t.confirm_after >= 1, "tracker.tracking.confirm_after", t.confirm_after, "≥ 1")?;
         let l = &self.tracker.loop_closure;
         check(positive(l.search_radius_m), "tracker.loop_closure.search_radius_m", l.search_radius_m, "> 0")?;
-        check(
-            l.time_gap_s.is_finite() && l.time_gap_s >= 0.0,
-            "tracker.loop_closure.time_gap_s",
-            l.time_gap_s,
-            "finite and ≥ 0",
-        )?;
+        check(non_negative(l.time_gap_s), "tracker.loop_closure.time_gap_s", l.time_gap_s, "finite and ≥ 0")?;
         check(positive(l.max_rmse_m), "tracker.loop_closure.max_rmse_m", l.max_rmse_m, "> 0")?;
         check(
-            l.min_interval_s.is_finite() && l.min_interval_s >= 0.0,
+            non_negative(l.min_interval_s),
             "tracker.loop_closure.min_interval_s",
             l.min_interval_s,
             "finite and ≥ 0",
