@@ -1,6 +1,6 @@
 //! `report.md`: the one-page summary, with the message table in the paper's Table 4 layout.
 
-use super::Report;
+use super::{MessageRow, Report};
 use crate::runner::Timing;
 use std::fmt::Write as _;
 
@@ -55,27 +55,14 @@ pub fn render(report: &Report, timing: &Timing) -> String {
         );
     }
     let _ = writeln!(s, "\n## Messages (paper Table 4 layout; whole team)\n\n| message | count | mean (KB) | max (KB) | total (KB) |\n|---|---|---|---|---|");
-    for (name, m) in &report.messages {
-        if m.count > 0 {
-            let _ = writeln!(
-                s,
-                "| {name} | {} | {} | {} | {} |",
-                m.count,
-                kib(m.bytes_mean),
-                kib(m.bytes_max as f64),
-                kib(m.bytes_total as f64)
-            );
-        }
+    let mut row = |name: &str, m: &MessageRow| {
+        let (mean, max, total) = (kib(m.bytes_mean), kib(m.bytes_max as f64), kib(m.bytes_total as f64));
+        let _ = writeln!(s, "| {name} | {} | {mean} | {max} | {total} |", m.count);
+    };
+    for (name, m) in report.messages.iter().filter(|(_, m)| m.count > 0) {
+        row(name, m);
     }
-    let raw = &report.point_cloud_raw;
-    let _ = writeln!(
-        s,
-        "| point-cloud raw (every frame, 16 B/point) | {} | {} | {} | {} |",
-        raw.count,
-        kib(raw.bytes_mean),
-        kib(raw.bytes_max as f64),
-        kib(raw.bytes_total as f64)
-    );
+    row("point-cloud raw (every frame, 16 B/point)", &report.point_cloud_raw);
     let _ =
         writeln!(s, "\nSGM sent {:.3} % of what raw point-cloud sharing would.\n", report.bytes_ratio_to_raw * 100.0);
     let r = &report.radio;
