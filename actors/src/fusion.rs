@@ -51,20 +51,20 @@ impl Handler<SensorFrame> for Fusion {
                     }
                 }
             };
-            let r2 = self.max_range_m * self.max_range_m;
-            let (mut points, mut kept) = (Vec::with_capacity(labels.len()), Vec::with_capacity(labels.len()));
+            let (r2, near) = (self.max_range_m * self.max_range_m, self.object_range_m * self.object_range_m);
+            let n = labels.len();
+            let (mut points, mut kept, mut clustered) =
+                (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
             for (p, l) in frame.points_in_body.iter().zip(labels) {
-                if p.coords.iter().all(|v| v.is_finite()) && p.coords.norm_squared() <= r2 {
+                let d2 = p.coords.norm_squared();
+                if p.coords.iter().all(|v| v.is_finite()) && d2 <= r2 {
+                    let label = l.and_then(|LabelId(id)| self.classes.object_label(id));
                     points.push(*p);
-                    kept.push(l.and_then(|LabelId(id)| self.classes.object_label(id)));
+                    kept.push(label);
+                    // Objects are clustered from returns within the object range only.
+                    clustered.push(if d2 <= near { label } else { None });
                 }
             }
-            let near = self.object_range_m * self.object_range_m;
-            let clustered: Vec<Option<LabelId>> = points
-                .iter()
-                .zip(&kept)
-                .map(|(p, l)| if p.coords.norm_squared() <= near { *l } else { None })
-                .collect();
             let candidates = cluster(&points, &clustered, &self.clustering);
             self.tracker.do_send(LabelledScan {
                 stamp: frame.stamp,
