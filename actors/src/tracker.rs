@@ -60,6 +60,8 @@ pub struct MapObject {
     pub label: sgm_model::scene_graph::LabelId,
     pub centroid: Point3<f64>,
     pub size: nalgebra::Vector3<f64>,
+    /// The keyframe it hangs from (the scene graph's cross-layer edge).
+    pub anchor: sgm_model::scene_graph::KeyframeId,
     /// Sightings reached the confirmation count: shared with and matched by other robots.
     pub confirmed: bool,
 }
@@ -331,6 +333,7 @@ impl Handler<GetMapSummary> for Tracker {
                     label: o.label,
                     centroid: self.graph.centroid_in_world(o.id)?,
                     size: o.size,
+                    anchor: o.anchor,
                     confirmed: self.objects.is_confirmed(o.id, &self.config.tracking),
                 })
             })

@@ -1,1 +1,7 @@
+//! SGM's ROS 1 bridge (DESIGN.md §5): ROS message ↔ model conversions, the synchroniser that
+//! turns LiDAR, label image and odometry streams into sensor frames, ROS 1 bag reading and
+//! writing, and the rosrust node with its inter-robot transport.
+
+pub mod convert;
+pub mod error;
 pub mod msg;

@@ -24,7 +24,7 @@ use sgm_actors::quiescence::until_quiet;
 use sgm_actors::supervisor::{start_robot, RobotHandle};
 use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
 use sgm_actors::transport::InProcessRadio;
-use sgm_model::scene_graph::{LabelId, RobotId, SceneGraph};
+use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, LabelId, RobotId, SceneGraph};
 use std::time::{Duration, Instant};
 
 /// Wall-clock facts of a run: kept out of the report so that the report is deterministic.
@@ -114,8 +114,9 @@ pub async fn run(scenario: &Scenario, progress: Option<&ProgressBar>) -> Result<
     if let Some(bar) = progress {
         bar.set_length(steps);
     }
+    let dt_nanos = nanos_from_stamp(dt);
     for step in 1..=steps {
-        let t = step as f64 * dt;
+        let t = stamp_from_nanos(step as i64 * dt_nanos);
         let sim_started = Instant::now();
         for (k, robot) in robots.iter_mut().enumerate() {
             let Some(truth) = robot.route.pose_at(t) else { continue };

@@ -13,6 +13,17 @@ use crate::scene_graph::LabelId;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
+/// `camera_from_body` of a camera at the body origin looking along the body's +x (x forward,
+/// y left, z up) with the ROS optical-frame convention (z forward, x right, y down). The
+/// simulator's camera and the bridge's default extrinsic.
+pub fn optical_from_forward_body() -> Pose3 {
+    let r = nalgebra::Matrix3::new(0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0);
+    Pose3::from_parts(
+        nalgebra::Translation3::identity(),
+        nalgebra::UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r)),
+    )
+}
+
 /// Intrinsics and distortion of a camera (as in `sensor_msgs/CameraInfo`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CameraModel {

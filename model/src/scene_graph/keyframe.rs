@@ -9,6 +9,18 @@ use serde::{Deserialize, Serialize};
 /// Time of a measurement, seconds since the mission's epoch (virtual or ROS time).
 pub type Stamp = f64;
 
+/// The stamp `nanos` nanoseconds after the epoch. Every clock in SGM (the scenario runner's
+/// steps, ROS header stamps, bag records) goes through here, so a time that went out as
+/// nanoseconds comes back as the very same `f64`.
+pub fn stamp_from_nanos(nanos: i64) -> Stamp {
+    nanos as f64 / 1e9
+}
+
+/// Nanoseconds after the epoch of `stamp`, rounded to the nearest (saturating).
+pub fn nanos_from_stamp(stamp: Stamp) -> i64 {
+    (stamp * 1e9).round() as i64
+}
+
 /// A keyframe: a robot pose selected by the front end, with its time.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Keyframe {

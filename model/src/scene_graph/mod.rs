@@ -23,6 +23,6 @@ mod semantic;
 pub use error::SceneGraphError;
 pub use graph::SceneGraph;
 pub use ids::{KeyframeId, LabelId, ObjectId, RobotId};
-pub use keyframe::{Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeRef, Stamp};
+pub use keyframe::{nanos_from_stamp, stamp_from_nanos, Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeRef, Stamp};
 pub use object::{Object, ObjectEdge};
 pub use semantic::SemanticScan;

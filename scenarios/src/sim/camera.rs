@@ -18,11 +18,7 @@ use std::collections::BTreeMap;
 /// The camera looks along the body's x axis: camera z = body x, camera x = −body y,
 /// camera y = −body z.
 pub fn camera_from_body() -> Pose3 {
-    let r = Matrix3::new(0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0);
-    Pose3::from_parts(
-        nalgebra::Translation3::identity(),
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)),
-    )
+    sgm_model::perception::projection::optical_from_forward_body()
 }
 
 pub fn camera_model(spec: &CameraSpec) -> CameraModel {

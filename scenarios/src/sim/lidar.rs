@@ -132,7 +132,9 @@ impl Lidar {
                 continue;
             }
             let t = t + noise.map_or(0.0, |n| n.sample(rng));
-            frame.points.push(Point3::from(d * t));
+            // Drivers publish float32 coordinates (sensor_msgs/PointCloud2): so does ours, and a
+            // scan written to a bag reads back bit for bit.
+            frame.points.push(Point3::from(d * t).map(|v| f64::from(v as f32)));
             frame.labels.push(label);
             frame.instances.push(instance);
         }

@@ -1,0 +1,328 @@
+//! `sensor_msgs/PointCloud2` ↔ points. In: any field layout with `x`, `y`, `z` as float32 (or
+//! float64) — Velodyne's (x y z intensity ring time), Livox's (x y z intensity tag line
+//! timestamp), Ouster's — either byte order, organised or not; points with a non-finite
+//! coordinate are dropped (organised clouds mark missing returns with NaN). An optional integer
+//! label field gives per-point classes ([`NO_LABEL`] or any value outside the class table:
+//! unlabelled). Out: x y z float32, label uint16, and a packed `rgb` float32 that RViz colours by.
+
+use crate::error::InputError;
+use crate::msg::{sensor_msgs, std_msgs};
+use nalgebra::Point3;
+
+/// The label value meaning "no class" in our clouds and label images.
+pub const NO_LABEL: u16 = u16::MAX;
+
+const INT8: u8 = 1;
+const UINT8: u8 = 2;
+const INT16: u8 = 3;
+const UINT16: u8 = 4;
+const INT32: u8 = 5;
+const UINT32: u8 = 6;
+const FLOAT32: u8 = 7;
+const FLOAT64: u8 = 8;
+
+fn type_name(datatype: u8) -> &'static str {
+    match datatype {
+        INT8 => "int8",
+        UINT8 => "uint8",
+        INT16 => "int16",
+        UINT16 => "uint16",
+        INT32 => "int32",
+        UINT32 => "uint32",
+        FLOAT32 => "float32",
+        FLOAT64 => "float64",
+        _ => "unknown",
+    }
+}
+
+fn type_size(datatype: u8) -> Option<u32> {
+    match datatype {
+        INT8 | UINT8 => Some(1),
+        INT16 | UINT16 => Some(2),
+        INT32 | UINT32 | FLOAT32 => Some(4),
+        FLOAT64 => Some(8),
+        _ => None,
+    }
+}
+
+/// Where a field sits in a point and how to read it.
+#[derive(Clone, Copy, Debug)]
+struct Field {
+    offset: usize,
+    datatype: u8,
+}
+
+impl Field {
+    fn find(
+        msg: &sensor_msgs::PointCloud2,
+        name: &str,
+        allowed: &[u8],
+        expected: &'static str,
+    ) -> Result<Option<Field>, InputError> {
+        let Some(f) = msg.fields.iter().find(|f| f.name == name) else { return Ok(None) };
+        if !allowed.contains(&f.datatype) {
+            return Err(InputError::FieldType {
+                field: name.into(),
+                datatype: f.datatype,
+                found: type_name(f.datatype),
+                expected,
+            });
+        }
+        let size = type_size(f.datatype).unwrap_or(0);
+        if f.offset.checked_add(size).is_none_or(|end| end > msg.point_step) {
+            return Err(InputError::FieldOutsidePoint { field: name.into(), offset: f.offset, point_step: msg.point_step });
+        }
+        Ok(Some(Field { offset: f.offset as usize, datatype: f.datatype }))
+    }
+
+    fn bytes<const N: usize>(&self, point: &[u8], big_endian: bool) -> [u8; N] {
+        let mut b = [0u8; N];
+        b.copy_from_slice(&point[self.offset..self.offset + N]);
+        if big_endian {
+            b.reverse();
+        }
+        b
+    }
+
+    fn float(&self, point: &[u8], big_endian: bool) -> f64 {
+        match self.datatype {
+            FLOAT64 => f64::from_le_bytes(self.bytes(point, big_endian)),
+            _ => f64::from(f32::from_le_bytes(self.bytes(point, big_endian))),
+        }
+    }
+
+    fn integer(&self, point: &[u8], big_endian: bool) -> i64 {
+        match self.datatype {
+            INT8 => i64::from(point[self.offset] as i8),
+            UINT8 => i64::from(point[self.offset]),
+            INT16 => i64::from(i16::from_le_bytes(self.bytes(point, big_endian))),
+            UINT16 => i64::from(u16::from_le_bytes(self.bytes(point, big_endian))),
+            INT32 => i64::from(i32::from_le_bytes(self.bytes(point, big_endian))),
+            _ => i64::from(u32::from_le_bytes(self.bytes(point, big_endian))),
+        }
+    }
+}
+
+/// A scan read from a cloud message.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scan {
+    pub points: Vec<Point3<f64>>,
+    /// Per-point label values when the cloud has the label field.
+    pub labels: Option<Vec<u16>>,
+    /// Points dropped for a non-finite coordinate.
+    pub dropped_non_finite: usize,
+}
+
+/// Reads the points (and the `label_field`, if named and present) of a cloud.
+pub fn read_cloud(msg: &sensor_msgs::PointCloud2, label_field: &str) -> Result<Scan, InputError> {
+    let coordinate = |name: &str| -> Result<Field, InputError> {
+        Field::find(msg, name, &[FLOAT32, FLOAT64], "float32 or float64")?
+            .ok_or_else(|| InputError::MissingField { field: name.into() })
+    };
+    let (x, y, z) = (coordinate("x")?, coordinate("y")?, coordinate("z")?);
+    let label = if label_field.is_empty() {
+        None
+    } else {
+        Field::find(msg, label_field, &[INT8, UINT8, INT16, UINT16, INT32, UINT32], "an integer type")?
+    };
+    let count = u64::from(msg.width) * u64::from(msg.height);
+    let step = msg.point_step as usize;
+    let row_bytes = u64::from(msg.width) * u64::from(msg.point_step);
+    if u64::from(msg.row_step) < row_bytes {
+        return Err(InputError::invalid(format!(
+            "row_step {} is less than width {} × point_step {}",
+            msg.row_step, msg.width, msg.point_step
+        )));
+    }
+    let needed = if msg.height == 0 { 0 } else { u64::from(msg.row_step) * u64::from(msg.height - 1) + row_bytes };
+    if (msg.data.len() as u64) < needed {
+        return Err(InputError::Truncated {
+            got: msg.data.len(),
+            expected: needed as usize,
+            what: format!("{} × {} points of {} bytes", msg.width, msg.height, msg.point_step),
+        });
+    }
+    let be = msg.is_bigendian;
+    let mut scan = Scan {
+        points: Vec::with_capacity(count as usize),
+        labels: label.map(|_| Vec::with_capacity(count as usize)),
+        dropped_non_finite: 0,
+    };
+    for row in 0..msg.height as usize {
+        let row_data = &msg.data[row * msg.row_step as usize..][..msg.width as usize * step];
+        for point in row_data.chunks_exact(step) {
+            let p = Point3::new(x.float(point, be), y.float(point, be), z.float(point, be));
+            if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
+                scan.dropped_non_finite += 1;
+                continue;
+            }
+            scan.points.push(p);
+            if let (Some(field), Some(labels)) = (label, scan.labels.as_mut()) {
+                labels.push(u16::try_from(field.integer(point, be)).unwrap_or(NO_LABEL));
+            }
+        }
+    }
+    Ok(scan)
+}
+
+fn point_field(name: &str, offset: u32, datatype: u8) -> sensor_msgs::PointField {
+    sensor_msgs::PointField { name: name.into(), offset, datatype, count: 1 }
+}
+
+/// Packs an RGB colour the way PCL and RViz read an `rgb` float32 field.
+fn packed_rgb([r, g, b]: [u8; 3]) -> f32 {
+    f32::from_bits((u32::from(r) << 16) | (u32::from(g) << 8) | u32::from(b))
+}
+
+/// An unorganised little-endian cloud: x y z float32, plus `label` uint16 and `rgb` (from
+/// `colour_of(label)`) when labels are given.
+pub fn cloud_msg(
+    header: std_msgs::Header,
+    points: &[Point3<f32>],
+    labels: Option<&[u16]>,
+    colour_of: impl Fn(u16) -> [u8; 3],
+) -> sensor_msgs::PointCloud2 {
+    let mut fields = vec![point_field("x", 0, FLOAT32), point_field("y", 4, FLOAT32), point_field("z", 8, FLOAT32)];
+    let point_step = if labels.is_some() {
+        fields.push(point_field("rgb", 12, FLOAT32));
+        fields.push(point_field("label", 16, UINT16));
+        20
+    } else {
+        12
+    };
+    let mut data = Vec::with_capacity(points.len() * point_step);
+    for (k, p) in points.iter().enumerate() {
+        for v in [p.x, p.y, p.z] {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        if let Some(labels) = labels {
+            let label = labels.get(k).copied().unwrap_or(NO_LABEL);
+            data.extend_from_slice(&packed_rgb(colour_of(label)).to_le_bytes());
+            data.extend_from_slice(&label.to_le_bytes());
+            data.extend_from_slice(&[0, 0]);
+        }
+    }
+    sensor_msgs::PointCloud2 {
+        header,
+        height: 1,
+        width: points.len() as u32,
+        fields,
+        is_bigendian: false,
+        point_step: point_step as u32,
+        row_step: (points.len() * point_step) as u32,
+        data,
+        is_dense: true,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A Velodyne-style cloud (x y z intensity ring time, 22-byte points) built by hand.
+    fn velodyne(points: &[[f32; 3]], big_endian: bool) -> sensor_msgs::PointCloud2 {
+        let fields = vec![
+            point_field("x", 0, FLOAT32),
+            point_field("y", 4, FLOAT32),
+            point_field("z", 8, FLOAT32),
+            point_field("intensity", 12, FLOAT32),
+            point_field("ring", 16, UINT16),
+            point_field("time", 18, FLOAT32),
+        ];
+        let order = |mut b: Vec<u8>| {
+            if big_endian {
+                b.reverse();
+            }
+            b
+        };
+        let mut data = Vec::new();
+        for (k, p) in points.iter().enumerate() {
+            for v in [p[0], p[1], p[2], 7.0] {
+                data.extend(order(v.to_le_bytes().to_vec()));
+            }
+            data.extend(order((k as u16).to_le_bytes().to_vec()));
+            data.extend(order(0.5f32.to_le_bytes().to_vec()));
+        }
+        sensor_msgs::PointCloud2 {
+            height: 1,
+            width: points.len() as u32,
+            fields,
+            is_bigendian: big_endian,
+            point_step: 22,
+            row_step: 22 * points.len() as u32,
+            data,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn velodyne_layout_either_byte_order_nan_dropped() {
+        let pts = [[1.0, 2.0, 3.0], [f32::NAN, 0.0, 0.0], [-4.5, 0.25, 1e3]];
+        for be in [false, true] {
+            let scan = read_cloud(&velodyne(&pts, be), "label").unwrap();
+            assert_eq!(scan.points, vec![Point3::new(1.0, 2.0, 3.0), Point3::new(-4.5, 0.25, 1000.0)]);
+            assert_eq!(scan.dropped_non_finite, 1);
+            assert_eq!(scan.labels, None);
+        }
+        // The ring field read as labels: an integer field anywhere in the point.
+        let scan = read_cloud(&velodyne(&pts, true), "ring").unwrap();
+        assert_eq!(scan.labels, Some(vec![0, 2]));
+    }
+
+    #[test]
+    fn organised_cloud_with_row_padding() {
+        let mut msg = cloud_msg(std_msgs::Header::default(), &[Point3::new(1.0, 1.0, 1.0); 4], None, |_| [0; 3]);
+        // 2 × 2 with 4 bytes of padding per row.
+        let mut data = Vec::new();
+        for row in msg.data.chunks(24) {
+            data.extend_from_slice(row);
+            data.extend_from_slice(&[0xAA; 4]);
+        }
+        (msg.width, msg.height, msg.row_step, msg.data) = (2, 2, 28, data);
+        assert_eq!(read_cloud(&msg, "").unwrap().points.len(), 4);
+    }
+
+    #[test]
+    fn malformed_clouds_are_refused_with_the_reason() {
+        let good = cloud_msg(std_msgs::Header::default(), &[Point3::new(1.0, 2.0, 3.0); 3], Some(&[1, 2, 3]), |_| [0; 3]);
+        let mut m = good.clone();
+        m.data.truncate(50);
+        assert_eq!(
+            read_cloud(&m, "label").unwrap_err().to_string(),
+            "data is 50 bytes, 60 expected (3 × 1 points of 20 bytes)"
+        );
+        let mut m = good.clone();
+        m.fields[1].datatype = UINT16;
+        assert_eq!(
+            read_cloud(&m, "label").unwrap_err().to_string(),
+            "field `y` has datatype 4 (uint16), float32 or float64 expected"
+        );
+        let mut m = good.clone();
+        m.fields.retain(|f| f.name != "z");
+        assert_eq!(read_cloud(&m, "").unwrap_err(), InputError::MissingField { field: "z".into() });
+        let mut m = good.clone();
+        m.fields[0].offset = 18;
+        assert!(matches!(read_cloud(&m, "").unwrap_err(), InputError::FieldOutsidePoint { .. }));
+        let mut m = good.clone();
+        m.row_step = 10;
+        assert!(read_cloud(&m, "").is_err());
+        let mut m = good;
+        m.fields[4].datatype = FLOAT32;
+        assert!(matches!(read_cloud(&m, "label").unwrap_err(), InputError::FieldType { .. }));
+    }
+
+    proptest! {
+        /// What we write reads back bit for bit: points and labels.
+        #[test]
+        fn written_clouds_read_back(points in proptest::collection::vec((-1e4f32..1e4, -1e4f32..1e4, -1e2f32..1e2, 0u16..400), 0..200)) {
+            let pts: Vec<Point3<f32>> = points.iter().map(|p| Point3::new(p.0, p.1, p.2)).collect();
+            let labels: Vec<u16> = points.iter().map(|p| p.3).collect();
+            let msg = cloud_msg(std_msgs::Header::default(), &pts, Some(&labels), |l| [l as u8, 0, 0]);
+            let scan = read_cloud(&msg, "label").unwrap();
+            let back: Vec<Point3<f32>> = scan.points.iter().map(|p| p.map(|v| v as f32)).collect();
+            prop_assert_eq!(back, pts);
+            prop_assert_eq!(scan.labels, Some(labels));
+        }
+    }
+}
