@@ -2,6 +2,8 @@
 //! turns LiDAR, label image and odometry streams into sensor frames, ROS 1 bag reading and
 //! writing, and the rosrust node with its inter-robot transport.
 
+pub mod config;
 pub mod convert;
 pub mod error;
 pub mod msg;
+pub mod sync;

@@ -8,7 +8,7 @@
 use crate::scenario::CameraSpec;
 use crate::sim::lidar::LidarFrame;
 use crate::sim::world::NO_LABEL;
-use nalgebra::{Matrix3, Point3, Rotation3, UnitQuaternion};
+use nalgebra::Point3;
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use sgm_model::geometry::Pose3;

@@ -1,0 +1,218 @@
+//! The `[ros]` section: topic names, frames, queue sizes and synchronisation, shared by the
+//! node (`sgm ros`), the bag replay (`sgm replay`) and the bag writer (`sgm run --bag-out`).
+//! `{robot}` in a topic or frame is replaced by the robot's name and `{id}` by its id.
+//! Relative topic names resolve in the node's namespace (`__ns`, `ROS_NAMESPACE`).
+
+use crate::error::InputError;
+use serde::{Deserialize, Serialize};
+use sgm_model::geometry::Pose3;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RosConfig {
+    pub topics: RosTopics,
+    pub frames: RosFrames,
+    /// Subscriber and publisher queue length, messages. Default 10 (1 s of a 10 Hz LiDAR).
+    pub queue_size: usize,
+    /// Where the points' classes come from: `image` (project into the label image, paper
+    /// §IV-A) or `cloud` (an integer field of the cloud, from an upstream fuser). Default image.
+    pub labels: LabelSource,
+    /// The cloud's label field when `labels = "cloud"`. Default `label`.
+    pub label_field: String,
+    /// `camera_from_body` as [x, y, z, qx, qy, qz, qw]; unset: a camera at the body origin
+    /// looking along +x (optical frame: z forward, x right, y down).
+    pub camera_from_body: Option<[f64; 7]>,
+    pub sync: SyncConfig,
+    /// Markers, path, map, tf and status are published every this many seconds. Default 1.
+    pub publish_interval_s: f64,
+    /// Voxel of the published semantic map cloud, m. Default 0.25.
+    pub map_voxel_m: f64,
+    /// Clouds with more points are refused (bounded memory per message). Default 2 000 000.
+    pub max_cloud_points: usize,
+    /// Label images with more pixels are refused. Default 16 777 216 (4096²).
+    pub max_image_pixels: usize,
+}
+
+impl Default for RosConfig {
+    fn default() -> Self {
+        Self {
+            topics: RosTopics::default(),
+            frames: RosFrames::default(),
+            queue_size: 10,
+            labels: LabelSource::Image,
+            label_field: "label".into(),
+            camera_from_body: None,
+            sync: SyncConfig::default(),
+            publish_interval_s: 1.0,
+            map_voxel_m: 0.25,
+            max_cloud_points: 2_000_000,
+            max_image_pixels: 4096 * 4096,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LabelSource {
+    Image,
+    Cloud,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RosTopics {
+    /// sensor_msgs/PointCloud2 in. Default `points`.
+    pub points: String,
+    /// sensor_msgs/Image (mono8/mono16 class ids) in. Default `labels`.
+    pub labels: String,
+    /// sensor_msgs/CameraInfo in. Default `camera_info`.
+    pub camera_info: String,
+    /// nav_msgs/Odometry in. Default `odometry`.
+    pub odometry: String,
+    /// nav_msgs/Odometry of the true pose, in bags written from scenarios (replay's ATE).
+    /// Default `ground_truth`.
+    pub ground_truth: String,
+    /// visualization_msgs/MarkerArray out. Default `sgm/markers`.
+    pub markers: String,
+    /// nav_msgs/Path out. Default `sgm/path`.
+    pub path: String,
+    /// sensor_msgs/PointCloud2 semantic map out. Default `sgm/map`.
+    pub map: String,
+    /// std_msgs/String (JSON) status out. Default `sgm/status`.
+    pub status: String,
+    /// tf2_msgs/TFMessage out. Default `/tf`.
+    pub tf: String,
+    /// sgm_msgs/Envelope broadcasts between robots (object data). Default `/sgm/team`.
+    pub team: String,
+    /// sgm_msgs/Deliver service of each robot (requests and replies addressed to it).
+    /// Default `/sgm/robot_{id}/deliver`.
+    pub deliver: String,
+}
+
+impl Default for RosTopics {
+    fn default() -> Self {
+        Self {
+            points: "points".into(),
+            labels: "labels".into(),
+            camera_info: "camera_info".into(),
+            odometry: "odometry".into(),
+            ground_truth: "ground_truth".into(),
+            markers: "sgm/markers".into(),
+            path: "sgm/path".into(),
+            map: "sgm/map".into(),
+            status: "sgm/status".into(),
+            tf: "/tf".into(),
+            team: "/sgm/team".into(),
+            deliver: "/sgm/robot_{id}/deliver".into(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RosFrames {
+    /// The robot's world (odometry) frame: odometry's `header.frame_id`, and the frame of
+    /// everything published. Default `{robot}/odom`.
+    pub world: String,
+    /// The body frame: odometry's `child_frame_id`. Default `{robot}/base_link`.
+    pub body: String,
+    /// The clouds' frame (points are taken as in the body frame). Default `{robot}/base_link`.
+    pub lidar: String,
+    /// The label image's and camera info's frame. Default `{robot}/camera`.
+    pub camera: String,
+}
+
+impl Default for RosFrames {
+    fn default() -> Self {
+        Self {
+            world: "{robot}/odom".into(),
+            body: "{robot}/base_link".into(),
+            lidar: "{robot}/base_link".into(),
+            camera: "{robot}/camera".into(),
+        }
+    }
+}
+
+/// How clouds meet their odometry and label image.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SyncConfig {
+    /// A label image within this of the cloud's stamp labels it, s. Default 0.05.
+    pub image_tolerance_s: f64,
+    /// The odometry poses bracketing a cloud may be at most this far apart to interpolate, s.
+    /// Default 0.5.
+    pub max_odometry_gap_s: f64,
+    /// A cloud still missing its odometry or image when the streams are this far past it is
+    /// dropped, s. Default 1.
+    pub max_wait_s: f64,
+}
+
+impl Default for SyncConfig {
+    fn default() -> Self {
+        Self { image_tolerance_s: 0.05, max_odometry_gap_s: 0.5, max_wait_s: 1.0 }
+    }
+}
+
+impl RosConfig {
+    /// `template` with `{robot}` and `{id}` filled in.
+    pub fn resolve(template: &str, robot: &str, id: u16) -> String {
+        template.replace("{robot}", robot).replace("{id}", &id.to_string())
+    }
+
+    /// The camera extrinsic (checked: finite, unit quaternion).
+    pub fn camera_from_body(&self) -> Result<Pose3, InputError> {
+        let Some([x, y, z, qx, qy, qz, qw]) = self.camera_from_body else {
+            return Ok(sgm_model::perception::projection::optical_from_forward_body());
+        };
+        let pose = crate::msg::geometry_msgs::Pose {
+            position: crate::msg::geometry_msgs::Point { x, y, z },
+            orientation: crate::msg::geometry_msgs::Quaternion { x: qx, y: qy, z: qz, w: qw },
+        };
+        crate::convert::geometry::pose_from_msg(&pose)
+            .map_err(|e| InputError::invalid(format!("ros.camera_from_body: {e}")))
+    }
+
+    /// Checks every key; errors name the key.
+    pub fn validate(&self) -> Result<(), InputError> {
+        let positive = |v: f64, key: &str| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(InputError::invalid(format!("ros.{key} = {v}: finite and > 0 expected")))
+            }
+        };
+        positive(self.sync.image_tolerance_s, "sync.image_tolerance_s")?;
+        positive(self.sync.max_odometry_gap_s, "sync.max_odometry_gap_s")?;
+        positive(self.sync.max_wait_s, "sync.max_wait_s")?;
+        positive(self.publish_interval_s, "publish_interval_s")?;
+        positive(self.map_voxel_m, "map_voxel_m")?;
+        if self.queue_size == 0 || self.max_cloud_points == 0 || self.max_image_pixels == 0 {
+            return Err(InputError::invalid("ros.queue_size, max_cloud_points and max_image_pixels must be ≥ 1"));
+        }
+        let t = &self.topics;
+        for (key, name) in [
+            ("points", &t.points),
+            ("labels", &t.labels),
+            ("camera_info", &t.camera_info),
+            ("odometry", &t.odometry),
+            ("markers", &t.markers),
+            ("path", &t.path),
+            ("map", &t.map),
+            ("status", &t.status),
+            ("tf", &t.tf),
+            ("team", &t.team),
+            ("deliver", &t.deliver),
+        ] {
+            let bad = name.is_empty()
+                || !name.chars().all(|c| c.is_ascii_alphanumeric() || "_/{}~".contains(c))
+                || name.contains("//");
+            if bad {
+                return Err(InputError::invalid(format!("ros.topics.{key} = {name:?}: not a valid ROS name")));
+            }
+        }
+        if !t.deliver.contains("{id}") {
+            return Err(InputError::invalid("ros.topics.deliver must contain {id}: one service per robot"));
+        }
+        self.camera_from_body().map(|_| ())
+    }
+}

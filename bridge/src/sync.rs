@@ -1,0 +1,304 @@
+//! The synchroniser: three streams in (clouds, odometry, label images + camera info), typed
+//! [`SensorFrame`]s out — the same code for the live node and the bag replay. A cloud gets the
+//! odometry pose at its stamp (the pose stamped exactly then, else interpolated between the two
+//! bracketing poses — linear in translation, slerp in rotation — if they are at most
+//! `max_odometry_gap_s` apart) and the label image nearest its stamp within `image_tolerance_s`.
+//! A cloud waits while its partners may still come; once the streams are `max_wait_s` past it,
+//! it is dropped and counted. Time here is the streams' own (header stamps), never the wall
+//! clock, so a replay is deterministic. Every buffer is bounded.
+
+use crate::config::{LabelSource, SyncConfig};
+use crate::convert::cloud::{Scan, NO_LABEL};
+use serde::Serialize;
+use sgm_actors::messages::{FrameLabels, SensorFrame};
+use sgm_model::geometry::Pose3;
+use sgm_model::perception::projection::{CameraModel, LabelImage};
+use sgm_model::scene_graph::{LabelId, Stamp};
+use std::collections::VecDeque;
+
+/// At most this many messages wait in each stream's buffer (the oldest goes first).
+const MAX_BUFFERED: usize = 1000;
+
+/// What became of the clouds.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct SyncCounts {
+    pub frames: u64,
+    pub no_odometry: u64,
+    pub no_image: u64,
+    pub no_camera_info: u64,
+    pub no_label_field: u64,
+    pub out_of_order: u64,
+    pub overflow: u64,
+}
+
+pub struct Synchroniser {
+    config: SyncConfig,
+    labels: LabelSource,
+    camera_from_body: Pose3,
+    odometry: VecDeque<(Stamp, Pose3)>,
+    images: VecDeque<(Stamp, LabelImage)>,
+    camera: Option<CameraModel>,
+    clouds: VecDeque<(Stamp, Scan)>,
+    latest: Stamp,
+    pub counts: SyncCounts,
+}
+
+enum Outcome<T> {
+    Ready(T),
+    Wait,
+    Drop,
+}
+
+fn push_bounded<T>(queue: &mut VecDeque<(Stamp, T)>, t: Stamp, value: T, overflow: &mut u64) -> bool {
+    if queue.back().is_some_and(|(last, _)| t < *last) {
+        return false;
+    }
+    if queue.len() == MAX_BUFFERED {
+        queue.pop_front();
+        *overflow += 1;
+    }
+    queue.push_back((t, value));
+    true
+}
+
+impl Synchroniser {
+    pub fn new(config: SyncConfig, labels: LabelSource, camera_from_body: Pose3) -> Self {
+        Self {
+            config,
+            labels,
+            camera_from_body,
+            odometry: VecDeque::new(),
+            images: VecDeque::new(),
+            camera: None,
+            clouds: VecDeque::new(),
+            latest: f64::NEG_INFINITY,
+            counts: SyncCounts::default(),
+        }
+    }
+
+    fn saw(&mut self, t: Stamp) {
+        self.latest = self.latest.max(t);
+    }
+
+    pub fn odometry(&mut self, t: Stamp, world_from_body: Pose3) {
+        self.saw(t);
+        if !push_bounded(&mut self.odometry, t, world_from_body, &mut self.counts.overflow) {
+            self.counts.out_of_order += 1;
+        }
+    }
+
+    pub fn image(&mut self, t: Stamp, image: LabelImage) {
+        self.saw(t);
+        if !push_bounded(&mut self.images, t, image, &mut self.counts.overflow) {
+            self.counts.out_of_order += 1;
+        }
+    }
+
+    pub fn camera_info(&mut self, camera: CameraModel) {
+        self.camera = Some(camera);
+    }
+
+    pub fn cloud(&mut self, t: Stamp, scan: Scan) {
+        self.saw(t);
+        if !push_bounded(&mut self.clouds, t, scan, &mut self.counts.overflow) {
+            self.counts.out_of_order += 1;
+        }
+    }
+
+    /// Clouds still waiting for a partner.
+    pub fn pending(&self) -> usize {
+        self.clouds.len()
+    }
+
+    fn pose_at(&self, t: Stamp) -> Outcome<Pose3> {
+        let after = self.odometry.partition_point(|(s, _)| *s < t);
+        match (after.checked_sub(1).and_then(|k| self.odometry.get(k)), self.odometry.get(after)) {
+            (_, Some((s1, p1))) if *s1 == t => Outcome::Ready(*p1),
+            (Some((s0, p0)), Some((s1, p1))) if s1 - s0 <= self.config.max_odometry_gap_s => {
+                let a = (t - s0) / (s1 - s0);
+                let translation = p0.translation.vector.lerp(&p1.translation.vector, a);
+                let rotation = p0.rotation.slerp(&p1.rotation, a);
+                Outcome::Ready(Pose3::from_parts(translation.into(), rotation))
+            }
+            (Some(_), Some(_)) => Outcome::Drop,
+            (_, None) => Outcome::Wait,
+            (None, Some(_)) => Outcome::Drop,
+        }
+    }
+
+    fn image_at(&self, t: Stamp) -> Outcome<LabelImage> {
+        let tolerance = self.config.image_tolerance_s;
+        let nearest = self
+            .images
+            .iter()
+            .filter(|(s, _)| (s - t).abs() <= tolerance)
+            .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()));
+        match nearest {
+            // An image exactly at t cannot be beaten; otherwise a closer one may still come.
+            Some((s, image)) if *s == t || self.images.back().is_some_and(|(last, _)| *last >= t + tolerance) => {
+                Outcome::Ready(image.clone())
+            }
+            Some(_) => Outcome::Wait,
+            None if self.images.back().is_some_and(|(last, _)| *last > t + tolerance) => Outcome::Drop,
+            None => Outcome::Wait,
+        }
+    }
+
+    fn labels_for(&mut self, t: Stamp, scan: &Scan) -> Outcome<FrameLabels> {
+        match self.labels {
+            LabelSource::Cloud => match &scan.labels {
+                Some(labels) => Outcome::Ready(FrameLabels::PerPoint(
+                    labels.iter().map(|&l| (l != NO_LABEL).then_some(LabelId(l))).collect(),
+                )),
+                None => {
+                    self.counts.no_label_field += 1;
+                    Outcome::Drop
+                }
+            },
+            LabelSource::Image => {
+                let Some(camera) = self.camera.clone() else { return Outcome::Wait };
+                match self.image_at(t) {
+                    Outcome::Ready(image) => {
+                        Outcome::Ready(FrameLabels::Image { image, camera, camera_from_body: self.camera_from_body })
+                    }
+                    Outcome::Wait => Outcome::Wait,
+                    Outcome::Drop => {
+                        self.counts.no_image += 1;
+                        Outcome::Drop
+                    }
+                }
+            }
+        }
+    }
+
+    /// The frames that can be assembled now, oldest first; stale clouds are dropped.
+    pub fn ready(&mut self) -> Vec<SensorFrame> {
+        let mut frames = Vec::new();
+        while let Some((t, _)) = self.clouds.front() {
+            let t = *t;
+            let stale = self.latest - t > self.config.max_wait_s;
+            let pose = match self.pose_at(t) {
+                Outcome::Ready(pose) => pose,
+                Outcome::Wait if !stale => break,
+                _ => {
+                    self.counts.no_odometry += 1;
+                    self.clouds.pop_front();
+                    continue;
+                }
+            };
+            let Some((_, scan)) = self.clouds.pop_front() else { break };
+            match self.labels_for(t, &scan) {
+                Outcome::Ready(labels) => {
+                    self.counts.frames += 1;
+                    frames.push(SensorFrame { stamp: t, world_from_body: pose, points_in_body: scan.points, labels });
+                }
+                Outcome::Wait if !stale => {
+                    self.clouds.push_front((t, scan));
+                    break;
+                }
+                Outcome::Wait => {
+                    if self.camera.is_none() {
+                        self.counts.no_camera_info += 1;
+                    } else {
+                        self.counts.no_image += 1;
+                    }
+                }
+                Outcome::Drop => {}
+            }
+        }
+        self.prune();
+        frames
+    }
+
+    /// Forgets odometry and images no waiting or future cloud can use.
+    fn prune(&mut self) {
+        let horizon = self.clouds.front().map_or(self.latest - self.config.max_wait_s, |(t, _)| *t)
+            - self.config.max_odometry_gap_s.max(self.config.image_tolerance_s);
+        while self.odometry.len() > 1 && self.odometry.get(1).is_some_and(|(t, _)| *t < horizon) {
+            self.odometry.pop_front();
+        }
+        while self.images.front().is_some_and(|(t, _)| *t < horizon) {
+            self.images.pop_front();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Point3, UnitQuaternion, Vector3};
+
+    fn scan(n: usize) -> Scan {
+        Scan { points: vec![Point3::new(1.0, 0.0, 0.0); n], labels: Some(vec![3; n]), dropped_non_finite: 0 }
+    }
+
+    fn camera() -> CameraModel {
+        CameraModel { width: 2, height: 2, fx: 1.0, fy: 1.0, cx: 1.0, cy: 1.0, distortion: [0.0; 5] }
+    }
+
+    fn image() -> LabelImage {
+        LabelImage::new(2, 2, vec![1; 4]).unwrap()
+    }
+
+    #[test]
+    fn exact_odometry_is_used_as_is_and_gaps_are_interpolated() {
+        let mut s = Synchroniser::new(SyncConfig::default(), LabelSource::Cloud, Pose3::identity());
+        let p0 = Pose3::from_parts(Vector3::new(0.0, 0.0, 0.0).into(), UnitQuaternion::identity());
+        let p1 = Pose3::from_parts(Vector3::new(2.0, 0.0, 0.0).into(), UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4));
+        s.cloud(0.15, scan(2));
+        s.odometry(0.1, p0);
+        assert!(s.ready().is_empty(), "waits for the odometry after it");
+        s.odometry(0.2, p1);
+        s.cloud(0.2, scan(1));
+        let frames = s.ready();
+        assert_eq!(frames.len(), 2);
+        // Halfway: x = 1, yaw = 0.2 (closed form).
+        assert!((frames[0].world_from_body.translation.vector.x - 1.0).abs() < 1e-12);
+        assert!((frames[0].world_from_body.rotation.euler_angles().2 - 0.2).abs() < 1e-12);
+        assert_eq!(frames[1].world_from_body, p1);
+        assert!(matches!(&frames[0].labels, FrameLabels::PerPoint(l) if l == &vec![Some(LabelId(3)); 2]));
+    }
+
+    #[test]
+    fn clouds_without_partners_are_dropped_once_stale() {
+        let config = SyncConfig { max_wait_s: 1.0, max_odometry_gap_s: 0.5, image_tolerance_s: 0.05 };
+        let mut s = Synchroniser::new(config, LabelSource::Image, Pose3::identity());
+        s.odometry(0.0, Pose3::identity());
+        s.odometry(2.0, Pose3::identity());
+        s.cloud(1.0, scan(1)); // odometry gap of 2 s > 0.5: no pose
+        assert!(s.ready().is_empty());
+        assert_eq!(s.counts.no_odometry, 1);
+        s.odometry(2.1, Pose3::identity());
+        s.cloud(2.05, scan(1)); // no camera info yet: waits, then stale
+        assert!(s.ready().is_empty());
+        assert_eq!(s.pending(), 1);
+        s.odometry(3.5, Pose3::identity());
+        assert!(s.ready().is_empty());
+        assert_eq!(s.counts.no_camera_info, 1);
+        s.camera_info(camera());
+        s.odometry(3.6, Pose3::identity());
+        s.image(3.58, image());
+        s.cloud(3.55, scan(1)); // image 0.03 s later: within tolerance, but a closer one may come
+        assert!(s.ready().is_empty());
+        s.image(3.62, image()); // the stream is past 3.55 + 0.05
+        s.odometry(3.7, Pose3::identity());
+        assert_eq!(s.ready().len(), 1);
+        s.cloud(3.65, scan(1));
+        s.image(3.9, image()); // nearest images 3.62 (0.03 off) and 3.9: 3.62 wins
+        assert_eq!(s.ready().len(), 1);
+        s.cloud(3.68, scan(1)); // no image within 0.05 and the image stream has passed: dropped
+        assert!(s.ready().is_empty());
+        assert_eq!((s.counts.no_image, s.pending()), (1, 0));
+        assert_eq!(s.counts.frames, 2);
+    }
+
+    #[test]
+    fn out_of_order_messages_are_counted_not_buffered() {
+        let mut s = Synchroniser::new(SyncConfig::default(), LabelSource::Cloud, Pose3::identity());
+        s.odometry(1.0, Pose3::identity());
+        s.odometry(0.5, Pose3::identity());
+        s.cloud(1.0, Scan { labels: None, ..scan(1) });
+        assert!(s.ready().is_empty());
+        assert_eq!((s.counts.out_of_order, s.counts.no_label_field), (1, 1));
+    }
+}
