@@ -4,6 +4,8 @@
 
 pub mod config;
 pub mod convert;
+pub mod bag;
 pub mod error;
+pub mod inputs;
 pub mod msg;
 pub mod sync;
