@@ -32,7 +32,11 @@ impl Inputs {
             body_frame: frame(&config.frames.body),
             lidar_frame: frame(&config.frames.lidar),
             camera_frame: frame(&config.frames.camera),
-            label_field: if config.labels == crate::config::LabelSource::Cloud { config.label_field.clone() } else { String::new() },
+            label_field: if config.labels == crate::config::LabelSource::Cloud {
+                config.label_field.clone()
+            } else {
+                String::new()
+            },
             max_cloud_points: config.max_cloud_points,
             max_image_pixels: config.max_image_pixels,
         }

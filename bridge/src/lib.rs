@@ -2,9 +2,9 @@
 //! turns LiDAR, label image and odometry streams into sensor frames, ROS 1 bag reading and
 //! writing, and the rosrust node with its inter-robot transport.
 
+pub mod bag;
 pub mod config;
 pub mod convert;
-pub mod bag;
 pub mod error;
 pub mod inputs;
 pub mod msg;

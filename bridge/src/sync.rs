@@ -244,7 +244,8 @@ mod tests {
     fn exact_odometry_is_used_as_is_and_gaps_are_interpolated() {
         let mut s = Synchroniser::new(SyncConfig::default(), LabelSource::Cloud, Pose3::identity());
         let p0 = Pose3::from_parts(Vector3::new(0.0, 0.0, 0.0).into(), UnitQuaternion::identity());
-        let p1 = Pose3::from_parts(Vector3::new(2.0, 0.0, 0.0).into(), UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4));
+        let p1 =
+            Pose3::from_parts(Vector3::new(2.0, 0.0, 0.0).into(), UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4));
         s.cloud(0.15, scan(2));
         s.odometry(0.1, p0);
         assert!(s.ready().is_empty(), "waits for the odometry after it");

@@ -28,10 +28,18 @@ fn written_bags_read_back_in_time_order_across_chunks() {
         let t = stamp_from_nanos(i64::from(k) * 100_000_000);
         let points: Vec<Point3<f32>> = (0..40_000).map(|i| Point3::new(i as f32 * 0.01, k as f32, 1.5)).collect();
         let pose = Pose3::translation(t, 0.0, 0.0);
-        bag.write("/alpha/odometry", SCENARIO_EPOCH.time(t), &odometry_msg(header(t, "alpha/odom"), "alpha/base_link", &pose))
-            .unwrap();
-        bag.write("/alpha/points", SCENARIO_EPOCH.time(t), &cloud_msg(header(t, "alpha/base_link"), &points, None, |_| [0; 3]))
-            .unwrap();
+        bag.write(
+            "/alpha/odometry",
+            SCENARIO_EPOCH.time(t),
+            &odometry_msg(header(t, "alpha/odom"), "alpha/base_link", &pose),
+        )
+        .unwrap();
+        bag.write(
+            "/alpha/points",
+            SCENARIO_EPOCH.time(t),
+            &cloud_msg(header(t, "alpha/base_link"), &points, None, |_| [0; 3]),
+        )
+        .unwrap();
         let encoding_ok = k != 7;
         let mut image = label_image_msg(header(t, "alpha/camera"), &LabelImage::new(4, 2, vec![k as u16; 8]).unwrap());
         if !encoding_ok {
@@ -77,10 +85,14 @@ fn a_topic_of_the_wrong_type_and_a_missing_file_are_named() {
     bag.write("/points", SCENARIO_EPOCH.time(1.0), &header(1.0, "x")).unwrap();
     bag.finish().unwrap();
     let items: Vec<BagItem> = read_bag(&path, &RosConfig::default(), "alpha", 1).into_iter().collect();
-    assert!(matches!(&items[..], [BagItem::Failed(e)] if e.to_string().contains("topic /points carries std_msgs/Header")));
-    let items: Vec<BagItem> = read_bag(&dir.path().join("none.bag"), &RosConfig::default(), "a", 1).into_iter().collect();
+    assert!(
+        matches!(&items[..], [BagItem::Failed(e)] if e.to_string().contains("topic /points carries std_msgs/Header"))
+    );
+    let items: Vec<BagItem> =
+        read_bag(&dir.path().join("none.bag"), &RosConfig::default(), "a", 1).into_iter().collect();
     assert!(matches!(&items[..], [BagItem::Failed(e)] if e.to_string().contains("none.bag")));
     std::fs::write(dir.path().join("junk.bag"), b"#ROSBAG V2.0\n\x10\x00").unwrap();
-    let items: Vec<BagItem> = read_bag(&dir.path().join("junk.bag"), &RosConfig::default(), "a", 1).into_iter().collect();
+    let items: Vec<BagItem> =
+        read_bag(&dir.path().join("junk.bag"), &RosConfig::default(), "a", 1).into_iter().collect();
     assert!(matches!(&items[..], [BagItem::Failed(_)]));
 }

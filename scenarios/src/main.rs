@@ -37,6 +37,25 @@ enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
+        /// Also write each robot's sensor streams as a ROS 1 bag (DIR/NAME.bag).
+        #[arg(long, value_name = "DIR")]
+        bag_out: Option<PathBuf>,
+    },
+    /// Replay recorded missions (one ROS 1 bag per robot) with no ROS master, and write the report.
+    Replay {
+        /// A robot's bag; give one per robot, in the order of the configuration's [[robots]].
+        #[arg(long = "bag", required = true, value_name = "BAG")]
+        bags: Vec<PathBuf>,
+        /// Scenario file or library name giving the robots, their configuration, the radio
+        /// and the [ros] topics (default: the defaults, robots named after the bag files).
+        #[arg(long)]
+        config: Option<String>,
+        /// Report directory (default: a fresh folder under runs/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
     },
     /// Match two object graphs; prints one JSON object (p_local = T · p_remote).
     Match {
@@ -158,11 +177,20 @@ enum BenchCommand {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
-        Command::Run { scenario, out, seed, quiet } => {
-            match cli::run_cmd::execute(cli::run_cmd::Options { scenario, out, seed, quiet }) {
+        Command::Run { scenario, out, seed, quiet, bag_out } => {
+            match cli::run_cmd::execute(cli::run_cmd::Options { scenario, out, seed, quiet, bag_out }) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("sgm run: {e:#}");
+                    ExitCode::from(2)
+                }
+            }
+        }
+        Command::Replay { bags, config, out, quiet } => {
+            match cli::replay_cmd::execute(cli::replay_cmd::Options { bags, config, out, quiet }) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("sgm replay: {e:#}");
                     ExitCode::from(2)
                 }
             }

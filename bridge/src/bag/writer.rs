@@ -133,7 +133,11 @@ impl BagWriter {
                 if self.connections[id as usize].msg_type != M::msg_type() {
                     return Err(io::Error::new(
                         io::ErrorKind::InvalidInput,
-                        format!("topic {topic} already carries {}, not {}", self.connections[id as usize].msg_type, M::msg_type()),
+                        format!(
+                            "topic {topic} already carries {}, not {}",
+                            self.connections[id as usize].msg_type,
+                            M::msg_type()
+                        ),
                     ));
                 }
                 id

@@ -70,7 +70,11 @@ impl Field {
         }
         let size = type_size(f.datatype).unwrap_or(0);
         if f.offset.checked_add(size).is_none_or(|end| end > msg.point_step) {
-            return Err(InputError::FieldOutsidePoint { field: name.into(), offset: f.offset, point_step: msg.point_step });
+            return Err(InputError::FieldOutsidePoint {
+                field: name.into(),
+                offset: f.offset,
+                point_step: msg.point_step,
+            });
         }
         Ok(Some(Field { offset: f.offset as usize, datatype: f.datatype }))
     }
@@ -285,7 +289,8 @@ mod tests {
 
     #[test]
     fn malformed_clouds_are_refused_with_the_reason() {
-        let good = cloud_msg(std_msgs::Header::default(), &[Point3::new(1.0, 2.0, 3.0); 3], Some(&[1, 2, 3]), |_| [0; 3]);
+        let good =
+            cloud_msg(std_msgs::Header::default(), &[Point3::new(1.0, 2.0, 3.0); 3], Some(&[1, 2, 3]), |_| [0; 3]);
         let mut m = good.clone();
         m.data.truncate(50);
         assert_eq!(

@@ -34,8 +34,9 @@ pub fn pose_from_msg(pose: &geometry_msgs::Pose) -> Result<Pose3, InputError> {
     if (norm - 1.0).abs() > 1e-3 {
         return Err(InputError::invalid(format!("orientation quaternion has norm {norm:.6}, 1 expected")));
     }
-    // An exact unit quaternion is kept bit for bit (what we wrote reads back unchanged).
-    let rotation = if norm == 1.0 { UnitQuaternion::new_unchecked(q) } else { UnitQuaternion::new_normalize(q) };
+    // A quaternion unit to rounding is kept bit for bit (what we wrote reads back unchanged).
+    let rotation =
+        if (norm - 1.0).abs() <= 1e-12 { UnitQuaternion::new_unchecked(q) } else { UnitQuaternion::new_normalize(q) };
     Ok(Pose3::from_parts(Translation3::new(p.x, p.y, p.z), rotation))
 }
 

@@ -66,7 +66,9 @@ pub fn read_camera_info(msg: &sensor_msgs::CameraInfo) -> Result<CameraModel, In
     let k = &msg.K;
     let (fx, fy, cx, cy) = (k[0], k[4], k[2], k[5]);
     if !(fx.is_finite() && fy.is_finite() && fx > 0.0 && fy > 0.0 && cx.is_finite() && cy.is_finite()) {
-        return Err(InputError::invalid(format!("K has fx {fx}, fy {fy}, cx {cx}, cy {cy}: finite, fx and fy > 0 expected")));
+        return Err(InputError::invalid(format!(
+            "K has fx {fx}, fy {fy}, cx {cx}, cy {cy}: finite, fx and fy > 0 expected"
+        )));
     }
     if msg.width == 0 || msg.height == 0 {
         return Err(InputError::invalid(format!("camera is {} × {}", msg.width, msg.height)));
@@ -143,15 +145,29 @@ mod tests {
         let good = label_image_msg(std_msgs::Header::default(), &image);
         let mut m = good.clone();
         m.encoding = "rgb8".into();
-        assert_eq!(read_label_image(&m).unwrap_err().to_string(), "unsupported encoding `rgb8` (mono8, mono16, 8UC1 or 16UC1 expected)");
+        assert_eq!(
+            read_label_image(&m).unwrap_err().to_string(),
+            "unsupported encoding `rgb8` (mono8, mono16, 8UC1 or 16UC1 expected)"
+        );
         let mut m = good.clone();
         m.data.truncate(10);
-        assert_eq!(read_label_image(&m).unwrap_err().to_string(), "data is 10 bytes, 16 expected (4 × 4 mono8 image, step 4)");
+        assert_eq!(
+            read_label_image(&m).unwrap_err().to_string(),
+            "data is 10 bytes, 16 expected (4 × 4 mono8 image, step 4)"
+        );
         let mut m = good;
         m.step = 2;
         assert!(read_label_image(&m).is_err());
 
-        let camera = CameraModel { width: 640, height: 480, fx: 500.0, fy: 501.0, cx: 320.5, cy: 240.0, distortion: [0.1, -0.01, 0.001, 0.002, 0.0] };
+        let camera = CameraModel {
+            width: 640,
+            height: 480,
+            fx: 500.0,
+            fy: 501.0,
+            cx: 320.5,
+            cy: 240.0,
+            distortion: [0.1, -0.01, 0.001, 0.002, 0.0],
+        };
         let info = camera_info_msg(std_msgs::Header::default(), &camera);
         assert_eq!(read_camera_info(&info).unwrap(), camera);
         let mut bad = info.clone();

@@ -3,7 +3,9 @@
 //! the tf of every aligned neighbour's world.
 
 use crate::convert::geometry::{pose_msg, transform_msg};
-use crate::msg::{geometry_msgs, nav_msgs, std_msgs, tf2_msgs, visualization_msgs::Marker, visualization_msgs::MarkerArray};
+use crate::msg::{
+    geometry_msgs, nav_msgs, std_msgs, tf2_msgs, visualization_msgs::Marker, visualization_msgs::MarkerArray,
+};
 use sgm_actors::matcher::NeighbourStatus;
 use sgm_actors::tracker::MapSummary;
 use sgm_model::geometry::Pose3;
@@ -58,7 +60,8 @@ pub fn map_markers(header: &std_msgs::Header, map: &MapSummary, classes: &ClassT
     trajectory.scale.x = 0.1;
     trajectory.color = colour([40, 120, 255], 1.0);
     trajectory.points = map.keyframes.iter().map(|k| point(&k.world_from_body.translation.vector.into())).collect();
-    let positions: BTreeMap<_, _> = map.keyframes.iter().map(|k| (k.id, k.world_from_body.translation.vector)).collect();
+    let positions: BTreeMap<_, _> =
+        map.keyframes.iter().map(|k| (k.id, k.world_from_body.translation.vector)).collect();
     let mut anchors = marker(header, "anchors", 0, LINE_LIST);
     anchors.scale.x = 0.03;
     anchors.color = colour([200, 200, 200], 0.5);
@@ -78,7 +81,11 @@ pub fn map_markers(header: &std_msgs::Header, map: &MapSummary, classes: &ClassT
 }
 
 /// The keyframe trajectory as a path in `header.frame_id`.
-pub fn keyframe_path(header: &std_msgs::Header, map: &MapSummary, time_of: impl Fn(f64) -> rosrust::Time) -> nav_msgs::Path {
+pub fn keyframe_path(
+    header: &std_msgs::Header,
+    map: &MapSummary,
+    time_of: impl Fn(f64) -> rosrust::Time,
+) -> nav_msgs::Path {
     let poses = map
         .keyframes
         .iter()
@@ -122,7 +129,11 @@ mod tests {
     fn objects_become_boxes_labels_and_edges() {
         let classes = ClassTable::new(sgm_actors::config::default_classes()).unwrap();
         let tree = classes.classes().iter().find(|c| c.name == "tree").unwrap();
-        let keyframe = |id, x| Keyframe { id: KeyframeId(id), stamp: f64::from(id), world_from_body: Pose3::translation(x, 0.0, 0.0) };
+        let keyframe = |id, x| Keyframe {
+            id: KeyframeId(id),
+            stamp: f64::from(id),
+            world_from_body: Pose3::translation(x, 0.0, 0.0),
+        };
         let map = MapSummary {
             keyframes: vec![keyframe(0, 0.0), keyframe(1, 2.0)],
             objects: vec![MapObject {
@@ -159,11 +170,26 @@ mod tests {
         assert_eq!((path.poses[1].pose.position.x, path.poses[1].header.stamp.sec), (2.0, 1));
 
         let neighbours = vec![
-            NeighbourStatus { robot: RobotId(2), state: "aligned", local_from_remote: Some(Pose3::translation(5.0, 0.0, 0.0)), first_aligned: Some(1.0), keyframes_held: 0 },
-            NeighbourStatus { robot: RobotId(3), state: "matching", local_from_remote: None, first_aligned: None, keyframes_held: 0 },
+            NeighbourStatus {
+                robot: RobotId(2),
+                state: "aligned",
+                local_from_remote: Some(Pose3::translation(5.0, 0.0, 0.0)),
+                first_aligned: Some(1.0),
+                keyframes_held: 0,
+            },
+            NeighbourStatus {
+                robot: RobotId(3),
+                state: "matching",
+                local_from_remote: None,
+                first_aligned: None,
+                keyframes_held: 0,
+            },
         ];
         let tf = neighbour_transforms(&header, &neighbours, |r| format!("robot{}/odom", r.0));
         assert_eq!(tf.transforms.len(), 1);
-        assert_eq!((tf.transforms[0].child_frame_id.as_str(), tf.transforms[0].transform.translation.x), ("robot2/odom", 5.0));
+        assert_eq!(
+            (tf.transforms[0].child_frame_id.as_str(), tf.transforms[0].transform.translation.x),
+            ("robot2/odom", 5.0)
+        );
     }
 }

@@ -5,7 +5,7 @@
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use sgm_scenarios::report::{self, Report};
-use sgm_scenarios::runner::{run, Timing};
+use sgm_scenarios::runner::{run_recording, Timing};
 use sgm_scenarios::scenario::Scenario;
 use std::path::{Path, PathBuf};
 
@@ -14,15 +14,22 @@ pub struct Options {
     pub out: Option<PathBuf>,
     pub seed: Option<u64>,
     pub quiet: bool,
+    pub bag_out: Option<PathBuf>,
 }
 
 /// `runs/NAME-seedS`, or with `-2`, `-3`, … if taken.
 fn fresh_dir(name: &str, seed: u64) -> PathBuf {
-    let base = Path::new("runs").join(format!("{name}-seed{seed}"));
+    fresh_run_dir(&format!("{name}-seed{seed}"))
+}
+
+/// `runs/BASE`, or with `-2`, `-3`, … if taken.
+pub fn fresh_run_dir(base: &str) -> PathBuf {
+    let name = base;
+    let base = Path::new("runs").join(name);
     if !base.exists() {
         return base;
     }
-    (2..).map(|k| Path::new("runs").join(format!("{name}-seed{seed}-{k}"))).find(|p| !p.exists()).unwrap_or(base)
+    (2..).map(|k| Path::new("runs").join(format!("{name}-{k}"))).find(|p| !p.exists()).unwrap_or(base)
 }
 
 pub fn execute(options: Options) -> Result<()> {
@@ -34,22 +41,30 @@ pub fn execute(options: Options) -> Result<()> {
     let dir = options.out.unwrap_or_else(|| fresh_dir(&scenario.scenario.name, scenario.scenario.seed));
     // Fail before the run, not after it, when the report cannot be written.
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create the report directory {}", dir.display()))?;
-    let bar = if options.quiet { ProgressBar::hidden() } else { ProgressBar::new(0) };
-    bar.set_style(
-        ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} steps, {elapsed} wall, eta {eta}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-    );
+    let bar = progress_bar(options.quiet, "{prefix} [{bar:40}] {pos}/{len} steps, {elapsed} wall, eta {eta}");
     bar.set_prefix(format!("{} (seed {})", scenario.scenario.name, scenario.scenario.seed));
     let system = actix_rt::System::new();
-    let outcome = system.block_on(run(&scenario, Some(&bar))).context("the run failed")?;
+    let outcome =
+        system.block_on(run_recording(&scenario, Some(&bar), options.bag_out.as_deref())).context("the run failed")?;
     bar.finish_and_clear();
     let report = report::write(&outcome, &dir).context("writing the report")?;
     print!("{}", summary(&report, &outcome.timing, &dir));
+    if let Some(bags) = &options.bag_out {
+        println!("bags: {}", bags.display());
+    }
     Ok(())
 }
 
-fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
+/// An indicatif bar with `template` (hidden when `quiet`).
+pub fn progress_bar(quiet: bool, template: &str) -> ProgressBar {
+    let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::new(0) };
+    bar.set_style(
+        ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()).progress_chars("=> "),
+    );
+    bar
+}
+
+pub fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
     use std::fmt::Write as _;
     let mut s = String::new();
     let m = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.2} m"));
@@ -62,13 +77,15 @@ fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
     for r in &report.robots {
         let _ = writeln!(
             s,
-            "  {:<10} ATE {:>8}  {:>4} keyframes  {:>3} objects ({} found, {} spurious)  {:>5.0} m",
+            "  {:<10} ATE {:>8}  {:>4} keyframes  {:>3} objects{}  {:>5.0} m",
             r.name,
             m(r.ate_rmse_m),
             r.keyframes,
             r.confirmed_objects,
-            r.objects_found,
-            r.objects_spurious,
+            match (r.objects_found, r.objects_spurious) {
+                (Some(found), Some(spurious)) => format!(" ({found} found, {spurious} spurious)"),
+                _ => String::new(),
+            },
             r.distance_m
         );
     }

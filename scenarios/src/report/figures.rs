@@ -25,11 +25,12 @@ pub struct RobotReport {
     pub objects: usize,
     pub confirmed_objects: usize,
     /// Confirmed objects whose class has a world object within 2 m (the robot's start frame
-    /// placed on the truth), counted once per world object.
-    pub objects_found: usize,
+    /// placed on the truth), counted once per world object. None when the world is unknown
+    /// (a replay).
+    pub objects_found: Option<usize>,
     /// Confirmed objects beyond the first for one world object, or with nothing of their class
-    /// within 2 m.
-    pub objects_spurious: usize,
+    /// within 2 m. None when the world is unknown.
+    pub objects_spurious: Option<usize>,
     /// Mean distance of the found objects to their world object, m.
     pub object_error_m: Option<f64>,
     pub distance_m: f64,
@@ -110,7 +111,7 @@ fn row(stats: &sgm_model::wire::TrafficStats) -> MessageRow {
 /// Keyframe positions of a robot's map (its world) and the true positions at their stamps.
 pub(crate) fn trajectory(observation: &Observation, k: usize, truth: &RobotTruth) -> Vec<(f64, Pose3, Pose3)> {
     let Some(Some((map, _, _))) = observation.maps.get(k) else { return Vec::new() };
-    map.keyframes.iter().filter_map(|kf| Some((kf.stamp, kf.world_from_body, truth.route.pose_at(kf.stamp)?))).collect()
+    map.keyframes.iter().filter_map(|kf| Some((kf.stamp, kf.world_from_body, truth.truth.pose_at(kf.stamp)?))).collect()
 }
 
 /// Where each robot's map sits on the truth at one observation: the SE(3) fit of its keyframes
@@ -246,6 +247,7 @@ pub fn compute(record: &RunRecord) -> Report {
                 _ => (0, 0, 0),
             };
             let distance_m = t.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+            let known_world = !record.world_objects.is_empty();
             let (found, spurious, error) = match last.maps.get(k) {
                 Some(Some((map, _, _))) => object_quality(map, truth, &record.world_objects),
                 _ => (0, 0, None),
@@ -256,8 +258,8 @@ pub fn compute(record: &RunRecord) -> Report {
                 keyframes,
                 objects,
                 confirmed_objects: confirmed,
-                objects_found: found,
-                objects_spurious: spurious,
+                objects_found: known_world.then_some(found),
+                objects_spurious: known_world.then_some(spurious),
                 object_error_m: error,
                 distance_m,
                 frames: truth.frames,

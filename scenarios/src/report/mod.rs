@@ -6,24 +6,25 @@ mod figures;
 mod map_cloud;
 mod markdown;
 mod plots;
+mod truth;
 mod tum;
 
 pub use figures::{compute, AlignmentReport, MessageRow, Report, RobotReport, SeriesPoint};
+pub use truth::TruthTrack;
 
 use crate::runner::{RunOutcome, Timing};
 use crate::sim::radio::RadioStats;
-use crate::sim::trajectory::Route;
 use sgm_actors::comms::CommsStatus;
 use sgm_actors::matcher::NeighbourStatus;
 use sgm_actors::tracker::MapSummary;
 use sgm_model::geometry::Pose3;
 use std::path::Path;
 
-/// One robot's truth: its route and where its world frame is.
+/// One robot's truth: its trajectory and where its world frame is.
 #[derive(Clone, Debug)]
 pub struct RobotTruth {
     pub name: String,
-    pub route: Route,
+    pub truth: TruthTrack,
     /// p_true = truth_from_world · p_world.
     pub truth_from_world: Pose3,
     pub frames: u64,

@@ -43,6 +43,8 @@ pub struct Scenario {
     pub matcher: MatcherSection,
     pub optimiser: OptimiserConfig,
     pub comms: CommsConfig,
+    /// Topics and frames of the bags `sgm run --bag-out` writes and `sgm replay` reads.
+    pub ros: sgm_bridge::config::RosConfig,
 }
 
 impl Default for Scenario {
@@ -61,6 +63,7 @@ impl Default for Scenario {
             matcher: robot.matcher,
             optimiser: robot.optimiser,
             comms: robot.comms,
+            ros: sgm_bridge::config::RosConfig::default(),
         }
     }
 }

@@ -20,6 +20,7 @@ fn within(v: f64, lo: f64, hi: f64) -> bool {
 
 impl Scenario {
     pub(super) fn validate(&self) -> Result<(), Failure> {
+        self.ros.validate().map_err(|e| ("ros".to_string(), "(section)".to_string(), e.to_string()))?;
         let s = &self.scenario;
         check(within(s.duration_s, 1.0, 1e6), "scenario.duration_s", s.duration_s, "1 ≤ x ≤ 1e6 s")?;
         check(

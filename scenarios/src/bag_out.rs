@@ -1,0 +1,120 @@
+//! `sgm run --bag-out DIR`: each robot's simulated sensor streams as a ROS 1 bag
+//! (`DIR/NAME.bag`), on the `[ros]` section's topics under the robot's namespace, stamped from
+//! [`SCENARIO_EPOCH`]: the LiDAR cloud (float32 x y z, plus the label field when the camera is
+//! off), the label image and camera info (camera on), the drifting odometry, and the true pose
+//! (`ground_truth`, for the replay's ATE). `sgm replay` of these bags gives the scenario's run.
+
+use sgm_bridge::bag::writer::BagWriter;
+use sgm_bridge::config::RosConfig;
+use sgm_bridge::convert::cloud::cloud_msg;
+use sgm_bridge::convert::geometry::odometry_msg;
+use sgm_bridge::convert::image::{camera_info_msg, label_image_msg};
+use sgm_bridge::convert::time::SCENARIO_EPOCH;
+use sgm_bridge::msg::std_msgs::Header;
+use sgm_model::geometry::Pose3;
+use sgm_model::perception::projection::{CameraModel, LabelImage};
+use sgm_model::scene_graph::Stamp;
+use std::path::{Path, PathBuf};
+
+/// One simulated frame, as the sensors would publish it.
+pub struct RecordedFrame<'a> {
+    pub t: Stamp,
+    pub odometry: &'a Pose3,
+    pub truth: &'a Pose3,
+    pub points: &'a [nalgebra::Point3<f64>],
+    /// Per-point class ids (camera off).
+    pub labels: Option<&'a [u16]>,
+    /// The label image (camera on).
+    pub image: Option<(&'a LabelImage, &'a CameraModel)>,
+}
+
+struct RobotBag {
+    writer: BagWriter,
+    /// points, labels, camera_info, odometry, ground_truth.
+    topics: [String; 5],
+    /// world, body, lidar, camera.
+    frames: [String; 4],
+}
+
+pub struct BagRecorder {
+    dir: PathBuf,
+    bags: Vec<Option<RobotBag>>,
+    ros: RosConfig,
+    names: Vec<String>,
+}
+
+fn io_error(path: &Path, e: std::io::Error) -> String {
+    format!("{}: {e}", path.display())
+}
+
+impl BagRecorder {
+    pub fn new(dir: &Path, ros: &RosConfig, names: Vec<String>) -> Result<Self, String> {
+        std::fs::create_dir_all(dir).map_err(|e| io_error(dir, e))?;
+        Ok(Self { dir: dir.to_path_buf(), bags: names.iter().map(|_| None).collect(), ros: ros.clone(), names })
+    }
+
+    fn bag(&mut self, k: usize) -> Result<&mut RobotBag, String> {
+        let (name, id) = (&self.names[k], k as u16 + 1);
+        if self.bags[k].is_none() {
+            let path = self.dir.join(format!("{name}.bag"));
+            let writer = BagWriter::create(&path).map_err(|e| io_error(&path, e))?;
+            let t = &self.ros.topics;
+            let topic = |template: &str| {
+                let resolved = RosConfig::resolve(template, name, id);
+                if resolved.starts_with('/') {
+                    resolved
+                } else {
+                    format!("/{name}/{resolved}")
+                }
+            };
+            let f = &self.ros.frames;
+            let frame = |template: &str| RosConfig::resolve(template, name, id);
+            self.bags[k] = Some(RobotBag {
+                writer,
+                topics: [
+                    topic(&t.points),
+                    topic(&t.labels),
+                    topic(&t.camera_info),
+                    topic(&t.odometry),
+                    topic(&t.ground_truth),
+                ],
+                frames: [frame(&f.world), frame(&f.body), frame(&f.lidar), frame(&f.camera)],
+            });
+        }
+        self.bags[k].as_mut().ok_or_else(|| format!("bag of {name} not open"))
+    }
+
+    pub fn record(&mut self, k: usize, frame: RecordedFrame<'_>) -> Result<(), String> {
+        let path = self.dir.join(format!("{}.bag", self.names[k]));
+        let bag = self.bag(k)?;
+        let time = SCENARIO_EPOCH.time(frame.t);
+        let header = |frame_id: &str| Header { seq: 0, stamp: time, frame_id: frame_id.to_string() };
+        let [world, body, lidar, camera] = &bag.frames;
+        let [points_topic, labels_topic, info_topic, odometry_topic, truth_topic] = &bag.topics;
+        let w = &mut bag.writer;
+        let e = |e| io_error(&path, e);
+        w.write(odometry_topic, time, &odometry_msg(header(world), body, frame.odometry)).map_err(e)?;
+        w.write(truth_topic, time, &odometry_msg(header("truth"), body, frame.truth)).map_err(e)?;
+        let points: Vec<nalgebra::Point3<f32>> = frame.points.iter().map(|p| p.map(|v| v as f32)).collect();
+        w.write(points_topic, time, &cloud_msg(header(lidar), &points, frame.labels, |_| [200, 200, 200]))
+            .map_err(e)?;
+        if let Some((image, model)) = frame.image {
+            w.write(labels_topic, time, &label_image_msg(header(camera), image)).map_err(e)?;
+            w.write(info_topic, time, &camera_info_msg(header(camera), model)).map_err(e)?;
+        }
+        Ok(())
+    }
+
+    /// Closes every bag; returns their paths.
+    pub fn finish(self) -> Result<Vec<PathBuf>, String> {
+        let mut paths = Vec::new();
+        for (bag, name) in self.bags.into_iter().zip(&self.names) {
+            if let Some(bag) = bag {
+                let path = self.dir.join(format!("{name}.bag"));
+                bag.writer.finish().map_err(|e| io_error(&path, e))?;
+                paths.push(path);
+            }
+        }
+        Ok(paths)
+    }
+}

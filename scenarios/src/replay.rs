@@ -1,0 +1,278 @@
+//! `sgm replay`: recorded missions, one ROS 1 bag per robot, driven through the robots in
+//! timestamp order with no ROS master, as fast as the CPU allows — the scenario runner's
+//! stepping ([`Team`]) with bags instead of the simulator. Each step of `frame_interval_s`
+//! takes every bag's messages recorded up to then, passes them through the bridge's checks and
+//! synchroniser, and hands out the frames that are ready. Robots talk over the configuration's
+//! radio model (its range needs positions: from the bags' ground truth when they have it).
+//! The report is the scenarios' report; trajectory errors need a ground-truth topic.
+
+use crate::report::{RobotTruth, RunRecord, TruthTrack};
+use crate::runner::RunOutcome;
+use crate::scenario::Scenario;
+use crate::sim::radio::{RadioShared, SimulatedRadio};
+use crate::sim::world::World;
+use crate::team::{RunError, Team, Timing};
+use indicatif::ProgressBar;
+use serde::Serialize;
+use sgm_actors::transport::InProcessRadio;
+use sgm_bridge::bag::reader::{read_bag, BagItem, Payload};
+use sgm_bridge::config::LabelSource;
+use sgm_bridge::convert::time::Epoch;
+use sgm_bridge::sync::{SyncCounts, Synchroniser};
+use sgm_model::geometry::Pose3;
+use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, RobotId, Stamp};
+use std::collections::BTreeMap;
+use std::iter::Peekable;
+use std::path::PathBuf;
+use std::sync::mpsc::IntoIter;
+use std::time::{Duration, Instant};
+
+/// Per robot: what came out of its bag.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct BagStats {
+    pub robot: String,
+    pub bag: String,
+    /// Messages refused, by topic (each is logged with the reason).
+    pub refused: BTreeMap<String, u64>,
+    pub sync: SyncCounts,
+}
+
+/// A finished replay: the run and what the bags held.
+pub struct ReplayOutcome {
+    pub run: RunOutcome,
+    pub bags: Vec<BagStats>,
+}
+
+struct BagRobot {
+    stream: Peekable<IntoIter<BagItem>>,
+    sync: Synchroniser,
+    truth: Vec<(Stamp, Pose3)>,
+    first_odometry: Option<(Stamp, Pose3)>,
+    stats: BagStats,
+    frames: u64,
+    raw_bytes: u64,
+    raw_max_bytes: u64,
+}
+
+impl BagRobot {
+    /// Logs and counts a refused message.
+    fn refused(&mut self, topic: String, error: &sgm_bridge::error::InputError) {
+        tracing::warn!(robot = %self.stats.robot, %topic, "message refused: {error}");
+        *self.stats.refused.entry(topic).or_default() += 1;
+    }
+
+    /// Record time of the next message (refusals before it are counted and passed over).
+    fn next_time(&mut self) -> Result<Option<u64>, RunError> {
+        loop {
+            match self.stream.peek() {
+                None => return Ok(None),
+                Some(BagItem::Message { time_nanos, .. }) => return Ok(Some(*time_nanos)),
+                Some(_) => match self.stream.next() {
+                    Some(BagItem::Refused { topic, error }) => self.refused(topic, &error),
+                    Some(BagItem::Failed(e)) => return Err(RunError::Input(e.to_string())),
+                    _ => {}
+                },
+            }
+        }
+    }
+
+    /// Feeds every message recorded up to `limit` (ns since 1970) to the synchroniser.
+    fn pull(&mut self, limit: u64, epoch: Epoch, id: RobotId, shared: &RadioShared) -> Result<(), RunError> {
+        while self.next_time()?.is_some_and(|t| t <= limit) {
+            let Some(BagItem::Message { payload, .. }) = self.stream.next() else { break };
+            match payload {
+                Payload::Cloud(stamp, scan) => {
+                    let raw = scan.points.len() as u64 * crate::runner::RAW_BYTES_PER_POINT;
+                    self.raw_bytes += raw;
+                    self.raw_max_bytes = self.raw_max_bytes.max(raw);
+                    self.sync.cloud(epoch.stamp(stamp), scan);
+                }
+                Payload::Image(stamp, image) => self.sync.image(epoch.stamp(stamp), image),
+                Payload::CameraInfo(camera) => self.sync.camera_info(camera),
+                Payload::Odometry(stamp, pose) => {
+                    let s = epoch.stamp(stamp);
+                    self.first_odometry.get_or_insert((s, pose));
+                    self.sync.odometry(s, pose);
+                }
+                Payload::GroundTruth(stamp, pose) => {
+                    shared.set_position(id, pose.translation.vector.into());
+                    self.truth.push((epoch.stamp(stamp), pose));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Replays `bags` (robot k ← `bags[k]`) with `scenario`'s robot configuration, radio and
+/// `[ros]` topics. Must be called inside an actix system.
+pub async fn replay(
+    scenario: &Scenario,
+    bags: &[PathBuf],
+    progress: Option<&ProgressBar>,
+) -> Result<ReplayOutcome, RunError> {
+    let wall = Instant::now();
+    if bags.is_empty() {
+        return Err(RunError::Input("no bag given".into()));
+    }
+    if scenario.robots.len() != bags.len() {
+        return Err(RunError::Input(format!(
+            "{} bags but the configuration has {} robots: one bag per robot, in the order of [[robots]]",
+            bags.len(),
+            scenario.robots.len()
+        )));
+    }
+    let mut ros = scenario.ros.clone();
+    if !scenario.camera.enabled {
+        ros.labels = LabelSource::Cloud;
+    }
+    let camera_from_body = ros.camera_from_body().map_err(|e| RunError::Input(e.to_string()))?;
+    let names: Vec<String> = (0..bags.len()).map(|k| scenario.robot_name(k)).collect();
+    let mut robots: Vec<BagRobot> = bags
+        .iter()
+        .enumerate()
+        .map(|(k, path)| BagRobot {
+            stream: read_bag(path, &ros, &names[k], k as u16 + 1).into_iter().peekable(),
+            sync: Synchroniser::new(ros.sync.clone(), ros.labels, camera_from_body),
+            truth: Vec::new(),
+            first_odometry: None,
+            stats: BagStats { robot: names[k].clone(), bag: path.display().to_string(), ..BagStats::default() },
+            frames: 0,
+            raw_bytes: 0,
+            raw_max_bytes: 0,
+        })
+        .collect();
+    let mut first = None;
+    for robot in &mut robots {
+        if let Some(t) = robot.next_time()? {
+            first = Some(first.map_or(t, |f: u64| f.min(t)));
+        }
+    }
+    let Some(first) = first else {
+        return Err(RunError::Input(format!(
+            "no message on the configured topics ({}, {}, {}, {}) in any bag",
+            ros.topics.points, ros.topics.labels, ros.topics.camera_info, ros.topics.odometry
+        )));
+    };
+    let epoch = Epoch { sec: (first / 1_000_000_000) as u32 };
+    let epoch_nanos = u64::from(epoch.sec) * 1_000_000_000;
+
+    let seed = scenario.scenario.seed;
+    let shared = RadioShared::default();
+    let dt_nanos = nanos_from_stamp(scenario.scenario.frame_interval_s).max(1);
+    let report_every =
+        ((scenario.scenario.report_interval_s / scenario.scenario.frame_interval_s).round() as u64).max(1);
+    let mut observations = Vec::new();
+    let mut decoding = Duration::ZERO;
+    let mut team: Option<Team> = None;
+    let mut step = 0u64;
+    let mut last_t = 0.0;
+    loop {
+        let started = Instant::now();
+        let exhausted = robots.iter_mut().all(|r| r.stream.peek().is_none() && r.sync.pending() == 0);
+        if exhausted {
+            decoding += started.elapsed();
+            break;
+        }
+        step += 1;
+        let t = stamp_from_nanos(step as i64 * dt_nanos);
+        let limit = epoch_nanos + step * dt_nanos as u64;
+        let mut frames = Vec::new();
+        for (k, robot) in robots.iter_mut().enumerate() {
+            robot.pull(limit, epoch, RobotId(k as u16 + 1), &shared)?;
+            for frame in robot.sync.ready() {
+                robot.frames += 1;
+                frames.push((k, frame));
+            }
+        }
+        let team = match &mut team {
+            Some(team) => team,
+            None => {
+                let mut spec = scenario.radio.clone();
+                if spec.range_m > 0.0 && robots.iter().any(|r| r.truth.is_empty()) {
+                    tracing::warn!("a bag has no ground truth: the radio's range limit is off");
+                    spec.range_m = 0.0;
+                }
+                let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&spec, seed, shared.clone())));
+                team.insert(Team::new(names.clone(), radio))
+            }
+        };
+        decoding += started.elapsed();
+        for (k, frame) in frames {
+            team.advance(k, t);
+            team.frame(k, || scenario.robot_config(k), frame)?;
+        }
+        team.settle(t).await;
+        last_t = t;
+        if step % report_every == 0 {
+            observations.push(team.observe(t).await?);
+        }
+        if let Some(bar) = progress {
+            bar.set_position(step);
+        }
+    }
+    let Some(team) = team else { return Err(RunError::Input("the bags hold no frame".into())) };
+    if observations.last().is_none_or(|o| o.t != last_t) {
+        observations.push(team.observe(last_t).await?);
+    }
+    let maps = team.maps().await?;
+    let truths: Vec<RobotTruth> = robots
+        .iter()
+        .enumerate()
+        .map(|(k, r)| RobotTruth {
+            name: names[k].clone(),
+            truth_from_world: truth_from_world(r),
+            truth: TruthTrack::Samples(r.truth.clone()),
+            frames: r.frames,
+            raw_bytes: r.raw_bytes,
+            raw_max_bytes: r.raw_max_bytes,
+        })
+        .collect();
+    let world = World {
+        bounds: bounds(&robots, &maps),
+        colours: scenario.fusion.classes.iter().map(|c| (c.id, c.colour)).collect(),
+        ..World::default()
+    };
+    let sim_s = step as f64 * scenario.scenario.frame_interval_s;
+    let record = RunRecord {
+        scenario: format!("replay of {}", names.join(", ")),
+        seed,
+        sim_s,
+        robots: truths,
+        observations,
+        radio: shared.stats(),
+        world_objects: Vec::new(),
+    };
+    let bag_stats = robots
+        .into_iter()
+        .map(|mut r| {
+            r.stats.sync = r.sync.counts.clone();
+            r.stats
+        })
+        .collect();
+    let timing = Timing::measure(wall, sim_s, decoding);
+    Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing }, bags: bag_stats })
+}
+
+/// Where the robot's world frame sits in the truth frame: truth · odometry⁻¹ at the first
+/// odometry pose that has a true pose beside it.
+fn truth_from_world(robot: &BagRobot) -> Pose3 {
+    let Some((t, odometry)) = robot.first_odometry else { return Pose3::identity() };
+    TruthTrack::Samples(robot.truth.clone()).pose_at(t).map_or(Pose3::identity(), |truth| truth * odometry.inverse())
+}
+
+/// The plot's extent: every true and estimated position, with a 10 m margin.
+fn bounds(robots: &[BagRobot], maps: &[sgm_model::scene_graph::SceneGraph]) -> [f64; 4] {
+    let points = robots
+        .iter()
+        .flat_map(|r| r.truth.iter().map(|(_, p)| p.translation.vector))
+        .chain(maps.iter().flat_map(|m| m.keyframes().map(|k| k.world_from_body.translation.vector)));
+    let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    for p in points {
+        b = [b[0].min(p.x), b[1].min(p.y), b[2].max(p.x), b[3].max(p.y)];
+    }
+    if !b.iter().all(|v| v.is_finite()) {
+        return [-50.0, -50.0, 50.0, 50.0];
+    }
+    [b[0] - 10.0, b[1] - 10.0, b[2] + 10.0, b[3] + 10.0]
+}

@@ -1,0 +1,57 @@
+//! A robot's true trajectory: the simulator's route, or the poses a bag's ground-truth topic
+//! carried (looked up exactly at their stamps, interpolated between them up to half a second).
+
+use crate::sim::trajectory::Route;
+use sgm_model::geometry::Pose3;
+use sgm_model::scene_graph::Stamp;
+
+/// Samples further apart than this are not interpolated.
+const MAX_GAP_S: f64 = 0.5;
+
+#[derive(Clone, Debug)]
+pub enum TruthTrack {
+    Route(Route),
+    /// (stamp, pose), stamps increasing.
+    Samples(Vec<(Stamp, Pose3)>),
+}
+
+impl TruthTrack {
+    pub fn pose_at(&self, t: Stamp) -> Option<Pose3> {
+        match self {
+            TruthTrack::Route(route) => route.pose_at(t),
+            TruthTrack::Samples(samples) => {
+                let after = samples.partition_point(|(s, _)| *s < t);
+                let (s1, p1) = samples.get(after)?;
+                if *s1 == t {
+                    return Some(*p1);
+                }
+                let (s0, p0) = samples.get(after.checked_sub(1)?)?;
+                if s1 - s0 > MAX_GAP_S {
+                    return None;
+                }
+                let a = (t - s0) / (s1 - s0);
+                let translation = p0.translation.vector.lerp(&p1.translation.vector, a);
+                Some(Pose3::from_parts(translation.into(), p0.rotation.slerp(&p1.rotation, a)))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn samples_exact_interpolated_or_none() {
+        let track = TruthTrack::Samples(vec![
+            (1.0, Pose3::translation(0.0, 0.0, 0.0)),
+            (1.2, Pose3::translation(2.0, 0.0, 0.0)),
+            (5.0, Pose3::translation(9.0, 0.0, 0.0)),
+        ]);
+        assert_eq!(track.pose_at(1.2), Some(Pose3::translation(2.0, 0.0, 0.0)));
+        assert!((track.pose_at(1.1).unwrap().translation.x - 1.0).abs() < 1e-12);
+        assert_eq!(track.pose_at(3.0), None);
+        assert_eq!(track.pose_at(0.5), None);
+        assert_eq!(track.pose_at(6.0), None);
+    }
+}

@@ -1,0 +1,72 @@
+//! A scenario written as ROS 1 bags (`sgm run --bag-out`) replays through `sgm replay` to the
+//! scenario's own result: the same keyframes, trajectories, alignments, times and radio bytes.
+//! Only what needs the simulated world differs (object quality, the world's object count, the
+//! start-frame error, which a bag can only estimate from its first poses).
+
+use sgm_scenarios::replay::replay;
+use sgm_scenarios::report;
+use sgm_scenarios::runner::run_recording;
+use sgm_scenarios::scenario::Scenario;
+
+/// Keys that need the simulated world.
+const WORLD_ONLY: &[&str] = &[
+    "scenario",
+    "objects_found",
+    "objects_spurious",
+    "object_error_m",
+    "start_frame_translation_error_m",
+    "world_objects",
+];
+
+fn without_world(mut value: serde_json::Value) -> serde_json::Value {
+    match &mut value {
+        serde_json::Value::Object(map) => {
+            for key in WORLD_ONLY {
+                map.remove(*key);
+            }
+            for v in map.values_mut() {
+                *v = without_world(v.take());
+            }
+        }
+        serde_json::Value::Array(items) => {
+            for v in items.iter_mut() {
+                *v = without_world(v.take());
+            }
+        }
+        _ => {}
+    }
+    value
+}
+
+#[test]
+fn a_scenario_replayed_from_its_bags_gives_the_same_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = Scenario::load_with_env("quickstart", "SGM_REPLAY_TEST").unwrap();
+    let system = actix_rt::System::new();
+    let outcome = system.block_on(run_recording(&scenario, None, Some(dir.path()))).unwrap();
+    let ran = report::compute(&outcome.record);
+    assert!(ran.alignments.iter().all(|a| a.first_aligned_s.is_some()), "the scenario aligns");
+
+    let bags = vec![dir.path().join("alpha.bag"), dir.path().join("bravo.bag")];
+    let replayed = system.block_on(replay(&scenario, &bags, None)).unwrap();
+    for b in &replayed.bags {
+        assert!(b.refused.is_empty(), "{b:?}");
+        assert_eq!(b.sync.frames, outcome.record.robots[0].frames, "{b:?}");
+    }
+    let again = report::compute(&replayed.run.record);
+    let (ran, again) = (serde_json::to_value(&ran).unwrap(), serde_json::to_value(&again).unwrap());
+    assert_eq!(without_world(ran), without_world(again));
+}
+
+#[test]
+fn bad_bag_lists_are_named() {
+    let scenario = Scenario::load_with_env("quickstart", "SGM_REPLAY_TEST").unwrap();
+    let system = actix_rt::System::new();
+    let dir = tempfile::tempdir().unwrap();
+    let one = vec![dir.path().join("alpha.bag")];
+    let err = system.block_on(replay(&scenario, &one, None)).err().unwrap().to_string();
+    assert!(err.contains("1 bags but the configuration has 2 robots"), "{err}");
+    let two = vec![dir.path().join("missing.bag"), dir.path().join("alpha.bag")];
+    let err = system.block_on(replay(&scenario, &two, None)).err().unwrap().to_string();
+    assert!(err.contains("missing.bag"), "{err}");
+}
