@@ -8,4 +8,6 @@ pub mod convert;
 pub mod error;
 pub mod inputs;
 pub mod msg;
+pub mod node;
 pub mod sync;
+pub mod transport;

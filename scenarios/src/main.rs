@@ -41,6 +41,25 @@ enum Command {
         #[arg(long, value_name = "DIR")]
         bag_out: Option<PathBuf>,
     },
+    /// Run one robot as a ROS 1 node (rosrust); ROS remappings (`__ns:=/alpha`, `a:=b`) may follow.
+    Ros {
+        /// The robot's name (node sgm_NAME; `{robot}` in topics and frames).
+        #[arg(long)]
+        robot: String,
+        /// The robot's id, unique in the team (default: the configuration's robot.id).
+        #[arg(long)]
+        id: Option<u16>,
+        /// Robot configuration file (TOML: the robot's sections and [ros]).
+        #[arg(long, conflicts_with = "scenario")]
+        config: Option<PathBuf>,
+        /// Take the robot's configuration from a scenario (library name or file) instead:
+        /// its shared sections, [ros], and this robot's name and id from [[robots]].
+        #[arg(long)]
+        scenario: Option<String>,
+        /// ROS remapping arguments, read by rosrust.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        remappings: Vec<String>,
+    },
     /// Replay recorded missions (one ROS 1 bag per robot) with no ROS master, and write the report.
     Replay {
         /// A robot's bag; give one per robot, in the order of the configuration's [[robots]].
@@ -182,6 +201,15 @@ fn main() -> ExitCode {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("sgm run: {e:#}");
+                    ExitCode::from(2)
+                }
+            }
+        }
+        Command::Ros { robot, id, config, scenario, remappings: _ } => {
+            match cli::ros_cmd::execute(cli::ros_cmd::Options { robot, id, config, scenario }) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("sgm ros: {e:#}");
                     ExitCode::from(2)
                 }
             }

@@ -1,0 +1,337 @@
+//! `sgm ros`: one robot as a ROS 1 node. Sensor topics in (checked by [`Inputs`], assembled by
+//! the [`Synchroniser`]), the robot's actor tree in the middle, RViz-ready outputs and the
+//! inter-robot [`RosTransport`] out. Names come from the `[ros]` section and resolve in the
+//! node's namespace; rosrust honours `ROS_MASTER_URI`, `ROS_IP`/`ROS_HOSTNAME`,
+//! `ROS_NAMESPACE`, `__name:=`, `__ns:=` and `from:=to` remappings on the command line.
+//!
+//! The robot's clock is the newest sensor stamp (ROS time, seconds since 1970): the node runs
+//! the same whether its sensors are live or a bag played at any rate. Handlers never read the
+//! wall clock; only the tick and publish loop waits on it.
+
+use crate::config::RosConfig;
+use crate::convert::cloud::cloud_msg;
+use crate::convert::markers::{keyframe_path, map_markers, neighbour_transforms};
+use crate::convert::time::Epoch;
+use crate::error::InputError;
+use crate::inputs::Inputs;
+use crate::msg::{nav_msgs, sensor_msgs, sgm_msgs, std_msgs, tf2_msgs, visualization_msgs};
+use crate::sync::Synchroniser;
+use crate::transport::{RosTransport, TransportCounts};
+use serde::{Deserialize, Serialize};
+use sgm_actors::clock::Clock;
+use sgm_actors::comms::GetCommsStatus;
+use sgm_actors::config::{ConfigError, RobotConfig};
+use sgm_actors::matcher::GetNeighbours;
+use sgm_actors::messages::Tick;
+use sgm_actors::supervisor::{start_robot_on, RobotHandle};
+use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
+use sgm_actors::transport::Delivered;
+use sgm_model::perception::classes::ClassTable;
+use sgm_model::scene_graph::SceneGraph;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+/// A node's configuration file: the robot's sections plus `[ros]`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct NodeConfig {
+    #[serde(flatten)]
+    pub robot: RobotConfig,
+    pub ros: RosConfig,
+}
+
+impl NodeConfig {
+    /// Defaults, then `file`, then `SGM__…` variables; both parts validated.
+    pub fn load(file: Option<&Path>) -> Result<Self, NodeError> {
+        let defaults = config::Config::try_from(&NodeConfig::default()).map_err(|e| {
+            NodeError::Config(ConfigError::Load { source_name: "defaults".into(), message: e.to_string() })
+        })?;
+        let merged = sgm_actors::config::layered(Some(defaults), file, "SGM").map_err(NodeError::Config)?;
+        let source_name = file.map_or("environment".into(), |p| p.display().to_string());
+        let config: NodeConfig = merged
+            .try_deserialize()
+            .map_err(|e| NodeError::Config(ConfigError::Load { source_name, message: e.to_string() }))?;
+        config.robot.validate().map_err(NodeError::Config)?;
+        config.ros.validate().map_err(NodeError::Ros)?;
+        Ok(config)
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    #[error("{0}")]
+    Config(ConfigError),
+    #[error("[ros]: {0}")]
+    Ros(InputError),
+    #[error("ROS: {0}")]
+    Ros1(String),
+}
+
+fn ros_error(e: impl std::fmt::Display) -> NodeError {
+    NodeError::Ros1(e.to_string())
+}
+
+/// Per input topic: messages accepted and refused.
+#[derive(Default)]
+struct InputCounts {
+    accepted: BTreeMap<&'static str, AtomicU64>,
+    refused: BTreeMap<&'static str, AtomicU64>,
+}
+
+impl InputCounts {
+    fn new(topics: &[&'static str]) -> Self {
+        Self {
+            accepted: topics.iter().map(|t| (*t, AtomicU64::new(0))).collect(),
+            refused: topics.iter().map(|t| (*t, AtomicU64::new(0))).collect(),
+        }
+    }
+
+    fn count<T>(&self, topic: &'static str, result: Result<T, InputError>) -> Option<T> {
+        let (map, value) = match result {
+            Ok(v) => (&self.accepted, Some(v)),
+            Err(e) => {
+                tracing::warn!(topic, "message refused: {e}");
+                (&self.refused, None)
+            }
+        };
+        if let Some(c) = map.get(topic) {
+            c.fetch_add(1, Ordering::Relaxed);
+        }
+        value
+    }
+
+    fn snapshot(map: &BTreeMap<&'static str, AtomicU64>) -> serde_json::Value {
+        map.iter().map(|(k, v)| (k.to_string(), serde_json::json!(v.load(Ordering::Relaxed)))).collect()
+    }
+}
+
+/// What the sensor callbacks share.
+struct SensorSide {
+    sync: Mutex<Synchroniser>,
+    inputs: Inputs,
+    counts: InputCounts,
+    handle: RobotHandle,
+    epoch: Epoch,
+}
+
+impl SensorSide {
+    fn sync(&self) -> std::sync::MutexGuard<'_, Synchroniser> {
+        self.sync.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Hands every assembled frame to the robot, moving its clock to the frame's stamp.
+    fn flush(&self, sync: &mut Synchroniser) {
+        for frame in sync.ready() {
+            self.handle.clock.advance_to(frame.stamp);
+            self.handle.supervisor.do_send(frame);
+        }
+    }
+}
+
+/// Runs robot `config` as a ROS node until ROS shuts down (SIGINT, `rosnode kill`).
+pub fn run(config: NodeConfig) -> Result<(), NodeError> {
+    let robot_name = config.robot.robot.name.clone();
+    let id = config.robot.robot.id;
+    rosrust::try_init(&format!("sgm_{robot_name}")).map_err(ros_error)?;
+    let ros = config.ros.clone();
+    let classes = ClassTable::new(config.robot.fusion.classes.clone())
+        .map_err(|e| NodeError::Ros(InputError::invalid(format!("fusion.classes: {e}"))))?;
+    let camera_from_body = ros.camera_from_body().map_err(NodeError::Ros)?;
+    let system = actix_rt::System::new();
+    system.block_on(async move {
+        let counts = Arc::new(TransportCounts::default());
+        let transport =
+            RosTransport::start(&ros, sgm_model::scene_graph::RobotId(id), counts.clone()).map_err(ros_error)?;
+        let mut comms_addr = None;
+        let handle = start_robot_on(&config.robot, Clock::starting_at(0.0), Box::new(transport), |_, comms| {
+            comms_addr = Some(comms)
+        })
+        .map_err(NodeError::Config)?;
+        let Some(comms) = comms_addr else { return Err(ros_error("the robot's Comms did not start")) };
+
+        // Inter-robot traffic in: the team topic (others' broadcasts) and our Deliver service.
+        let team_in = {
+            let (comms, counts) = (comms.clone(), counts.clone());
+            rosrust::subscribe(&ros.topics.team, ros.queue_size.max(64), move |m: sgm_msgs::Envelope| {
+                if m.from_robot != id {
+                    counts.received.fetch_add(1, Ordering::Relaxed);
+                    comms.do_send(Delivered { bytes: m.data });
+                }
+            })
+            .map_err(ros_error)?
+        };
+        let deliver_name = RosConfig::resolve(&ros.topics.deliver, &robot_name, id);
+        let deliver = {
+            let (comms, counts) = (comms.clone(), counts.clone());
+            rosrust::service::<sgm_msgs::Deliver, _>(&deliver_name, move |request| {
+                counts.received.fetch_add(1, Ordering::Relaxed);
+                comms.do_send(Delivered { bytes: request.data });
+                // Authentication and decoding happen in Comms; receipt is all we can vouch for.
+                Ok(sgm_msgs::DeliverRes { accepted: true, reason: String::new() })
+            })
+            .map_err(ros_error)?
+        };
+
+        let side = Arc::new(SensorSide {
+            sync: Mutex::new(Synchroniser::new(ros.sync.clone(), ros.labels, camera_from_body)),
+            inputs: Inputs::new(&ros, &robot_name, id),
+            counts: InputCounts::new(&["points", "labels", "camera_info", "odometry"]),
+            handle: handle.clone(),
+            epoch: Epoch { sec: 0 },
+        });
+        let q = ros.queue_size;
+        let s = side.clone();
+        let points = rosrust::subscribe(&ros.topics.points, q, move |m: sensor_msgs::PointCloud2| {
+            if let Some((t, scan)) = s.counts.count("points", s.inputs.cloud(&m)) {
+                let mut sync = s.sync();
+                sync.cloud(s.epoch.stamp(t), scan);
+                s.flush(&mut sync);
+            }
+        })
+        .map_err(ros_error)?;
+        let s = side.clone();
+        let labels = rosrust::subscribe(&ros.topics.labels, q, move |m: sensor_msgs::Image| {
+            if let Some((t, image)) = s.counts.count("labels", s.inputs.image(&m)) {
+                let mut sync = s.sync();
+                sync.image(s.epoch.stamp(t), image);
+                s.flush(&mut sync);
+            }
+        })
+        .map_err(ros_error)?;
+        let s = side.clone();
+        let camera_info = rosrust::subscribe(&ros.topics.camera_info, q, move |m: sensor_msgs::CameraInfo| {
+            if let Some(camera) = s.counts.count("camera_info", s.inputs.camera_info(&m)) {
+                let mut sync = s.sync();
+                sync.camera_info(camera);
+                s.flush(&mut sync);
+            }
+        })
+        .map_err(ros_error)?;
+        let s = side.clone();
+        let odometry = rosrust::subscribe(&ros.topics.odometry, q, move |m: nav_msgs::Odometry| {
+            if let Some((t, pose)) = s.counts.count("odometry", s.inputs.odometry(&m)) {
+                let mut sync = s.sync();
+                sync.odometry(s.epoch.stamp(t), pose);
+                s.flush(&mut sync);
+            }
+        })
+        .map_err(ros_error)?;
+
+        let publishers = Publishers::advertise(&ros).map_err(ros_error)?;
+        tracing::info!(robot = %robot_name, id, service = %deliver_name, "sgm node up");
+        let world_frame = side.inputs.world_frame().to_string();
+        let mut since_publish = Duration::ZERO;
+        let tick = Duration::from_millis(100);
+        let publish_every = Duration::from_secs_f64(ros.publish_interval_s);
+        let mut seq = 0u32;
+        while rosrust::is_ok() {
+            actix_rt::time::sleep(tick).await;
+            handle.supervisor.do_send(Tick { now: handle.clock.now() });
+            since_publish += tick;
+            if since_publish < publish_every {
+                continue;
+            }
+            since_publish = Duration::ZERO;
+            seq = seq.wrapping_add(1);
+            let header =
+                std_msgs::Header { seq, stamp: side.epoch.time(handle.clock.now()), frame_id: world_frame.clone() };
+            let (Ok(map), Ok(neighbours), Ok(comms_status)) = (
+                handle.tracker.send(GetMapSummary).await,
+                handle.matcher.send(GetNeighbours).await,
+                handle.comms.send(GetCommsStatus).await,
+            ) else {
+                continue;
+            };
+            let _ = publishers.markers.send(map_markers(&header, &map, &classes));
+            let _ = publishers.path.send(keyframe_path(&header, &map, |t| side.epoch.time(t)));
+            let tf = neighbour_transforms(&header, &neighbours, |r| {
+                RosConfig::resolve(&ros.frames.world, &format!("robot_{}", r.0), r.0)
+            });
+            if !tf.transforms.is_empty() {
+                let _ = publishers.tf.send(tf);
+            }
+            if publishers.map.subscriber_count() > 0 {
+                if let Ok(graph) = handle.tracker.send(GetSceneGraph).await {
+                    let _ = publishers.map.send(semantic_map(&header, &graph, &classes, ros.map_voxel_m));
+                }
+            }
+            let sync_counts = side.sync().counts.clone();
+            let status = serde_json::json!({
+                "robot": robot_name,
+                "id": id,
+                "stamp": handle.clock.now(),
+                "keyframes": map.keyframes.len(),
+                "objects": map.objects.len(),
+                "accepted": InputCounts::snapshot(&side.counts.accepted),
+                "refused": InputCounts::snapshot(&side.counts.refused),
+                "sync": sync_counts,
+                "transport": counts.snapshot(),
+                "comms": format!("{comms_status:?}"),
+                "neighbours": neighbours.iter().map(|n| serde_json::json!({
+                    "robot": n.robot.0,
+                    "state": n.state,
+                    "first_aligned": n.first_aligned,
+                    "local_from_remote": n.local_from_remote.map(|p| {
+                        let (t, q) = (p.translation.vector, p.rotation.quaternion());
+                        [t.x, t.y, t.z, q.i, q.j, q.k, q.w]
+                    }),
+                })).collect::<Vec<_>>(),
+            });
+            let _ = publishers.status.send(std_msgs::String { data: status.to_string() });
+        }
+        drop((team_in, deliver, points, labels, camera_info, odometry));
+        Ok(())
+    })
+}
+
+struct Publishers {
+    markers: rosrust::Publisher<visualization_msgs::MarkerArray>,
+    path: rosrust::Publisher<nav_msgs::Path>,
+    map: rosrust::Publisher<sensor_msgs::PointCloud2>,
+    status: rosrust::Publisher<std_msgs::String>,
+    tf: rosrust::Publisher<tf2_msgs::TFMessage>,
+}
+
+impl Publishers {
+    fn advertise(ros: &RosConfig) -> Result<Self, rosrust::error::Error> {
+        let q = ros.queue_size;
+        let mut markers = rosrust::publish(&ros.topics.markers, q)?;
+        let mut path = rosrust::publish(&ros.topics.path, q)?;
+        let mut status = rosrust::publish(&ros.topics.status, q)?;
+        // Latched: a late `rostopic echo` or RViz sees the latest at once.
+        markers.set_latching(true);
+        path.set_latching(true);
+        status.set_latching(true);
+        Ok(Self {
+            markers,
+            path,
+            map: rosrust::publish(&ros.topics.map, q)?,
+            status,
+            tf: rosrust::publish(&ros.topics.tf, q)?,
+        })
+    }
+}
+
+/// The keyframes' labelled points in the world frame, one per `voxel_m` voxel.
+fn semantic_map(
+    header: &std_msgs::Header,
+    graph: &SceneGraph,
+    classes: &ClassTable,
+    voxel_m: f64,
+) -> sensor_msgs::PointCloud2 {
+    let mut voxels = BTreeMap::new();
+    for keyframe in graph.keyframes() {
+        let Some(scan) = graph.semantic_scan(keyframe.id) else { continue };
+        for (p, label) in scan.points_in_body.iter().zip(&scan.labels) {
+            let w = keyframe.world_from_body * p.cast::<f64>();
+            let key = ((w.x / voxel_m).floor() as i64, (w.y / voxel_m).floor() as i64, (w.z / voxel_m).floor() as i64);
+            voxels.entry(key).or_insert((w.cast::<f32>(), label.0));
+        }
+    }
+    let (points, labels): (Vec<_>, Vec<_>) = voxels.into_values().unzip();
+    let colour = |l: u16| classes.get(sgm_model::scene_graph::LabelId(l)).map_or([128, 128, 128], |c| c.colour);
+    cloud_msg(header.clone(), &points, Some(&labels), colour)
+}
