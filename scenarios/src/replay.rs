@@ -77,9 +77,24 @@ impl BagRobot {
     }
 
     /// Feeds every message recorded up to `limit` (ns since 1970) to the synchroniser.
-    fn pull(&mut self, limit: u64, epoch: Epoch, id: RobotId, shared: &RadioShared) -> Result<(), RunError> {
+    /// `epoch` is the stamps' (header times), set from the first stamped message of the replay:
+    /// record times and header stamps may differ (a bag recorded while another played at 3×).
+    fn pull(
+        &mut self,
+        limit: u64,
+        epoch: &mut Option<Epoch>,
+        id: RobotId,
+        shared: &RadioShared,
+    ) -> Result<(), RunError> {
         while self.next_time()?.is_some_and(|t| t <= limit) {
             let Some(BagItem::Message { payload, .. }) = self.stream.next() else { break };
+            let stamped = match &payload {
+                Payload::Cloud(t, _) | Payload::Image(t, _) | Payload::Odometry(t, _) | Payload::GroundTruth(t, _) => {
+                    Some(*t)
+                }
+                Payload::CameraInfo(_) => None,
+            };
+            let epoch = *epoch.get_or_insert_with(|| Epoch::at(stamped.unwrap_or_default()));
             match payload {
                 Payload::Cloud(stamp, scan) => {
                     let raw = scan.points.len() as u64 * crate::runner::RAW_BYTES_PER_POINT;
@@ -154,8 +169,10 @@ pub async fn replay(
             ros.topics.points, ros.topics.labels, ros.topics.camera_info, ros.topics.odometry
         )));
     };
-    let epoch = Epoch { sec: (first / 1_000_000_000) as u32 };
-    let epoch_nanos = u64::from(epoch.sec) * 1_000_000_000;
+    // Steps go by record time from the first record's whole second; stamps by header time.
+    let record_epoch_nanos = first / 1_000_000_000 * 1_000_000_000;
+    let mut epoch: Option<Epoch> = None;
+    let mut latest_stamp = f64::NEG_INFINITY;
 
     let seed = scenario.scenario.seed;
     let shared = RadioShared::default();
@@ -176,10 +193,10 @@ pub async fn replay(
         }
         step += 1;
         let t = stamp_from_nanos(step as i64 * dt_nanos);
-        let limit = epoch_nanos + step * dt_nanos as u64;
+        let limit = record_epoch_nanos + step * dt_nanos as u64;
         let mut frames = Vec::new();
         for (k, robot) in robots.iter_mut().enumerate() {
-            robot.pull(limit, epoch, RobotId(k as u16 + 1), &shared)?;
+            robot.pull(limit, &mut epoch, RobotId(k as u16 + 1), &shared)?;
             for frame in robot.sync.ready() {
                 robot.frames += 1;
                 frames.push((k, frame));
@@ -198,6 +215,9 @@ pub async fn replay(
             }
         };
         decoding += started.elapsed();
+        // The team's time: the step, or the newest stamp if the stamps run ahead of the records.
+        latest_stamp = frames.iter().map(|(_, f)| f.stamp).fold(latest_stamp, f64::max);
+        let t = t.max(latest_stamp);
         for (k, frame) in frames {
             team.advance(k, t);
             team.frame(k, || scenario.robot_config(k), frame)?;

@@ -129,13 +129,16 @@ fn maps_on_truth(observation: &Observation, record: &RunRecord) -> Vec<Option<Po
 /// The true local_from_remote between two drifting maps: each map placed on the truth by its
 /// best fit, so that what is measured is how well the maps were joined, not how far each
 /// drifted from its start (that is `start_frame_translation_error_m`). Falls back to the start
-/// frames before a map has 3 keyframes.
-fn true_local_from_remote(fits: &[Option<Pose3>], record: &RunRecord, l: usize, r: usize) -> Pose3 {
+/// frames before a map has 3 keyframes. None without truth (a replayed bag without it).
+fn true_local_from_remote(fits: &[Option<Pose3>], record: &RunRecord, l: usize, r: usize) -> Option<Pose3> {
     let (local, remote) = (&record.robots[l], &record.robots[r]);
-    match (fits[l], fits[r]) {
+    if !(local.truth.is_known() && remote.truth.is_known()) {
+        return None;
+    }
+    Some(match (fits[l], fits[r]) {
         (Some(a), Some(b)) => a.inverse() * b,
         _ => local.truth_from_world.inverse() * remote.truth_from_world,
-    }
+    })
 }
 
 /// The reference robot's estimate of robot k's world: reference_world_from_k_world.
@@ -182,7 +185,7 @@ fn pair_errors(observation: &Observation, record: &RunRecord) -> Vec<PairError> 
         for n in neighbours {
             let r = usize::from(n.robot.0).wrapping_sub(1);
             let (Some(remote), Some(estimate)) = (record.robots.get(r), n.local_from_remote) else { continue };
-            let truth = true_local_from_remote(&fits, record, k, r);
+            let Some(truth) = true_local_from_remote(&fits, record, k, r) else { continue };
             let e = pose_error(&estimate, &truth);
             out.push(PairError {
                 local: local.name.clone(),
@@ -274,10 +277,12 @@ pub fn compute(record: &RunRecord) -> Report {
             let r = usize::from(n.robot.0).wrapping_sub(1);
             let Some(remote) = record.robots.get(r) else { continue };
             let truth = true_local_from_remote(&fits, record, k, r);
-            let error = n.local_from_remote.map(|estimate| pose_error(&estimate, &truth));
+            let known = truth.and(n.local_from_remote);
+            let truth = truth.unwrap_or_else(Pose3::identity);
+            let error = known.map(|estimate| pose_error(&estimate, &truth));
             let start_truth = local.truth_from_world.inverse() * remote.truth_from_world;
-            let start_error = n.local_from_remote.map(|estimate| pose_error(&estimate, &start_truth).translation_m);
-            let xyz = n.local_from_remote.map(|estimate| {
+            let start_error = known.map(|estimate| pose_error(&estimate, &start_truth).translation_m);
+            let xyz = known.map(|estimate| {
                 let d = estimate.translation.vector - truth.translation.vector;
                 [d.x, d.y, d.z]
             });

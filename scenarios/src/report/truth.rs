@@ -16,6 +16,14 @@ pub enum TruthTrack {
 }
 
 impl TruthTrack {
+    /// Whether there is any truth at all.
+    pub fn is_known(&self) -> bool {
+        match self {
+            TruthTrack::Route(_) => true,
+            TruthTrack::Samples(samples) => !samples.is_empty(),
+        }
+    }
+
     pub fn pose_at(&self, t: Stamp) -> Option<Pose3> {
         match self {
             TruthTrack::Route(route) => route.pose_at(t),

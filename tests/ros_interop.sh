@@ -1,0 +1,100 @@
+#!/usr/bin/env bash
+# Interop against Debian's real ROS 1 (ros-core: rosmaster, rostopic, rosbag, rosnode), run by
+# .ci/run after the Rust tests. Needs `sgm` built (release) and the ROS packages installed.
+#   1. our message md5sums against `rosmsg md5` (cargo test with SGM_ROS_INTEROP=1);
+#   2. `sgm run quickstart --bag-out`: our bags pass `rosbag info` and `rosbag check`;
+#   3. two `sgm ros` processes (robots alpha and bravo, their own namespaces) under a rosmaster
+#      on 127.0.0.1, fed by Debian's `rosbag play` of those bags at 3x: both align through the
+#      master; `rostopic echo` sees their MarkerArray, Path and status; every frame accepted;
+#   4. malformed messages from `rostopic pub` (unknown encoding, wrong frame, truncated cloud)
+#      are refused and counted while the node keeps running;
+#   5. a bag recorded by Debian's `rosbag record` (lz4 chunks) of that traffic replays through
+#      `sgm replay` and both robots align.
+# Everything listens on 127.0.0.1 and every process started here is stopped by PID.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+SGM=${SGM:-target/release/sgm}
+WORK=$(mktemp -d /tmp/sgm-interop.XXXXXX)
+export ROS_MASTER_URI=http://127.0.0.1:11311 ROS_IP=127.0.0.1 ROS_HOME=$WORK/roshome
+mkdir -p "$ROS_HOME"
+PIDS=()
+cleanup() {
+  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
+  for pid in "${PIDS[@]}"; do wait "$pid" 2>/dev/null || true; done
+}
+trap cleanup EXIT
+fail() { echo "ros interop FAILED: $*" >&2; exit 1; }
+
+echo "== md5sums against rosmsg"
+SGM_ROS_INTEROP=1 cargo test -q -p sgm-bridge --test md5
+
+echo "== bags written by sgm run, checked by rosbag"
+"$SGM" run quickstart --quiet --out "$WORK/run" --bag-out "$WORK/bags" >/dev/null
+for robot in alpha bravo; do
+  rosbag info "$WORK/bags/$robot.bag" | grep -q "sensor_msgs/PointCloud2" || fail "rosbag info $robot.bag"
+  rosbag check "$WORK/bags/$robot.bag" >/dev/null || fail "rosbag check $robot.bag"
+done
+
+echo "== two sgm ros nodes through rosmaster"
+ss -ltn | grep -q ':11311 ' && fail "port 11311 busy"
+rosmaster --core -p 11311 >"$ROS_HOME/master.log" 2>&1 & PIDS+=($!)
+for _ in $(seq 100); do rostopic list >/dev/null 2>&1 && break; sleep 0.1; done
+"$SGM" ros --robot alpha --scenario quickstart __ns:=/alpha >"$WORK/alpha.log" 2>&1 & PIDS+=($!)
+ALPHA=$!
+"$SGM" ros --robot bravo --scenario quickstart __ns:=/bravo >"$WORK/bravo.log" 2>&1 & PIDS+=($!)
+for _ in $(seq 100); do rosnode list 2>/dev/null | grep -q sgm_bravo && break; sleep 0.1; done
+rosbag record -q --lz4 -O "$WORK/recorded.bag" /alpha/points /alpha/labels /alpha/camera_info /alpha/odometry \
+  /bravo/points /bravo/labels /bravo/camera_info /bravo/odometry >/dev/null 2>&1 & RECORD=$!; PIDS+=($RECORD)
+sleep 1
+rosbag play -q -r 3 "$WORK/bags/alpha.bag" "$WORK/bags/bravo.bag" >/dev/null 2>&1
+sleep 3
+kill -INT "$RECORD"; wait "$RECORD" 2>/dev/null || true
+
+status() { timeout 20 rostopic echo -n 1 "/$1/sgm/status" | /usr/bin/python3 -c '
+import sys, json, yaml
+doc = yaml.safe_load(sys.stdin.read().split("---")[0])
+print(doc["data"])'; }
+for robot in alpha bravo; do
+  status "$robot" > "$WORK/$robot.status.json"
+  /usr/bin/python3 - "$WORK/$robot.status.json" "$robot" <<'PY' || fail "$robot status"
+import json, sys
+s = json.load(open(sys.argv[1]))
+assert s["accepted"]["points"] == 180, s["accepted"]
+assert s["sync"]["frames"] == 180, s["sync"]
+assert all(v == 0 for v in s["refused"].values()), s["refused"]
+assert s["neighbours"] and all(n["state"] == "Aligned" for n in s["neighbours"]), s["neighbours"]
+print(f"  {sys.argv[2]}: 180/180 frames, {s['keyframes']} keyframes, {s['objects']} objects, aligned at "
+      + ", ".join(f"{n['first_aligned'] - 1700000000:.0f} s" for n in s["neighbours"]))
+PY
+done
+timeout 20 rostopic echo -n 1 /alpha/sgm/markers | grep -q 'ns: "objects"' || fail "no object markers"
+timeout 20 rostopic echo -n 1 /alpha/sgm/markers | grep -q 'type: 9' || fail "no text labels"
+timeout 20 rostopic echo -n 1 /bravo/sgm/path/poses[0]/header/frame_id | grep -q 'bravo/odom' || fail "path frame"
+
+echo "== malformed messages are refused and counted"
+rostopic pub -1 /alpha/labels sensor_msgs/Image \
+  "{header: {frame_id: alpha/camera}, width: 2, height: 1, encoding: rgb8, step: 6, data: [1,2,3,4,5,6]}" >/dev/null
+rostopic pub -1 /alpha/points sensor_msgs/PointCloud2 \
+  "{header: {frame_id: elsewhere}, width: 1, height: 1, point_step: 12, row_step: 12}" >/dev/null
+rostopic pub -1 /alpha/odometry nav_msgs/Odometry \
+  "{header: {frame_id: alpha/odom}, child_frame_id: alpha/base_link, pose: {pose: {orientation: {w: 0.0}}}}" >/dev/null
+sleep 2
+kill -0 "$ALPHA" || fail "alpha died on malformed input"
+status alpha > "$WORK/alpha.status2.json"
+/usr/bin/python3 - "$WORK/alpha.status2.json" <<'PY' || fail "refusals not counted"
+import json, sys
+s = json.load(open(sys.argv[1]))
+assert s["refused"] == {"camera_info": 0, "labels": 1, "odometry": 1, "points": 1}, s["refused"]
+print("  alpha refused", s["refused"], "and kept running")
+PY
+
+echo "== a bag recorded by Debian's rosbag replays through sgm replay"
+rosbag info "$WORK/recorded.bag" | grep -q lz4 || fail "recorded bag not lz4"
+# One bag holds both robots: each reads its own namespace's topics.
+SGM__ROS__TOPICS__POINTS='/{robot}/points' SGM__ROS__TOPICS__LABELS='/{robot}/labels' \
+SGM__ROS__TOPICS__CAMERA_INFO='/{robot}/camera_info' SGM__ROS__TOPICS__ODOMETRY='/{robot}/odometry' \
+  "$SGM" replay --bag "$WORK/recorded.bag" --bag "$WORK/recorded.bag" --config quickstart \
+  --out "$WORK/replay" --quiet > "$WORK/replay.txt" || fail "sgm replay"
+cat "$WORK/replay.txt"
+grep -c "Aligned" "$WORK/replay.txt" | grep -q 2 || fail "replayed robots did not align"
+echo "ros interop: all passed ($WORK)"
