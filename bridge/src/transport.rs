@@ -58,9 +58,8 @@ impl RosTransport {
                         let name = RosConfig::resolve(&deliver_template, "", r.0);
                         let client = match clients.get(&r.0) {
                             Some(c) => Ok(c.clone()),
-                            None => rosrust::client::<sgm_msgs::Deliver>(&name).map(|c| {
+                            None => rosrust::client::<sgm_msgs::Deliver>(&name).inspect(|c| {
                                 clients.insert(r.0, c.clone());
-                                c
                             }),
                         };
                         let request = sgm_msgs::DeliverReq { from_robot: robot.0, data };
