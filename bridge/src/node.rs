@@ -27,7 +27,7 @@ use sgm_actors::supervisor::{start_robot_on, RobotHandle};
 use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
 use sgm_actors::transport::Delivered;
 use sgm_model::perception::classes::ClassTable;
-use sgm_model::scene_graph::SceneGraph;
+use sgm_model::scene_graph::{LabelledVoxels, SceneGraph};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -322,16 +322,9 @@ fn semantic_map(
     classes: &ClassTable,
     voxel_m: f64,
 ) -> sensor_msgs::PointCloud2 {
-    let mut voxels = BTreeMap::new();
-    for keyframe in graph.keyframes() {
-        let Some(scan) = graph.semantic_scan(keyframe.id) else { continue };
-        for (p, label) in scan.points_in_body.iter().zip(&scan.labels) {
-            let w = keyframe.world_from_body * p.cast::<f64>();
-            let key = ((w.x / voxel_m).floor() as i64, (w.y / voxel_m).floor() as i64, (w.z / voxel_m).floor() as i64);
-            voxels.entry(key).or_insert((w.cast::<f32>(), label.0));
-        }
-    }
-    let (points, labels): (Vec<_>, Vec<_>) = voxels.into_values().unzip();
+    let mut voxels = LabelledVoxels::new(voxel_m);
+    voxels.insert_graph(graph, &sgm_model::geometry::Pose3::identity());
+    let (points, labels): (Vec<_>, Vec<_>) = voxels.points().map(|(p, l)| (p.cast::<f32>(), l.0)).unzip();
     let colour = |l: u16| classes.get(sgm_model::scene_graph::LabelId(l)).map_or([128, 128, 128], |c| c.colour);
     cloud_msg(header.clone(), &points, Some(&labels), colour)
 }

@@ -115,10 +115,7 @@ impl Synchroniser {
         match (after.checked_sub(1).and_then(|k| self.odometry.get(k)), self.odometry.get(after)) {
             (_, Some((s1, p1))) if *s1 == t => Outcome::Ready(*p1),
             (Some((s0, p0)), Some((s1, p1))) if s1 - s0 <= self.config.max_odometry_gap_s => {
-                let a = (t - s0) / (s1 - s0);
-                let translation = p0.translation.vector.lerp(&p1.translation.vector, a);
-                let rotation = p0.rotation.slerp(&p1.rotation, a);
-                Outcome::Ready(Pose3::from_parts(translation.into(), rotation))
+                Outcome::Ready(sgm_model::geometry::interpolate(p0, p1, (t - s0) / (s1 - s0)))
             }
             (Some(_), Some(_)) => Outcome::Drop,
             (_, None) => Outcome::Wait,

@@ -26,6 +26,13 @@ pub fn pose_from_rpy_translation(roll: f64, pitch: f64, yaw: f64, translation: V
     Isometry3::from_parts(Translation3::from(translation), UnitQuaternion::from_euler_angles(roll, pitch, yaw))
 }
 
+/// The pose a fraction `s` ∈ [0, 1] of the way from `a` to `b`: translation linear, rotation
+/// by slerp (the constant-velocity model between two stamped poses).
+pub fn interpolate(a: &Pose3, b: &Pose3, s: f64) -> Pose3 {
+    let translation = a.translation.vector.lerp(&b.translation.vector, s);
+    Isometry3::from_parts(Translation3::from(translation), a.rotation.slerp(&b.rotation, s))
+}
+
 /// Yaw of a pose's rotation (radians in (−π, π]).
 pub fn yaw_of(pose: &Pose3) -> f64 {
     pose.rotation.euler_angles().2

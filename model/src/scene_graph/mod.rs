@@ -25,4 +25,4 @@ pub use graph::SceneGraph;
 pub use ids::{KeyframeId, LabelId, ObjectId, RobotId};
 pub use keyframe::{nanos_from_stamp, stamp_from_nanos, Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeRef, Stamp};
 pub use object::{Object, ObjectEdge};
-pub use semantic::SemanticScan;
+pub use semantic::{LabelledVoxels, SemanticScan};

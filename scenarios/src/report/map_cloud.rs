@@ -5,33 +5,24 @@
 use super::figures::reference_from;
 use crate::runner::RunOutcome;
 use sgm_model::pcd::{write_pcd, DataFormat, FieldKind, PcdField, PointCloud};
-use std::collections::BTreeMap;
+use sgm_model::scene_graph::LabelledVoxels;
 
 const VOXEL_M: f64 = 0.1;
 
 pub fn merged_map(outcome: &RunOutcome) -> Vec<u8> {
     let last = outcome.record.observations.last().cloned().unwrap_or_default();
-    let mut voxels: BTreeMap<(i64, i64, i64), ([f64; 3], u16)> = BTreeMap::new();
+    let mut voxels = LabelledVoxels::new(VOXEL_M);
     for (k, map) in outcome.maps.iter().enumerate() {
         let Some(reference_from_robot) = reference_from(&last, k) else { continue };
-        for keyframe in map.keyframes() {
-            let Some(scan) = map.semantic_scan(keyframe.id) else { continue };
-            let pose = reference_from_robot * keyframe.world_from_body;
-            for (p, label) in scan.points_in_body.iter().zip(&scan.labels) {
-                let w = pose * p.cast::<f64>();
-                let key =
-                    ((w.x / VOXEL_M).floor() as i64, (w.y / VOXEL_M).floor() as i64, (w.z / VOXEL_M).floor() as i64);
-                voxels.entry(key).or_insert(([w.x, w.y, w.z], label.0));
-            }
-        }
+        voxels.insert_graph(map, &reference_from_robot);
     }
     let float = |name: &str| PcdField { name: name.into(), size: 4, kind: FieldKind::Float, count: 1 };
     let mut columns: Vec<Vec<f64>> = (0..4).map(|_| Vec::with_capacity(voxels.len())).collect();
-    for (p, label) in voxels.values() {
+    for (p, label) in voxels.points() {
         for (c, v) in p.iter().enumerate() {
             columns[c].push(*v);
         }
-        columns[3].push(f64::from(*label));
+        columns[3].push(f64::from(label.0));
     }
     let cloud = PointCloud {
         fields: vec![

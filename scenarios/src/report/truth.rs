@@ -37,9 +37,7 @@ impl TruthTrack {
                 if s1 - s0 > MAX_GAP_S {
                     return None;
                 }
-                let a = (t - s0) / (s1 - s0);
-                let translation = p0.translation.vector.lerp(&p1.translation.vector, a);
-                Some(Pose3::from_parts(translation.into(), p0.rotation.slerp(&p1.rotation, a)))
+                Some(sgm_model::geometry::interpolate(p0, p1, (t - s0) / (s1 - s0)))
             }
         }
     }
