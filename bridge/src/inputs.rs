@@ -12,6 +12,16 @@ use rosrust::Time;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
 
+/// A decoded, checked input message (header stamps in ROS time).
+#[derive(Clone, Debug)]
+pub enum Payload {
+    Cloud(Time, Scan),
+    Image(Time, LabelImage),
+    CameraInfo(CameraModel),
+    Odometry(Time, Pose3),
+    GroundTruth(Time, Pose3),
+}
+
 /// The checks of one robot's inputs, with its frame names resolved.
 #[derive(Clone, Debug)]
 pub struct Inputs {
@@ -42,36 +52,36 @@ impl Inputs {
         }
     }
 
-    pub fn cloud(&self, msg: &sensor_msgs::PointCloud2) -> Result<(Time, Scan), InputError> {
+    pub fn cloud(&self, msg: &sensor_msgs::PointCloud2) -> Result<Payload, InputError> {
         check_frame(&msg.header.frame_id, &self.lidar_frame)?;
         let count = u64::from(msg.width) * u64::from(msg.height);
         if count > self.max_cloud_points as u64 {
             return Err(InputError::invalid(format!("{count} points, at most {} accepted", self.max_cloud_points)));
         }
-        Ok((msg.header.stamp, read_cloud(msg, &self.label_field)?))
+        Ok(Payload::Cloud(msg.header.stamp, read_cloud(msg, &self.label_field)?))
     }
 
-    pub fn image(&self, msg: &sensor_msgs::Image) -> Result<(Time, LabelImage), InputError> {
+    pub fn image(&self, msg: &sensor_msgs::Image) -> Result<Payload, InputError> {
         check_frame(&msg.header.frame_id, &self.camera_frame)?;
         let pixels = u64::from(msg.width) * u64::from(msg.height);
         if pixels > self.max_image_pixels as u64 {
             return Err(InputError::invalid(format!("{pixels} pixels, at most {} accepted", self.max_image_pixels)));
         }
-        Ok((msg.header.stamp, read_label_image(msg)?))
+        Ok(Payload::Image(msg.header.stamp, read_label_image(msg)?))
     }
 
-    pub fn camera_info(&self, msg: &sensor_msgs::CameraInfo) -> Result<CameraModel, InputError> {
+    pub fn camera_info(&self, msg: &sensor_msgs::CameraInfo) -> Result<Payload, InputError> {
         check_frame(&msg.header.frame_id, &self.camera_frame)?;
-        read_camera_info(msg)
+        Ok(Payload::CameraInfo(read_camera_info(msg)?))
     }
 
-    pub fn odometry(&self, msg: &nav_msgs::Odometry) -> Result<(Time, Pose3), InputError> {
-        Ok((msg.header.stamp, pose_from_odometry(msg, &self.world_frame, &self.body_frame)?))
+    pub fn odometry(&self, msg: &nav_msgs::Odometry) -> Result<Payload, InputError> {
+        Ok(Payload::Odometry(msg.header.stamp, pose_from_odometry(msg, &self.world_frame, &self.body_frame)?))
     }
 
     /// A true pose (frames are the simulator's, not checked).
-    pub fn ground_truth(&self, msg: &nav_msgs::Odometry) -> Result<(Time, Pose3), InputError> {
-        Ok((msg.header.stamp, pose_from_msg(&msg.pose.pose)?))
+    pub fn ground_truth(&self, msg: &nav_msgs::Odometry) -> Result<Payload, InputError> {
+        Ok(Payload::GroundTruth(msg.header.stamp, pose_from_msg(&msg.pose.pose)?))
     }
 
     pub fn world_frame(&self) -> &str {

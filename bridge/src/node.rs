@@ -13,7 +13,7 @@ use crate::convert::cloud::cloud_msg;
 use crate::convert::markers::{keyframe_path, map_markers, neighbour_transforms};
 use crate::convert::time::Epoch;
 use crate::error::InputError;
-use crate::inputs::Inputs;
+use crate::inputs::{Inputs, Payload};
 use crate::msg::{nav_msgs, sensor_msgs, sgm_msgs, std_msgs, tf2_msgs, visualization_msgs};
 use crate::sync::Synchroniser;
 use crate::transport::{RosTransport, TransportCounts};
@@ -122,13 +122,29 @@ impl SensorSide {
         self.sync.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// Hands every assembled frame to the robot, moving its clock to the frame's stamp.
-    fn flush(&self, sync: &mut Synchroniser) {
+    /// Counts a checked input of `topic`, feeds it to the synchroniser, and hands every frame
+    /// then assembled to the robot, moving its clock to the frame's stamp.
+    fn receive(&self, topic: &'static str, input: Result<Payload, InputError>) {
+        let Some(payload) = self.counts.count(topic, input) else { return };
+        let mut sync = self.sync();
+        sync.feed(self.epoch, payload);
         for frame in sync.ready() {
             self.handle.clock.advance_to(frame.stamp);
             self.handle.supervisor.do_send(frame);
         }
     }
+}
+
+/// Subscribes `topic` (counted as `name`): each message is checked by `check` and received.
+fn subscribe<M: rosrust::Message>(
+    topic: &str,
+    queue: usize,
+    side: &Arc<SensorSide>,
+    name: &'static str,
+    check: fn(&Inputs, &M) -> Result<Payload, InputError>,
+) -> Result<rosrust::Subscriber, NodeError> {
+    let side = side.clone();
+    rosrust::subscribe(topic, queue, move |m: M| side.receive(name, check(&side.inputs, &m))).map_err(ros_error)
 }
 
 /// Runs robot `config` as a ROS node until ROS shuts down (SIGINT, `rosnode kill`).
@@ -183,42 +199,11 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
             epoch: Epoch { sec: 0 },
         });
         let q = ros.queue_size;
-        let s = side.clone();
-        let points = rosrust::subscribe(&ros.topics.points, q, move |m: sensor_msgs::PointCloud2| {
-            if let Some((t, scan)) = s.counts.count("points", s.inputs.cloud(&m)) {
-                let mut sync = s.sync();
-                sync.cloud(s.epoch.stamp(t), scan);
-                s.flush(&mut sync);
-            }
-        })
-        .map_err(ros_error)?;
-        let s = side.clone();
-        let labels = rosrust::subscribe(&ros.topics.labels, q, move |m: sensor_msgs::Image| {
-            if let Some((t, image)) = s.counts.count("labels", s.inputs.image(&m)) {
-                let mut sync = s.sync();
-                sync.image(s.epoch.stamp(t), image);
-                s.flush(&mut sync);
-            }
-        })
-        .map_err(ros_error)?;
-        let s = side.clone();
-        let camera_info = rosrust::subscribe(&ros.topics.camera_info, q, move |m: sensor_msgs::CameraInfo| {
-            if let Some(camera) = s.counts.count("camera_info", s.inputs.camera_info(&m)) {
-                let mut sync = s.sync();
-                sync.camera_info(camera);
-                s.flush(&mut sync);
-            }
-        })
-        .map_err(ros_error)?;
-        let s = side.clone();
-        let odometry = rosrust::subscribe(&ros.topics.odometry, q, move |m: nav_msgs::Odometry| {
-            if let Some((t, pose)) = s.counts.count("odometry", s.inputs.odometry(&m)) {
-                let mut sync = s.sync();
-                sync.odometry(s.epoch.stamp(t), pose);
-                s.flush(&mut sync);
-            }
-        })
-        .map_err(ros_error)?;
+        let t = &ros.topics;
+        let points = subscribe(&t.points, q, &side, "points", Inputs::cloud)?;
+        let labels = subscribe(&t.labels, q, &side, "labels", Inputs::image)?;
+        let camera_info = subscribe(&t.camera_info, q, &side, "camera_info", Inputs::camera_info)?;
+        let odometry = subscribe(&t.odometry, q, &side, "odometry", Inputs::odometry)?;
 
         let publishers = Publishers::advertise(&ros).map_err(ros_error)?;
         tracing::info!(robot = %robot_name, id, service = %deliver_name, "sgm node up");

@@ -9,6 +9,8 @@
 
 use crate::config::{LabelSource, SyncConfig};
 use crate::convert::cloud::{Scan, NO_LABEL};
+use crate::convert::time::Epoch;
+use crate::inputs::Payload;
 use serde::Serialize;
 use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_model::geometry::Pose3;
@@ -103,6 +105,19 @@ impl Synchroniser {
         if !push_bounded(&mut self.clouds, t, scan, &mut self.counts.overflow) {
             self.counts.out_of_order += 1;
         }
+    }
+
+    /// Feeds a checked input, its stamp taken from `epoch`. A true pose is not the
+    /// synchroniser's business: it is handed back (stamped) to the caller.
+    pub fn feed(&mut self, epoch: Epoch, payload: Payload) -> Option<(Stamp, Pose3)> {
+        match payload {
+            Payload::Cloud(t, scan) => self.cloud(epoch.stamp(t), scan),
+            Payload::Image(t, image) => self.image(epoch.stamp(t), image),
+            Payload::CameraInfo(camera) => self.camera_info(camera),
+            Payload::Odometry(t, pose) => self.odometry(epoch.stamp(t), pose),
+            Payload::GroundTruth(t, pose) => return Some((epoch.stamp(t), pose)),
+        }
+        None
     }
 
     /// Clouds still waiting for a partner.

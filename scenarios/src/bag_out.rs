@@ -67,8 +67,7 @@ impl BagRecorder {
                     format!("/{name}/{resolved}")
                 }
             };
-            let f = &self.ros.frames;
-            let frame = |template: &str| RosConfig::resolve(template, name, id);
+            let inputs = sgm_bridge::inputs::Inputs::new(&self.ros, name, id);
             self.bags[k] = Some(RobotBag {
                 writer,
                 topics: [
@@ -78,7 +77,8 @@ impl BagRecorder {
                     topic(&t.odometry),
                     topic(&t.ground_truth),
                 ],
-                frames: [frame(&f.world), frame(&f.body), frame(&f.lidar), frame(&f.camera)],
+                frames: [inputs.world_frame(), inputs.body_frame(), inputs.lidar_frame(), inputs.camera_frame()]
+                    .map(str::to_string),
             });
         }
         self.bags[k].as_mut().ok_or_else(|| format!("bag of {name} not open"))

@@ -95,24 +95,20 @@ impl BagRobot {
                 Payload::CameraInfo(_) => None,
             };
             let epoch = *epoch.get_or_insert_with(|| Epoch::at(stamped.unwrap_or_default()));
-            match payload {
-                Payload::Cloud(stamp, scan) => {
+            match &payload {
+                Payload::Cloud(_, scan) => {
                     let raw = scan.points.len() as u64 * crate::runner::RAW_BYTES_PER_POINT;
                     self.raw_bytes += raw;
                     self.raw_max_bytes = self.raw_max_bytes.max(raw);
-                    self.sync.cloud(epoch.stamp(stamp), scan);
                 }
-                Payload::Image(stamp, image) => self.sync.image(epoch.stamp(stamp), image),
-                Payload::CameraInfo(camera) => self.sync.camera_info(camera),
                 Payload::Odometry(stamp, pose) => {
-                    let s = epoch.stamp(stamp);
-                    self.first_odometry.get_or_insert((s, pose));
-                    self.sync.odometry(s, pose);
+                    self.first_odometry.get_or_insert((epoch.stamp(*stamp), *pose));
                 }
-                Payload::GroundTruth(stamp, pose) => {
-                    shared.set_position(id, pose.translation.vector.into());
-                    self.truth.push((epoch.stamp(stamp), pose));
-                }
+                _ => {}
+            }
+            if let Some((stamp, pose)) = self.sync.feed(epoch, payload) {
+                shared.set_position(id, pose.translation.vector.into());
+                self.truth.push((stamp, pose));
             }
         }
         Ok(())
@@ -236,20 +232,29 @@ pub async fn replay(
         observations.push(team.observe(last_t).await?);
     }
     let maps = team.maps().await?;
-    let truths: Vec<RobotTruth> = robots
-        .iter()
-        .enumerate()
-        .map(|(k, r)| RobotTruth {
+    let bounds = bounds(&robots, &maps);
+    let mut bag_stats = Vec::new();
+    let mut truths = Vec::new();
+    for (k, r) in robots.into_iter().enumerate() {
+        let truth = TruthTrack::Samples(r.truth);
+        // Where the robot's world frame sits in the truth frame: truth · odometry⁻¹ at the first
+        // odometry pose that has a true pose beside it.
+        let truth_from_world = r
+            .first_odometry
+            .and_then(|(t, odometry)| Some(truth.pose_at(t)? * odometry.inverse()))
+            .unwrap_or_else(Pose3::identity);
+        truths.push(RobotTruth {
             name: names[k].clone(),
-            truth_from_world: truth_from_world(r),
-            truth: TruthTrack::Samples(r.truth.clone()),
+            truth_from_world,
+            truth,
             frames: r.frames,
             raw_bytes: r.raw_bytes,
             raw_max_bytes: r.raw_max_bytes,
-        })
-        .collect();
+        });
+        bag_stats.push(BagStats { sync: r.sync.counts.clone(), ..r.stats });
+    }
     let world = World {
-        bounds: bounds(&robots, &maps),
+        bounds,
         colours: scenario.fusion.classes.iter().map(|c| (c.id, c.colour)).collect(),
         ..World::default()
     };
@@ -263,22 +268,8 @@ pub async fn replay(
         radio: shared.stats(),
         world_objects: Vec::new(),
     };
-    let bag_stats = robots
-        .into_iter()
-        .map(|mut r| {
-            r.stats.sync = r.sync.counts.clone();
-            r.stats
-        })
-        .collect();
     let timing = Timing::measure(wall, sim_s, decoding);
     Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing }, bags: bag_stats })
-}
-
-/// Where the robot's world frame sits in the truth frame: truth · odometry⁻¹ at the first
-/// odometry pose that has a true pose beside it.
-fn truth_from_world(robot: &BagRobot) -> Pose3 {
-    let Some((t, odometry)) = robot.first_odometry else { return Pose3::identity() };
-    TruthTrack::Samples(robot.truth.clone()).pose_at(t).map_or(Pose3::identity(), |truth| truth * odometry.inverse())
 }
 
 /// The plot's extent: every true and estimated position, with a 10 m margin.

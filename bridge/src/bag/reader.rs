@@ -4,27 +4,15 @@
 //! bounded channel, so bags decode in parallel and memory stays bounded.
 
 use crate::config::RosConfig;
-use crate::convert::cloud::Scan;
 use crate::error::InputError;
 use crate::inputs::Inputs;
+pub use crate::inputs::Payload;
 use crate::msg::{nav_msgs, sensor_msgs};
 use rosbag::{ChunkRecord, MessageRecord, RosBag};
-use rosrust::{Message, RosMsg, Time};
-use sgm_model::geometry::Pose3;
-use sgm_model::perception::projection::{CameraModel, LabelImage};
+use rosrust::{Message, RosMsg};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
-
-/// A decoded, checked message.
-#[derive(Clone, Debug)]
-pub enum Payload {
-    Cloud(Time, Scan),
-    Image(Time, LabelImage),
-    CameraInfo(CameraModel),
-    Odometry(Time, Pose3),
-    GroundTruth(Time, Pose3),
-}
 
 /// What the reader thread sends: messages in record-time order (nanoseconds since 1970), a
 /// message refused (its topic and why), or the end.
@@ -104,25 +92,13 @@ impl Decoder {
     }
 
     fn payload(&self, kind: Kind, data: &[u8]) -> Result<Payload, InputError> {
-        Ok(match kind {
-            Kind::Cloud => {
-                let (t, scan) = self.inputs.cloud(&decode(data)?)?;
-                Payload::Cloud(t, scan)
-            }
-            Kind::Image => {
-                let (t, image) = self.inputs.image(&decode(data)?)?;
-                Payload::Image(t, image)
-            }
-            Kind::CameraInfo => Payload::CameraInfo(self.inputs.camera_info(&decode(data)?)?),
-            Kind::Odometry => {
-                let (t, pose) = self.inputs.odometry(&decode(data)?)?;
-                Payload::Odometry(t, pose)
-            }
-            Kind::GroundTruth => {
-                let (t, pose) = self.inputs.ground_truth(&decode(data)?)?;
-                Payload::GroundTruth(t, pose)
-            }
-        })
+        match kind {
+            Kind::Cloud => self.inputs.cloud(&decode(data)?),
+            Kind::Image => self.inputs.image(&decode(data)?),
+            Kind::CameraInfo => self.inputs.camera_info(&decode(data)?),
+            Kind::Odometry => self.inputs.odometry(&decode(data)?),
+            Kind::GroundTruth => self.inputs.ground_truth(&decode(data)?),
+        }
     }
 
     /// Decodes the bag into `out`; returns early if the receiver is gone.
