@@ -17,19 +17,13 @@ pub struct Options {
     pub bag_out: Option<PathBuf>,
 }
 
-/// `runs/NAME-seedS`, or with `-2`, `-3`, … if taken.
-fn fresh_dir(name: &str, seed: u64) -> PathBuf {
-    fresh_run_dir(&format!("{name}-seed{seed}"))
-}
-
-/// `runs/BASE`, or with `-2`, `-3`, … if taken.
-pub fn fresh_run_dir(base: &str) -> PathBuf {
-    let name = base;
-    let base = Path::new("runs").join(name);
-    if !base.exists() {
-        return base;
+/// `runs/NAME`, or with `-2`, `-3`, … if taken.
+pub fn fresh_run_dir(name: &str) -> PathBuf {
+    let first = Path::new("runs").join(name);
+    if !first.exists() {
+        return first;
     }
-    (2..).map(|k| Path::new("runs").join(format!("{name}-{k}"))).find(|p| !p.exists()).unwrap_or(base)
+    (2..).map(|k| Path::new("runs").join(format!("{name}-{k}"))).find(|p| !p.exists()).unwrap_or(first)
 }
 
 pub fn execute(options: Options) -> Result<()> {
@@ -38,7 +32,9 @@ pub fn execute(options: Options) -> Result<()> {
     if let Some(seed) = options.seed {
         scenario = scenario.with_seed(seed);
     }
-    let dir = options.out.unwrap_or_else(|| fresh_dir(&scenario.scenario.name, scenario.scenario.seed));
+    let dir = options
+        .out
+        .unwrap_or_else(|| fresh_run_dir(&format!("{}-seed{}", scenario.scenario.name, scenario.scenario.seed)));
     // Fail before the run, not after it, when the report cannot be written.
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create the report directory {}", dir.display()))?;
     let bar = progress_bar(options.quiet, "{prefix} [{bar:40}] {pos}/{len} steps, {elapsed} wall, eta {eta}");
