@@ -93,15 +93,17 @@ impl BagRecorder {
         let [points_topic, labels_topic, info_topic, odometry_topic, truth_topic] = &bag.topics;
         let w = &mut bag.writer;
         let e = |e| io_error(&path, e);
+        // Camera info first, as a camera driver publishes it: a replay must not take its epoch
+        // from a message without a stamp (regression: `replay_bags.rs`).
+        if let Some((image, model)) = frame.image {
+            w.write(info_topic, time, &camera_info_msg(header(camera), model)).map_err(e)?;
+            w.write(labels_topic, time, &label_image_msg(header(camera), image)).map_err(e)?;
+        }
         w.write(odometry_topic, time, &odometry_msg(header(world), body, frame.odometry)).map_err(e)?;
         w.write(truth_topic, time, &odometry_msg(header("truth"), body, frame.truth)).map_err(e)?;
         let points: Vec<nalgebra::Point3<f32>> = frame.points.iter().map(|p| p.map(|v| v as f32)).collect();
         w.write(points_topic, time, &cloud_msg(header(lidar), &points, frame.labels, |_| [200, 200, 200]))
             .map_err(e)?;
-        if let Some((image, model)) = frame.image {
-            w.write(labels_topic, time, &label_image_msg(header(camera), image)).map_err(e)?;
-            w.write(info_topic, time, &camera_info_msg(header(camera), model)).map_err(e)?;
-        }
         Ok(())
     }
 

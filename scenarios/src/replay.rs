@@ -94,7 +94,11 @@ impl BagRobot {
                 }
                 Payload::CameraInfo(_) => None,
             };
-            let epoch = *epoch.get_or_insert_with(|| Epoch::at(stamped.unwrap_or_default()));
+            // Only a stamped message sets the epoch (camera info may come first and has none).
+            let epoch = match stamped {
+                Some(t) => *epoch.get_or_insert_with(|| Epoch::at(t)),
+                None => epoch.unwrap_or(Epoch { sec: 0 }),
+            };
             match &payload {
                 Payload::Cloud(_, scan) => {
                     let raw = scan.points.len() as u64 * crate::runner::RAW_BYTES_PER_POINT;
@@ -258,7 +262,9 @@ pub async fn replay(
         colours: scenario.fusion.classes.iter().map(|c| (c.id, c.colour)).collect(),
         ..World::default()
     };
-    let sim_s = step as f64 * scenario.scenario.frame_interval_s;
+    // The mission's span: the steps, or the stamps when they ran ahead of the records.
+    let stepped = step as f64 * scenario.scenario.frame_interval_s;
+    let sim_s = if last_t > stepped + scenario.scenario.frame_interval_s { last_t } else { stepped };
     let record = RunRecord {
         scenario: format!("replay of {}", names.join(", ")),
         seed,

@@ -127,7 +127,7 @@ fn map(outcome: &RunOutcome, path: &Path, text: bool) -> Result<(), String> {
 fn ate(report: &Report, path: &Path, text: bool) -> Result<(), String> {
     let root = BitMapBackend::new(path, (1000, 500)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
-    let t_max = report.sim_s.max(1.0);
+    let t_max = time_extent(report);
     let mut y_max: f64 = 0.5;
     for p in &report.series {
         y_max = y_max.max(p.team_ate_rmse_m.unwrap_or(0.0));
@@ -186,10 +186,16 @@ fn ate(report: &Report, path: &Path, text: bool) -> Result<(), String> {
     root.present().map_err(err)
 }
 
+/// The time axis: the mission, widened to every sample (a sample off the axis would overflow
+/// plotters' pixel arithmetic).
+fn time_extent(report: &Report) -> f64 {
+    report.series.iter().map(|p| p.t).filter(|t| t.is_finite()).fold(report.sim_s.max(1.0), f64::max)
+}
+
 fn bytes(report: &Report, path: &Path, text: bool) -> Result<(), String> {
     let root = BitMapBackend::new(path, (1000, 500)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
-    let t_max = report.sim_s.max(1.0);
+    let t_max = time_extent(report);
     let raw_total = report.point_cloud_raw.bytes_total.max(1) as f64;
     let mut builder = ChartBuilder::on(&root);
     builder.margin(20).x_label_area_size(if text { 40 } else { 5 }).y_label_area_size(if text { 70 } else { 5 });
