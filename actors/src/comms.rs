@@ -32,7 +32,7 @@ pub struct CommsLinks {
 }
 
 /// What Comms has seen, for status and reports.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct CommsStatus {
     pub sent: TrafficAccount,
     pub received: TrafficAccount,

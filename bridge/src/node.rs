@@ -254,7 +254,7 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
                 "refused": InputCounts::snapshot(&side.counts.refused),
                 "sync": sync_counts,
                 "transport": counts.snapshot(),
-                "comms": format!("{comms_status:?}"),
+                "comms": comms_status,
                 "neighbours": neighbours.iter().map(|n| serde_json::json!({
                     "robot": n.robot.0,
                     "state": n.state,

@@ -193,8 +193,18 @@ enum BenchCommand {
     },
 }
 
+/// Log lines go to stderr, filtered by `RUST_LOG` (default: warnings, and the node's own
+/// information for `sgm ros`).
+fn init_logging(command: &Command) {
+    let default = if matches!(command, Command::Ros { .. }) { "info" } else { "warn" };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    init_logging(&cli.command);
     match cli.command {
         Command::Run { scenario, out, seed, quiet, bag_out } => {
             match cli::run_cmd::execute(cli::run_cmd::Options { scenario, out, seed, quiet, bag_out }) {

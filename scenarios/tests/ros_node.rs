@@ -1,0 +1,428 @@
+//! `sgm ros` under an embedded ROS master (`ros-core-rs`: no ROS installation needed). Two robot
+//! processes, each in its own namespace, are fed quickstart's sensor streams (its own bags,
+//! published by this test's rosrust node at 3× real time) and must:
+//! - accept every message and assemble every frame;
+//! - align with each other through the master (object data on the team topic, requests over
+//!   the Deliver services);
+//! - publish what RViz needs: markers (a box and a label per object, in the class colours; the
+//!   keyframe trajectory), the keyframe path, tf of the neighbour's world, the semantic map on
+//!   demand, and a JSON status;
+//! - refuse malformed messages (wrong field types, truncated data, unknown encodings, wrong
+//!   frame, a zero quaternion), log and count each, and keep running;
+//! - exit cleanly on SIGINT.
+//!
+//! rosrust allows one node per process, so this file holds one test.
+
+use rosrust::RosMsg;
+use serde_json::Value;
+use sgm_bridge::convert::cloud::read_cloud;
+use sgm_bridge::msg::{nav_msgs, sensor_msgs, std_msgs, tf2_msgs, visualization_msgs};
+use sgm_model::perception::classes::ClassTable;
+use sgm_scenarios::runner::run_recording;
+use sgm_scenarios::scenario::Scenario;
+use std::collections::BTreeMap;
+use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+const ROBOTS: [&str; 2] = ["alpha", "bravo"];
+/// Bag time runs this many times faster than the wall clock.
+const RATE: f64 = 3.0;
+
+/// Starts a ROS master on a free loopback port, in a thread that lives as long as the test.
+fn embedded_master() -> SocketAddr {
+    let addr = TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).expect("a free port");
+    std::thread::spawn(move || {
+        let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
+        runtime.block_on(ros_core_rs::core::Master::new(&addr).serve())
+    });
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while TcpStream::connect(addr).is_err() {
+        assert!(Instant::now() < deadline, "the embedded master did not come up on {addr}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    addr
+}
+
+/// The `sgm ros` processes; killed if the test fails.
+struct Nodes {
+    children: Vec<(String, Child, PathBuf)>,
+}
+
+impl Nodes {
+    fn start(master: SocketAddr, dir: &Path) -> Self {
+        let children = ROBOTS
+            .iter()
+            .map(|robot| {
+                let log = dir.join(format!("{robot}.log"));
+                let child = Command::new(env!("CARGO_BIN_EXE_sgm"))
+                    .args(["ros", "--robot", robot, "--scenario", "quickstart", &format!("__ns:=/{robot}")])
+                    .env("ROS_MASTER_URI", format!("http://{master}"))
+                    .env("ROS_IP", "127.0.0.1")
+                    .env("ROS_HOME", dir)
+                    .env("RUST_LOG", "info")
+                    .env_remove("ROS_HOSTNAME")
+                    .env_remove("ROS_NAMESPACE")
+                    .stdout(Stdio::null())
+                    .stderr(std::fs::File::create(&log).expect("log file"))
+                    .spawn()
+                    .expect("sgm ros starts");
+                (robot.to_string(), child, log)
+            })
+            .collect();
+        Self { children }
+    }
+
+    fn log(&self, robot: &str) -> String {
+        let (_, _, path) = self.children.iter().find(|(r, _, _)| r == robot).expect("a robot");
+        std::fs::read_to_string(path).unwrap_or_default()
+    }
+
+    fn running(&mut self, robot: &str) -> bool {
+        let (_, child, _) = self.children.iter_mut().find(|(r, _, _)| r == robot).expect("a robot");
+        matches!(child.try_wait(), Ok(None))
+    }
+
+    /// SIGINT to each node; each must exit with success.
+    fn interrupt(mut self) {
+        for (robot, child, _) in &mut self.children {
+            let sent = Command::new("kill").args(["-INT", &child.id().to_string()]).status();
+            assert!(sent.is_ok_and(|s| s.success()), "SIGINT to {robot}");
+        }
+        let deadline = Instant::now() + Duration::from_secs(20);
+        for (robot, child, _) in &mut self.children {
+            let status = loop {
+                if let Ok(Some(status)) = child.try_wait() {
+                    break status;
+                }
+                assert!(Instant::now() < deadline, "{robot} did not exit on SIGINT");
+                std::thread::sleep(Duration::from_millis(50));
+            };
+            assert!(status.success(), "{robot} exited with {status} on SIGINT");
+        }
+        self.children.clear();
+    }
+}
+
+impl Drop for Nodes {
+    fn drop(&mut self) {
+        for (robot, child, log) in &mut self.children {
+            let _ = child.kill();
+            let _ = child.wait();
+            if std::thread::panicking() {
+                eprintln!(
+                    "--- {robot}'s log ({}):\n{}",
+                    log.display(),
+                    std::fs::read_to_string(&*log).unwrap_or_default()
+                );
+            }
+        }
+    }
+}
+
+/// The newest message of a topic.
+struct Latest<T> {
+    value: Arc<Mutex<Option<T>>>,
+    _subscriber: rosrust::Subscriber,
+}
+
+impl<T: rosrust::Message> Latest<T> {
+    fn subscribe(topic: &str) -> Self {
+        let value = Arc::new(Mutex::new(None));
+        let sink = value.clone();
+        let subscriber =
+            rosrust::subscribe(topic, 10, move |m: T| *sink.lock().unwrap() = Some(m)).expect("subscribes");
+        Self { value, _subscriber: subscriber }
+    }
+
+    fn get(&self) -> Option<T> {
+        self.value.lock().unwrap().clone()
+    }
+
+    /// Waits (at most `secs`) for a message `ok` accepts; `what` names it on failure.
+    fn wait_for(&self, secs: u64, what: &str, ok: impl Fn(&T) -> bool) -> T {
+        let deadline = Instant::now() + Duration::from_secs(secs);
+        loop {
+            if let Some(m) = self.get().filter(|m| ok(m)) {
+                return m;
+            }
+            assert!(Instant::now() < deadline, "timed out waiting for {what}");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+/// Each node's status topic, parsed.
+struct Statuses(Vec<(String, Latest<std_msgs::String>)>);
+
+impl Statuses {
+    fn subscribe() -> Self {
+        Self(ROBOTS.iter().map(|r| (r.to_string(), Latest::subscribe(&format!("/{r}/sgm/status")))).collect())
+    }
+
+    fn of(&self, robot: &str) -> Option<Value> {
+        let (_, latest) = self.0.iter().find(|(r, _)| r == robot)?;
+        serde_json::from_str(&latest.get()?.data).ok()
+    }
+
+    fn wait_for(&self, robot: &str, secs: u64, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
+        let deadline = Instant::now() + Duration::from_secs(secs);
+        loop {
+            if let Some(s) = self.of(robot).filter(|s| ok(s)) {
+                return s;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "timed out waiting for {robot}'s {what}; last status: {:?}",
+                self.of(robot)
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    fn aligned(status: &Value) -> bool {
+        status["neighbours"].as_array().is_some_and(|n| !n.is_empty() && n.iter().all(|n| n["state"] == "Aligned"))
+    }
+}
+
+/// A sensor topic's publisher.
+enum Feed {
+    Cloud(rosrust::Publisher<sensor_msgs::PointCloud2>),
+    Image(rosrust::Publisher<sensor_msgs::Image>),
+    CameraInfo(rosrust::Publisher<sensor_msgs::CameraInfo>),
+    Odometry(rosrust::Publisher<nav_msgs::Odometry>),
+}
+
+impl Feed {
+    fn advertise(topic: &str) -> Option<Self> {
+        let q = 100;
+        Some(match topic.rsplit('/').next()? {
+            "points" => Feed::Cloud(rosrust::publish(topic, q).expect("advertises")),
+            "labels" => Feed::Image(rosrust::publish(topic, q).expect("advertises")),
+            "camera_info" => Feed::CameraInfo(rosrust::publish(topic, q).expect("advertises")),
+            "odometry" => Feed::Odometry(rosrust::publish(topic, q).expect("advertises")),
+            _ => return None,
+        })
+    }
+
+    fn subscribers(&self) -> usize {
+        match self {
+            Feed::Cloud(p) => p.subscriber_count(),
+            Feed::Image(p) => p.subscriber_count(),
+            Feed::CameraInfo(p) => p.subscriber_count(),
+            Feed::Odometry(p) => p.subscriber_count(),
+        }
+    }
+
+    /// Publishes a message recorded in a bag.
+    fn send(&self, data: &[u8]) {
+        let sent = match self {
+            Feed::Cloud(p) => p.send(RosMsg::decode(data).expect("bag cloud")),
+            Feed::Image(p) => p.send(RosMsg::decode(data).expect("bag image")),
+            Feed::CameraInfo(p) => p.send(RosMsg::decode(data).expect("bag camera info")),
+            Feed::Odometry(p) => p.send(RosMsg::decode(data).expect("bag odometry")),
+        };
+        sent.expect("publishes");
+    }
+}
+
+/// Every message of `bags` as (record time ns, topic, bytes), in record-time order.
+fn bag_messages(bags: &[PathBuf]) -> Vec<(u64, String, Vec<u8>)> {
+    let mut all = Vec::new();
+    for path in bags {
+        let bag = rosbag::RosBag::new(path).expect("bag opens");
+        let mut topics = BTreeMap::new();
+        for record in bag.chunk_records() {
+            let rosbag::ChunkRecord::Chunk(chunk) = record.expect("chunk") else { continue };
+            for message in chunk.messages() {
+                match message.expect("message") {
+                    rosbag::MessageRecord::Connection(c) => {
+                        topics.insert(c.id, c.topic.to_string());
+                    }
+                    rosbag::MessageRecord::MessageData(m) => {
+                        all.push((m.time, topics[&m.conn_id].clone(), m.data.to_vec()));
+                    }
+                }
+            }
+        }
+    }
+    all.sort_by_key(|m| m.0);
+    all
+}
+
+fn header(frame: &str) -> std_msgs::Header {
+    std_msgs::Header { seq: 0, stamp: rosrust::Time::from_nanos(1_700_000_500_000_000_000), frame_id: frame.into() }
+}
+
+fn field(name: &str, offset: u32, datatype: u8) -> sensor_msgs::PointField {
+    sensor_msgs::PointField { name: name.into(), offset, datatype, count: 1 }
+}
+
+/// A one-point cloud with x, y, z of the 4-byte `datatype` (5 int32, 7 float32).
+fn cloud(frame: &str, datatype: u8, data_len: usize) -> sensor_msgs::PointCloud2 {
+    let size = 4;
+    sensor_msgs::PointCloud2 {
+        header: header(frame),
+        height: 1,
+        width: 1,
+        fields: vec![field("x", 0, datatype), field("y", size, datatype), field("z", 2 * size, datatype)],
+        is_bigendian: false,
+        point_step: 3 * size,
+        row_step: 3 * size,
+        data: vec![0; data_len],
+        is_dense: true,
+    }
+}
+
+fn image(encoding: &str) -> sensor_msgs::Image {
+    sensor_msgs::Image {
+        header: header("alpha/camera"),
+        height: 1,
+        width: 2,
+        encoding: encoding.into(),
+        is_bigendian: 0,
+        step: 6,
+        data: vec![1, 2, 3, 4, 5, 6],
+    }
+}
+
+fn count(status: &Value, group: &str, topic: &str) -> u64 {
+    status[group][topic].as_u64().unwrap_or_else(|| panic!("status has no {group}.{topic}: {status}"))
+}
+
+#[test]
+fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = Scenario::load("quickstart").unwrap();
+    let bags_dir = dir.path().join("bags");
+    actix_rt::System::new().block_on(run_recording(&scenario, None, Some(&bags_dir))).unwrap();
+    let messages = bag_messages(&ROBOTS.map(|r| bags_dir.join(format!("{r}.bag"))));
+
+    let master = embedded_master();
+    // One process, one rosrust node: set before rosrust reads them (no other thread reads env).
+    std::env::set_var("ROS_MASTER_URI", format!("http://{master}"));
+    std::env::set_var("ROS_IP", "127.0.0.1");
+    rosrust::try_init("sgm_node_test").expect("rosrust node");
+    let mut nodes = Nodes::start(master, dir.path());
+
+    let mut feeds: BTreeMap<String, Feed> = BTreeMap::new();
+    for (_, topic, _) in &messages {
+        if !feeds.contains_key(topic) {
+            if let Some(feed) = Feed::advertise(topic) {
+                feeds.insert(topic.clone(), feed);
+            }
+        }
+    }
+    assert_eq!(feeds.len(), 8, "four sensor topics per robot: {:?}", feeds.keys().collect::<Vec<_>>());
+    let statuses = Statuses::subscribe();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while feeds.values().any(|f| f.subscribers() == 0) || ROBOTS.iter().any(|r| statuses.of(r).is_none()) {
+        assert!(Instant::now() < deadline, "the nodes did not subscribe (logs: {})", nodes.log("alpha"));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+
+    // Play the bags at RATE until both robots are aligned, stopping after a frame's cloud.
+    let mut published: BTreeMap<&str, u64> = BTreeMap::new();
+    let (t0, wall0) = (messages[0].0, Instant::now());
+    for (time, topic, data) in &messages {
+        let Some(feed) = feeds.get(topic) else { continue };
+        let due = wall0 + Duration::from_secs_f64((time - t0) as f64 * 1e-9 / RATE);
+        std::thread::sleep(due.saturating_duration_since(Instant::now()));
+        feed.send(data);
+        if topic.ends_with("/points") {
+            let robot = ROBOTS.iter().find(|r| topic.starts_with(&format!("/{r}/"))).unwrap();
+            *published.entry(robot).or_default() += 1;
+            if ROBOTS.iter().all(|r| statuses.of(r).is_some_and(|s| Statuses::aligned(&s))) {
+                break;
+            }
+        }
+    }
+    for robot in ROBOTS {
+        let sent = published[robot];
+        let s = statuses.wait_for(robot, 60, "every frame", |s| count(s, "sync", "frames") == sent);
+        assert_eq!(count(&s, "accepted", "points"), sent, "{robot}: {s}");
+        assert!(s["refused"].as_object().unwrap().values().all(|v| v == 0), "{robot}: {s}");
+        assert!(Statuses::aligned(&s), "{robot} did not align after {sent} frames: {s}");
+        assert!(count(&s, "transport", "sent") > 0 && count(&s, "transport", "received") > 0, "{robot}: {s}");
+        assert!(s["comms"]["sent"]["by_kind"]["ObjectData"]["count"].as_u64() > Some(0), "{robot}: {s}");
+        assert!(nodes.log(robot).contains("sgm node up"), "{robot}'s log");
+        eprintln!("{robot}: {sent}/{sent} frames, aligned with {}", s["neighbours"]);
+    }
+
+    // What RViz shows of alpha, consistent with its status.
+    let classes = ClassTable::new(scenario.fusion.classes.clone()).unwrap();
+    let markers = Latest::<visualization_msgs::MarkerArray>::subscribe("/alpha/sgm/markers");
+    let path = Latest::<nav_msgs::Path>::subscribe("/alpha/sgm/path");
+    let tf = Latest::<tf2_msgs::TFMessage>::subscribe("/tf");
+    let map = Latest::<sensor_msgs::PointCloud2>::subscribe("/alpha/sgm/map");
+    let status = statuses.of("alpha").unwrap();
+    let objects = status["objects"].as_u64().unwrap() as usize;
+    let keyframes = status["keyframes"].as_u64().unwrap() as usize;
+    let m =
+        markers.wait_for(20, "alpha's markers", |m| m.markers.iter().filter(|m| m.ns == "objects").count() == objects);
+    assert_eq!(m.markers[0].action, 3, "DELETEALL first");
+    let boxes: Vec<_> = m.markers.iter().filter(|m| m.ns == "objects").collect();
+    let labels: BTreeMap<i32, &str> =
+        m.markers.iter().filter(|m| m.ns == "labels").map(|m| (m.id, m.text.as_str())).collect();
+    assert_eq!(labels.len(), objects);
+    for b in &boxes {
+        assert_eq!((b.type_, b.header.frame_id.as_str()), (1, "alpha/odom"));
+        let name = labels[&b.id].split(' ').next().unwrap();
+        let class = classes.by_name(name).unwrap_or_else(|| panic!("label {:?} names no class", labels[&b.id]));
+        let rgb = [b.color.r, b.color.g, b.color.b].map(|c| (c * 255.0).round() as u8);
+        assert_eq!(rgb, class.colour, "object {} ({name}) in its class colour", b.id);
+    }
+    let trajectory = m.markers.iter().find(|m| m.ns == "keyframes").expect("the keyframe trajectory");
+    assert_eq!(trajectory.points.len(), keyframes);
+    let p = path.wait_for(20, "alpha's path", |p| p.poses.len() == keyframes);
+    assert_eq!(p.header.frame_id, "alpha/odom");
+    assert!(p.poses.windows(2).all(|w| w[0].header.stamp < w[1].header.stamp), "path stamps increase");
+    let bravo_id = status["neighbours"][0]["robot"].as_u64().unwrap();
+    let t = tf.wait_for(20, "alpha's tf", |t| t.transforms.iter().any(|t| t.header.frame_id == "alpha/odom"));
+    let t = &t.transforms[0];
+    assert_eq!(t.child_frame_id, format!("robot_{bravo_id}/odom"));
+    let expected: Vec<f64> = serde_json::from_value(status["neighbours"][0]["local_from_remote"].clone()).unwrap();
+    let (v, q) = (&t.transform.translation, &t.transform.rotation);
+    let got = [v.x, v.y, v.z, q.x, q.y, q.z, q.w];
+    assert!(got.iter().zip(&expected).all(|(a, b)| (a - b).abs() < 1e-9), "tf {got:?} ≠ status {expected:?}");
+    let semantic = map.wait_for(20, "alpha's semantic map", |c| c.width > 0);
+    assert_eq!(semantic.header.frame_id, "alpha/odom");
+    let scan = read_cloud(&semantic, "label").expect("the map reads back");
+    assert_eq!(scan.points.len(), semantic.width as usize * semantic.height as usize);
+    assert!(scan.labels.is_some(), "the map carries labels");
+
+    // Malformed input to alpha: each refused, logged and counted; alpha keeps running.
+    let bad_points = rosrust::publish::<sensor_msgs::PointCloud2>("/alpha/points", 10).unwrap();
+    let bad_labels = rosrust::publish::<sensor_msgs::Image>("/alpha/labels", 10).unwrap();
+    let bad_odometry = rosrust::publish::<nav_msgs::Odometry>("/alpha/odometry", 10).unwrap();
+    let lidar = "alpha/base_link";
+    let mut zero_quaternion = nav_msgs::Odometry { header: header("alpha/odom"), ..Default::default() };
+    zero_quaternion.child_frame_id = "alpha/base_link".into();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while [bad_points.subscriber_count(), bad_labels.subscriber_count(), bad_odometry.subscriber_count()].contains(&0) {
+        assert!(Instant::now() < deadline, "alpha did not connect to the test's second publishers");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let before = statuses.of("alpha").unwrap();
+    bad_points.send(cloud(lidar, 5, 12)).unwrap(); // int32 coordinates
+    bad_points.send(cloud(lidar, 7, 5)).unwrap(); // 5 bytes of a 12-byte point
+    bad_points.send(cloud("elsewhere", 7, 12)).unwrap(); // wrong frame
+    bad_labels.send(image("rgb8")).unwrap();
+    bad_labels.send(image("bayer_rggb8")).unwrap();
+    bad_odometry.send(zero_quaternion).unwrap();
+    let expected = [("points", 3), ("labels", 2), ("odometry", 1), ("camera_info", 0)];
+    let after = statuses.wait_for("alpha", 20, "refusals", |s| {
+        expected.iter().all(|(topic, n)| count(s, "refused", topic) == count(&before, "refused", topic) + n)
+    });
+    assert_eq!(count(&after, "accepted", "points"), count(&before, "accepted", "points"));
+    assert!(nodes.running("alpha"), "alpha died on malformed input");
+    let log = nodes.log("alpha");
+    for reason in ["datatype 5", "data is 5 bytes", "frame `elsewhere`", "encoding `rgb8`", "encoding `bayer_rggb8`"] {
+        assert!(log.contains(reason), "alpha's log names {reason:?}:\n{log}");
+    }
+    assert_eq!(log.matches("message refused").count(), 6, "{log}");
+
+    nodes.interrupt();
+}
