@@ -9,8 +9,12 @@
 #   4. malformed messages from `rostopic pub` (unknown encoding, wrong frame, truncated cloud)
 #      are refused and counted while the node keeps running;
 #   5. a bag recorded by Debian's `rosbag record` (lz4 chunks) of that traffic replays through
-#      `sgm replay` and both robots align.
-# Everything listens on 127.0.0.1 and every process started here is stopped by PID.
+#      `sgm replay` and both robots align;
+#   6. as root: the two nodes again, each in its own network namespace joined by a veth pair,
+#      each fed by a rospy script (tests/ros_feed.py) in its namespace, so everything between
+#      the robots crosses a network: both align, and the veth counters show the traffic.
+# Everything listens on 127.0.0.1 (or the namespaces' private veth addresses) and every process
+# started here is stopped by PID; the namespaces are deleted.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SGM=${SGM:-target/release/sgm}
@@ -18,9 +22,11 @@ WORK=$(mktemp -d /tmp/sgm-interop.XXXXXX)
 export ROS_MASTER_URI=http://127.0.0.1:11311 ROS_IP=127.0.0.1 ROS_HOME=$WORK/roshome
 mkdir -p "$ROS_HOME"
 PIDS=()
+NETNS=()
 cleanup() {
   for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
   for pid in "${PIDS[@]}"; do wait "$pid" 2>/dev/null || true; done
+  for ns in "${NETNS[@]}"; do ip netns del "$ns" 2>/dev/null || true; done
 }
 trap cleanup EXIT
 fail() { echo "ros interop FAILED: $*" >&2; exit 1; }
@@ -48,22 +54,29 @@ rosbag play -q -r 3 "$WORK/bags/alpha.bag" "$WORK/bags/bravo.bag" >/dev/null 2>&
 sleep 3
 kill -INT "$RECORD"; wait "$RECORD" 2>/dev/null || true
 
-status() { timeout 20 rostopic echo -n 1 "/$1/sgm/status" | /usr/bin/python3 -c '
+# status ROBOT [COMMAND PREFIX]: the robot's latest status JSON.
+status() { "${@:2}" timeout 20 rostopic echo -n 1 "/$1/sgm/status" | /usr/bin/python3 -c '
 import sys, json, yaml
 doc = yaml.safe_load(sys.stdin.read().split("---")[0])
 print(doc["data"])'; }
-for robot in alpha bravo; do
-  status "$robot" > "$WORK/$robot.status.json"
-  /usr/bin/python3 - "$WORK/$robot.status.json" "$robot" <<'PY' || fail "$robot status"
+# check_run ROBOT FILE: every frame accepted and assembled, nothing refused, aligned.
+check_run() {
+  /usr/bin/python3 - "$2" "$1" <<'PY' || fail "$1 status"
 import json, sys
 s = json.load(open(sys.argv[1]))
 assert s["accepted"]["points"] == 180, s["accepted"]
 assert s["sync"]["frames"] == 180, s["sync"]
 assert all(v == 0 for v in s["refused"].values()), s["refused"]
 assert s["neighbours"] and all(n["state"] == "Aligned" for n in s["neighbours"]), s["neighbours"]
+assert s["transport"]["sent"] > 0 and s["transport"]["received"] > 0, s["transport"]
 print(f"  {sys.argv[2]}: 180/180 frames, {s['keyframes']} keyframes, {s['objects']} objects, aligned at "
-      + ", ".join(f"{n['first_aligned'] - 1700000000:.0f} s" for n in s["neighbours"]))
+      + ", ".join(f"{n['first_aligned'] - 1700000000:.0f} s" for n in s["neighbours"])
+      + f"; {s['transport']['sent']} envelopes sent, {s['transport']['received']} received")
 PY
+}
+for robot in alpha bravo; do
+  status "$robot" > "$WORK/$robot.status.json"
+  check_run "$robot" "$WORK/$robot.status.json"
 done
 # Whole outputs to files, then grep: grep -q in a pipe would close it early (SIGPIPE + pipefail).
 timeout 20 rostopic echo -n 1 /alpha/sgm/markers > "$WORK/markers.txt" || fail "rostopic echo markers"
@@ -99,4 +112,44 @@ SGM__ROS__TOPICS__CAMERA_INFO='/{robot}/camera_info' SGM__ROS__TOPICS__ODOMETRY=
   --out "$WORK/replay" --quiet > "$WORK/replay.txt" || fail "sgm replay"
 cat "$WORK/replay.txt"
 [ "$(grep -c "Aligned" "$WORK/replay.txt")" = 2 ] || fail "replayed robots did not align"
+if [ "$(id -u)" = 0 ] && command -v ip >/dev/null; then
+  echo "== two robots in their own network namespaces, joined by veth, fed by rospy"
+  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
+  for pid in "${PIDS[@]}"; do wait "$pid" 2>/dev/null || true; done
+  PIDS=()
+  A=sgm_a_$$ B=sgm_b_$$ VA=sgmva$$ VB=sgmvb$$
+  ip netns add "$A" && NETNS+=("$A") && ip netns add "$B" && NETNS+=("$B") || fail "ip netns add"
+  ip link add "$VA" type veth peer name "$VB" || fail "ip link add veth"
+  ip link set "$VA" netns "$A" && ip link set "$VB" netns "$B"
+  ip -n "$A" addr add 10.231.0.1/24 dev "$VA" && ip -n "$B" addr add 10.231.0.2/24 dev "$VB"
+  for ns in "$A:$VA" "$B:$VB"; do ip -n "${ns%%:*}" link set lo up; ip -n "${ns%%:*}" link set "${ns#*:}" up; done
+  export ROS_MASTER_URI=http://10.231.0.1:11311
+  in_a() { ROS_IP=10.231.0.1 ip netns exec "$A" "$@"; }
+  in_b() { ROS_IP=10.231.0.2 ip netns exec "$B" "$@"; }
+  in_a rosmaster --core -p 11311 >"$ROS_HOME/master_netns.log" 2>&1 & PIDS+=($!)
+  for _ in $(seq 100); do in_b rostopic list >/dev/null 2>&1 && break; sleep 0.1; done
+  in_b rostopic list >/dev/null 2>&1 || fail "the master in $A is not reachable from $B"
+  in_a "$SGM" ros --robot alpha --scenario quickstart __ns:=/alpha >"$WORK/alpha_netns.log" 2>&1 & PIDS+=($!)
+  in_b "$SGM" ros --robot bravo --scenario quickstart __ns:=/bravo >"$WORK/bravo_netns.log" 2>&1 & PIDS+=($!)
+  in_a /usr/bin/python3 tests/ros_feed.py "$WORK/bags/alpha.bag" 3 >"$WORK/feed_alpha.log" 2>&1 & FEED_A=$!; PIDS+=($FEED_A)
+  in_b /usr/bin/python3 tests/ros_feed.py "$WORK/bags/bravo.bag" 3 >"$WORK/feed_bravo.log" 2>&1 & FEED_B=$!; PIDS+=($FEED_B)
+  wait "$FEED_A" || { cat "$WORK/feed_alpha.log"; fail "rospy feeder of alpha"; }
+  wait "$FEED_B" || { cat "$WORK/feed_bravo.log"; fail "rospy feeder of bravo"; }
+  sleep 3
+  # alpha's status read in B and bravo's in A: the topic crosses the veth either way.
+  status alpha in_b > "$WORK/alpha.netns.json" || fail "alpha's status from $B"
+  check_run alpha "$WORK/alpha.netns.json"
+  status bravo in_a > "$WORK/bravo.netns.json" || fail "bravo's status from $A"
+  check_run bravo "$WORK/bravo.netns.json"
+  ip -n "$A" -s -j link show "$VA" > "$WORK/veth.json"
+  /usr/bin/python3 - "$WORK/veth.json" <<'PY' || fail "no traffic on the veth"
+import json, sys
+stats = json.load(open(sys.argv[1]))[0]["stats64"]
+tx, rx = stats["tx"]["bytes"], stats["rx"]["bytes"]
+assert tx > 100_000 and rx > 100_000, stats
+print(f"  veth between the namespaces: {tx / 1e6:.1f} MB out of A, {rx / 1e6:.1f} MB into A")
+PY
+else
+  echo "== (not root: the network-namespace test is skipped)"
+fi
 echo "ros interop: all passed ($WORK)"

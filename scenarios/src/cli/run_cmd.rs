@@ -69,7 +69,14 @@ pub fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
         "{}: {:.0} s simulated in {:.1} s ({:.0}× real time)",
         report.scenario, report.sim_s, timing.wall_s, timing.realtime_factor
     );
-    let _ = writeln!(s, "team ATE RMSE {} over {}", m(report.team_ate_rmse_m), report.team_ate_robots.join(", "));
+    match report.team_ate_rmse_m {
+        Some(ate) => {
+            let _ = writeln!(s, "team ATE RMSE {ate:.2} m over {}", report.team_ate_robots.join(", "));
+        }
+        None => {
+            let _ = writeln!(s, "team ATE RMSE — (no ground truth, or no robot aligned)");
+        }
+    }
     for r in &report.robots {
         let _ = writeln!(
             s,

@@ -33,6 +33,7 @@ pub struct RobotReport {
     pub objects_spurious: Option<usize>,
     /// Mean distance of the found objects to their world object, m.
     pub object_error_m: Option<f64>,
+    /// Distance travelled, m: along the true path, or the estimated keyframes without truth.
     pub distance_m: f64,
     pub frames: u64,
 }
@@ -243,13 +244,18 @@ pub fn compute(record: &RunRecord) -> Report {
         .map(|(k, truth)| {
             let samples = trajectory(&last, k, truth);
             let (e, t) = positions(&samples, &Pose3::identity());
-            let (keyframes, objects, confirmed) = match last.maps.get(k) {
-                Some(Some((map, _, _))) => {
-                    (map.keyframes.len(), map.objects.len(), map.objects.iter().filter(|o| o.confirmed).count())
-                }
-                _ => (0, 0, 0),
+            let (keyframes, objects, confirmed, estimated) = match last.maps.get(k) {
+                Some(Some((map, _, _))) => (
+                    map.keyframes.len(),
+                    map.objects.len(),
+                    map.objects.iter().filter(|o| o.confirmed).count(),
+                    map.keyframes.iter().map(|f| Point3::from(f.world_from_body.translation.vector)).collect(),
+                ),
+                _ => (0, 0, 0, Vec::new()),
             };
-            let distance_m = t.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+            // Along the true path; along the estimated keyframes when there is no truth.
+            let path = if t.is_empty() { &estimated } else { &t };
+            let distance_m = path.windows(2).map(|w| (w[1] - w[0]).norm()).fold(0.0, |a, b| a + b);
             let known_world = !record.world_objects.is_empty();
             let (found, spurious, error) = match last.maps.get(k) {
                 Some(Some((map, _, _))) => object_quality(map, truth, &record.world_objects),

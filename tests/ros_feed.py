@@ -1,0 +1,40 @@
+#!/usr/bin/python3
+"""Feeds one robot's sensor topics from a ROS 1 bag through rospy publishers, at RATE times
+the recorded pace (the rospy side of the ROS interop tests; run with Debian's Python).
+Waits for a subscriber on every topic first; ground truth is not published.
+Usage: ros_feed.py BAG RATE"""
+import sys
+import time
+
+import rosbag
+import roslib.message
+import rospy
+
+
+def main():
+    path, rate = sys.argv[1], float(sys.argv[2])
+    rospy.init_node("sgm_feed", anonymous=True, disable_signals=True)
+    bag = rosbag.Bag(path)
+    publishers = {}
+    for topic, info in bag.get_type_and_topic_info().topics.items():
+        if not topic.endswith("/ground_truth"):
+            cls = roslib.message.get_message_class(info.msg_type)
+            publishers[topic] = (rospy.Publisher(topic, cls, queue_size=100), cls)
+    deadline = time.monotonic() + 60
+    while any(p.get_num_connections() == 0 for p, _ in publishers.values()):
+        if time.monotonic() > deadline:
+            sys.exit(f"{path}: no subscriber on " + ", ".join(t for t, (p, _) in publishers.items()
+                                                              if p.get_num_connections() == 0))
+        time.sleep(0.05)
+    start, first, sent = time.monotonic(), None, 0
+    for topic, (_, data, _, _, _), t in bag.read_messages(topics=list(publishers), raw=True):
+        publisher, cls = publishers[topic]
+        first = t if first is None else first
+        time.sleep(max(0.0, start + (t - first).to_sec() / rate - time.monotonic()))
+        publisher.publish(cls().deserialize(data))
+        sent += 1
+    time.sleep(1)  # let the queues drain before the connections close
+    print(f"{path}: {sent} messages published")
+
+
+main()
