@@ -1,15 +1,19 @@
 //! The book's reference chapters against the code. `book/src/configuration.md`: every key of
 //! `RobotConfig` is listed with its true default, nothing listed is unknown, and every TOML
 //! example loads. `book/src/scenarios.md`: the same for the scenario file's own sections and a
-//! robot entry.
+//! robot entry. `book/src/ros.md`: the `[ros]` section's keys, and its TOML example loads as a
+//! node configuration.
 
 use serde_json::Value;
 use sgm_actors::config::RobotConfig;
+use sgm_bridge::config::RosConfig;
+use sgm_bridge::node::NodeConfig;
 use sgm_scenarios::scenario::{RobotSpec, Scenario};
 use std::collections::BTreeMap;
 
 const CONFIGURATION: &str = include_str!("../../book/src/configuration.md");
 const SCENARIOS: &str = include_str!("../../book/src/scenarios.md");
+const ROS: &str = include_str!("../../book/src/ros.md");
 const OWN_SECTIONS: [&str; 6] = ["scenario", "world", "lidar", "camera", "odometry", "radio"];
 /// Tables documented as a whole rather than key by key.
 const WHOLE: [&str; 3] = ["fusion.classes", "world.objects", "robots[].route"];
@@ -29,8 +33,11 @@ fn flatten(prefix: &str, value: &Value, out: &mut BTreeMap<String, Value>) {
     }
 }
 
-/// A default as written in the book (a TOML value), as JSON.
+/// A default as written in the book (a TOML value, or "unset" for an absent option), as JSON.
 fn parse_toml_value(text: &str) -> Option<Value> {
+    if text == "unset" {
+        return Some(Value::Null);
+    }
     let source = config::File::from_str(&format!("v = {text}"), config::FileFormat::Toml);
     config::Config::builder().add_source(source).build().ok()?.get::<Value>("v").ok()
 }
@@ -110,6 +117,29 @@ fn book_scenario_reference() {
     assert!(defaults.len() > 30, "{} keys", defaults.len());
     let reference = SCENARIOS.split("## Scenario file reference").nth(1).unwrap_or("");
     check_reference("scenarios.md", &rows(reference), &defaults);
+}
+
+#[test]
+fn book_ros_reference() {
+    let mut defaults = BTreeMap::new();
+    flatten("ros", &serde_json::to_value(RosConfig::default()).unwrap(), &mut defaults);
+    assert!(defaults.len() > 20, "{} keys", defaults.len());
+    let section = ROS.split("## The `[ros]` section").nth(1).unwrap_or("");
+    let section = section.split("\n## ").next().unwrap_or("");
+    check_reference("ros.md", &rows(section), &defaults);
+}
+
+#[test]
+fn every_toml_example_in_the_ros_chapter_loads() {
+    let blocks = toml_blocks(ROS);
+    assert!(!blocks.is_empty());
+    for block in blocks {
+        let file = tempfile::Builder::new().suffix(".toml").tempfile().unwrap();
+        std::fs::write(file.path(), block).unwrap();
+        if let Err(e) = NodeConfig::load(Some(file.path())) {
+            panic!("{e}\n{block}");
+        }
+    }
 }
 
 #[test]
