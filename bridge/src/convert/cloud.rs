@@ -224,54 +224,100 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    /// A Velodyne-style cloud (x y z intensity ring time, 22-byte points) built by hand.
-    fn velodyne(points: &[[f32; 3]], big_endian: bool) -> sensor_msgs::PointCloud2 {
-        let fields = vec![
-            point_field("x", 0, FLOAT32),
-            point_field("y", 4, FLOAT32),
-            point_field("z", 8, FLOAT32),
-            point_field("intensity", 12, FLOAT32),
-            point_field("ring", 16, UINT16),
-            point_field("time", 18, FLOAT32),
-        ];
-        let order = |mut b: Vec<u8>| {
-            if big_endian {
-                b.reverse();
+    /// Drivers' point layouts: (field, offset, datatype), point step.
+    type Layout = (&'static [(&'static str, u32, u8)], u32);
+    /// velodyne_pointcloud's PointXYZIRT.
+    const VELODYNE: Layout = (
+        &[
+            ("x", 0, FLOAT32),
+            ("y", 4, FLOAT32),
+            ("z", 8, FLOAT32),
+            ("intensity", 12, FLOAT32),
+            ("ring", 16, UINT16),
+            ("time", 18, FLOAT32),
+        ],
+        22,
+    );
+    /// livox_ros_driver2's PointXYZRTLT.
+    const LIVOX: Layout = (
+        &[
+            ("x", 0, FLOAT32),
+            ("y", 4, FLOAT32),
+            ("z", 8, FLOAT32),
+            ("intensity", 12, FLOAT32),
+            ("tag", 16, UINT8),
+            ("line", 17, UINT8),
+            ("timestamp", 18, FLOAT64),
+        ],
+        26,
+    );
+    /// ouster_ros's PointOS1 (x y z padded to 16 bytes, 48-byte points).
+    const OUSTER: Layout = (
+        &[
+            ("x", 0, FLOAT32),
+            ("y", 4, FLOAT32),
+            ("z", 8, FLOAT32),
+            ("intensity", 16, FLOAT32),
+            ("t", 20, UINT32),
+            ("reflectivity", 24, UINT16),
+            ("ring", 26, UINT16),
+            ("ambient", 28, UINT16),
+            ("range", 32, UINT32),
+        ],
+        48,
+    );
+
+    /// A cloud of `points` in a driver's `layout`, either byte order, built field by field;
+    /// padding bytes are 0xEE and every other field holds the point's index.
+    fn layout_cloud((fields, step): Layout, points: &[[f32; 3]], big_endian: bool) -> sensor_msgs::PointCloud2 {
+        let mut data = vec![0xEE; points.len() * step as usize];
+        for (k, (p, point)) in points.iter().zip(data.chunks_mut(step as usize)).enumerate() {
+            for &(name, offset, datatype) in fields {
+                let mut bytes = match (name, datatype) {
+                    ("x", _) => p[0].to_le_bytes().to_vec(),
+                    ("y", _) => p[1].to_le_bytes().to_vec(),
+                    ("z", _) => p[2].to_le_bytes().to_vec(),
+                    (_, FLOAT32) => (k as f32).to_le_bytes().to_vec(),
+                    (_, FLOAT64) => (k as f64).to_le_bytes().to_vec(),
+                    (_, UINT8) => vec![k as u8],
+                    (_, UINT16) => (k as u16).to_le_bytes().to_vec(),
+                    _ => (k as u32).to_le_bytes().to_vec(),
+                };
+                if big_endian {
+                    bytes.reverse();
+                }
+                point[offset as usize..offset as usize + bytes.len()].copy_from_slice(&bytes);
             }
-            b
-        };
-        let mut data = Vec::new();
-        for (k, p) in points.iter().enumerate() {
-            for v in [p[0], p[1], p[2], 7.0] {
-                data.extend(order(v.to_le_bytes().to_vec()));
-            }
-            data.extend(order((k as u16).to_le_bytes().to_vec()));
-            data.extend(order(0.5f32.to_le_bytes().to_vec()));
         }
         sensor_msgs::PointCloud2 {
             height: 1,
             width: points.len() as u32,
-            fields,
+            fields: fields.iter().map(|&(name, offset, datatype)| point_field(name, offset, datatype)).collect(),
             is_bigendian: big_endian,
-            point_step: 22,
-            row_step: 22 * points.len() as u32,
+            point_step: step,
+            row_step: step * points.len() as u32,
             data,
             ..Default::default()
         }
     }
 
     #[test]
-    fn velodyne_layout_either_byte_order_nan_dropped() {
+    fn driver_layouts_either_byte_order_nan_dropped() {
         let pts = [[1.0, 2.0, 3.0], [f32::NAN, 0.0, 0.0], [-4.5, 0.25, 1e3]];
-        for be in [false, true] {
-            let scan = read_cloud(&velodyne(&pts, be), "label").unwrap();
-            assert_eq!(scan.points, vec![Point3::new(1.0, 2.0, 3.0), Point3::new(-4.5, 0.25, 1000.0)]);
-            assert_eq!(scan.dropped_non_finite, 1);
-            assert_eq!(scan.labels, None);
+        for (layout, name) in [(VELODYNE, "velodyne"), (LIVOX, "livox"), (OUSTER, "ouster")] {
+            for be in [false, true] {
+                let scan = read_cloud(&layout_cloud(layout, &pts, be), "label").unwrap();
+                assert_eq!(scan.points, vec![Point3::new(1.0, 2.0, 3.0), Point3::new(-4.5, 0.25, 1000.0)], "{name}");
+                assert_eq!(scan.dropped_non_finite, 1);
+                assert_eq!(scan.labels, None);
+            }
         }
-        // The ring field read as labels: an integer field anywhere in the point.
-        let scan = read_cloud(&velodyne(&pts, true), "ring").unwrap();
-        assert_eq!(scan.labels, Some(vec![0, 2]));
+        // An integer field anywhere in the point read as labels: Velodyne's and Ouster's
+        // uint16 ring, Livox's uint8 line.
+        for (layout, field) in [(VELODYNE, "ring"), (OUSTER, "ring"), (LIVOX, "line")] {
+            let scan = read_cloud(&layout_cloud(layout, &pts, true), field).unwrap();
+            assert_eq!(scan.labels, Some(vec![0, 2]), "{field}");
+        }
     }
 
     #[test]
