@@ -14,6 +14,7 @@ pub mod lap;
 mod matcher;
 mod outcome;
 pub mod paper_baseline;
+pub mod scan_context;
 pub mod significance;
 mod spectral;
 mod verification;
