@@ -67,10 +67,15 @@ const MAX_LITERAL: usize = 32;
 const MAX_OFFSET: usize = 1 << 13;
 const MAX_REF: usize = (1 << 8) + (1 << 3);
 
-/// Compresses `input` (greedy matching through a hash of the next three bytes).
+/// Positions remembered per hash bucket: the longest of their matches is taken.
+const WAYS: usize = 4;
+
+/// Compresses `input`: greedy matching through a hash of the next three bytes, each bucket
+/// remembering the last [`WAYS`] positions (one is liblzf's; periodic data with repeats inside
+/// its period then never finds the period and compresses poorly).
 pub fn compress(input: &[u8]) -> Vec<u8> {
     let mut out = Vec::with_capacity(input.len() / 2 + 16);
-    let mut table = vec![usize::MAX; 1 << HASH_BITS];
+    let mut table = vec![[usize::MAX; WAYS]; 1 << HASH_BITS];
     let mut literal_start = 0;
     let mut ip = 0;
     let flush_literals = |out: &mut Vec<u8>, from: usize, to: usize| {
@@ -82,21 +87,33 @@ pub fn compress(input: &[u8]) -> Vec<u8> {
             k += run;
         }
     };
-    while ip + 2 < input.len() {
-        let h = ((u32::from(input[ip]) << 16 | u32::from(input[ip + 1]) << 8 | u32::from(input[ip + 2]))
+    let hash = |p: usize| {
+        ((u32::from(input[p]) << 16 | u32::from(input[p + 1]) << 8 | u32::from(input[p + 2]))
             .wrapping_mul(2_654_435_761)
-            >> (32 - HASH_BITS)) as usize;
-        let candidate = table[h];
-        table[h] = ip;
-        if candidate != usize::MAX
-            && ip - candidate <= MAX_OFFSET
-            && input[candidate..candidate + 3] == input[ip..ip + 3]
-        {
-            let max_len = (input.len() - ip).min(MAX_REF);
-            let mut len = 3;
-            while len < max_len && input[candidate + len] == input[ip + len] {
-                len += 1;
+            >> (32 - HASH_BITS)) as usize
+    };
+    let remember = |table: &mut Vec<[usize; WAYS]>, p: usize| {
+        let bucket = &mut table[hash(p)];
+        bucket.copy_within(0..WAYS - 1, 1);
+        bucket[0] = p;
+    };
+    while ip + 2 < input.len() {
+        let max_len = (input.len() - ip).min(MAX_REF);
+        let matched = |&candidate: &usize| {
+            if candidate == usize::MAX || ip - candidate > MAX_OFFSET {
+                return None;
             }
+            let len = (0..max_len).take_while(|&k| input[candidate + k] == input[ip + k]).count();
+            (len >= 3).then_some((len, candidate))
+        };
+        // Longest first; among equals the nearest (the bucket is newest first).
+        let best =
+            table[hash(ip)].iter().filter_map(matched).fold(None, |best: Option<(usize, usize)>, m| match best {
+                Some(b) if b.0 >= m.0 => Some(b),
+                _ => Some(m),
+            });
+        remember(&mut table, ip);
+        if let Some((len, candidate)) = best {
             flush_literals(&mut out, literal_start, ip);
             let distance = ip - candidate - 1;
             let code = len - 2;
@@ -107,6 +124,11 @@ pub fn compress(input: &[u8]) -> Vec<u8> {
                 out.push((code - 7) as u8);
             }
             out.push((distance & 0xff) as u8);
+            // Every position the match covers is remembered too (as liblzf's default mode
+            // does): otherwise the next match starts from stale candidates.
+            for p in ip + 1..(ip + len).min(input.len().saturating_sub(2)) {
+                remember(&mut table, p);
+            }
             ip += len;
             literal_start = ip;
         } else {
