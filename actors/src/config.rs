@@ -107,9 +107,23 @@ pub struct TrackerSection {
     pub loop_closure: LoopClosureConfig,
 }
 
+/// Inter-robot association.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Association {
+    /// Object-graph matching, then object-cloud and keyframe ICP (the paper).
+    #[default]
+    Objects,
+    /// None: robots exchange object data but never align (the evaluation's "no inter-robot
+    /// association" baseline).
+    None,
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MatcherSection {
+    /// How robots find each other. Default `objects`.
+    pub association: Association,
     /// Object-graph matching (paper §IV-C).
     #[serde(flatten)]
     pub matching: MatcherConfig,
@@ -146,6 +160,7 @@ pub struct MatcherSection {
 impl Default for MatcherSection {
     fn default() -> Self {
         Self {
+            association: Association::Objects,
             matching: MatcherConfig::default(),
             min_matched_objects: 4,
             match_interval_s: 2.0,

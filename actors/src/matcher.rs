@@ -6,7 +6,7 @@
 //! factors and the neighbour keyframes (with their marginal covariances) to the Optimiser.
 
 use crate::clock::Clock;
-use crate::config::MatcherSection;
+use crate::config::{Association, MatcherSection};
 use crate::containment::contained;
 use crate::messages::*;
 use crate::protocol::{Neighbour, Protocol, RetryConfig};
@@ -153,7 +153,7 @@ impl Matcher {
         let Some(data) = &entry.objects else { return };
         let waiting = matches!(entry.protocol, Some(Protocol::ObjectsReceived(_)));
         let due = entry.last_attempt.is_none_or(|t| now - t >= self.config.match_interval_s);
-        if !waiting || !due {
+        if !waiting || !due || self.config.association == Association::None {
             return;
         }
         let remote_objects: Vec<GraphObject> = data

@@ -109,3 +109,18 @@ fn quickstart_aligns_is_deterministic_and_its_ate_checks_out() {
     let map = sgm_model::pcd::read_pcd(&std::fs::read(a.path().join("map.pcd")).unwrap()).unwrap();
     assert!(map.len() > 1000 && map.column_of("label").is_some());
 }
+
+/// `matcher.association = "none"` (the evaluation's no-association baseline): object data still
+/// flows, but no robot matches, asks for object clouds or keyframes, or aligns.
+#[test]
+fn without_association_object_data_flows_and_nothing_aligns() {
+    let mut scenario = Scenario::load_with_env("quickstart", "SGM_QUICKSTART_NONE_TEST").unwrap();
+    scenario.matcher.association = sgm_actors::config::Association::None;
+    let outcome = actix_rt::System::new().block_on(run(&scenario, None)).unwrap();
+    let report = report::compute(&outcome.record);
+    assert!(report.alignments.iter().all(|a| a.first_aligned_s.is_none()), "{:?}", report.alignments);
+    assert!(report.messages["ObjectData"].count > 0);
+    for kind in ["ObjectCloudRequest", "ObjectCloudResponse", "KeyframeRequest", "KeyframeResponse"] {
+        assert_eq!(report.messages[kind].count, 0, "{kind}");
+    }
+}
