@@ -7,6 +7,7 @@
 //! * `sgm pcd-convert IN.pcd OUT.pcd [--format ...]`: PCD format conversion.
 //! * `sgm encode-cloud CLOUD.pcd [--resolution M]`: keyframe cloud codec size and error.
 //! * `sgm bench matching [--reps N] [--seed S]`: the paper's Tables 1–2 protocol.
+//! * `sgm bench messages [--duration S] [--json FILE]`: the paper's Table 4 analogue.
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -191,6 +192,16 @@ enum BenchCommand {
         #[arg(long, value_enum, default_value_t = bench::matching::ErrorOnArg::Both)]
         error_on: bench::matching::ErrorOnArg,
     },
+    /// Paper §V-C, Table 4: message sizes per type on outdoor_two_robots and
+    /// indoor_three_robots, against raw point-cloud sharing.
+    Messages {
+        /// Cut each mission to this many simulated seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Also write the table as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
 }
 
 /// Log lines go to stderr, filtered by `RUST_LOG` (default: warnings, and the node's own
@@ -276,6 +287,15 @@ fn main() -> ExitCode {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("sgm bench matching: {e:#}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Command::Bench { which: BenchCommand::Messages { duration, json } } => {
+            match bench::messages::run_bench(bench::messages::Options { duration, json }) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("sgm bench messages: {e:#}");
                     ExitCode::FAILURE
                 }
             }

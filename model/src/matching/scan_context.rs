@@ -55,14 +55,14 @@ impl ScanContext {
     pub fn new(points: &[Point3<f64>], config: &ScanContextConfig) -> Self {
         let (rings, sectors) = (config.rings, config.sectors);
         let mut cells = vec![0.0f32; rings * sectors];
-        if rings == 0 || sectors == 0 || !(config.max_range_m > 0.0) {
+        if rings == 0 || sectors == 0 || config.max_range_m.is_nan() || config.max_range_m <= 0.0 {
             return Self { rings, sectors, cells };
         }
         let tau = std::f64::consts::TAU;
         for p in points {
             let range = p.x.hypot(p.y);
             let height = p.z + config.height_offset_m;
-            if !(range < config.max_range_m) || !height.is_finite() || height <= 0.0 {
+            if range.is_nan() || range >= config.max_range_m || !height.is_finite() || height <= 0.0 {
                 continue;
             }
             let ring = ((range / config.max_range_m * rings as f64) as usize).min(rings - 1);

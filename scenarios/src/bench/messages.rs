@@ -1,0 +1,151 @@
+//! `sgm bench messages`: paper §V-C, Table 4. Every message type's mean, max and count over a
+//! whole mission of `outdoor_two_robots` and `indoor_three_robots`, beside "Point-cloud Raw"
+//! (every LiDAR frame sent as a raw PointCloud2 to a central server, the paper's bandwidth
+//! upper bound) and the paper's own figures. Sizes are whole sealed envelopes (header, payload
+//! and MAC), in KB of 1000 bytes as the paper's table appears to use.
+
+use anyhow::Context;
+use serde::Serialize;
+use sgm_scenarios::report::{self, MessageRow};
+use sgm_scenarios::runner::run;
+use sgm_scenarios::scenario::Scenario;
+use std::path::PathBuf;
+
+const SCENARIOS: [(&str, &str); 2] = [("outdoor_two_robots", "Outdoor"), ("indoor_three_robots", "Indoor")];
+
+const PAPER_ORDER: [&str; 3] = ["ObjectData", "KeyframeRequest", "KeyframeResponse"];
+
+/// The paper's Table 4 (KB mean, KB max, count) per message type and environment.
+fn paper(kind: &str, env: &str) -> Option<[f64; 3]> {
+    Some(match (kind, env) {
+        ("PointCloudRaw", "Outdoor") => [508.2, 516.9, 3073.0],
+        ("PointCloudRaw", "Indoor") => [508.1, 512.1, 3079.0],
+        ("ObjectData", "Outdoor") => [7.76, 16.93, 701.0],
+        ("ObjectData", "Indoor") => [18.40, 44.37, 845.0],
+        ("KeyframeRequest", "Outdoor") => [0.02, 0.02, 61.0],
+        ("KeyframeRequest", "Indoor") => [0.02, 0.02, 411.0],
+        ("KeyframeResponse", "Outdoor") => [18.87, 22.95, 10.0],
+        ("KeyframeResponse", "Indoor") => [6.90, 11.05, 72.0],
+        _ => return None,
+    })
+}
+
+#[derive(Serialize)]
+struct Row {
+    kind: String,
+    env: &'static str,
+    ours: MessageRow,
+    /// KB mean, KB max, count.
+    paper: Option<[f64; 3]>,
+}
+
+#[derive(Serialize)]
+struct Environment {
+    scenario: &'static str,
+    env: &'static str,
+    sim_s: f64,
+    total_bytes: u64,
+    raw_bytes: u64,
+    /// Total SGM bytes ÷ raw point-cloud bytes (target ≤ 1 %).
+    ratio_to_raw: f64,
+    aligned_pairs: usize,
+    pairs: usize,
+}
+
+#[derive(Serialize)]
+struct Report {
+    command: String,
+    rows: Vec<Row>,
+    environments: Vec<Environment>,
+}
+
+pub struct Options {
+    /// Cut each mission to this many seconds (the test suite's reduced mode).
+    pub duration: Option<f64>,
+    pub json: Option<PathBuf>,
+}
+
+pub fn run_bench(options: Options) -> anyhow::Result<()> {
+    let (mut rows, mut environments) = (Vec::new(), Vec::new());
+    for (name, env) in SCENARIOS {
+        let mut scenario = Scenario::load(name)?;
+        if let Some(d) = options.duration {
+            anyhow::ensure!(d > 0.0, "--duration must be positive");
+            scenario.scenario.duration_s = scenario.scenario.duration_s.min(d);
+        }
+        let system = actix_rt::System::new();
+        let outcome = system.block_on(run(&scenario, None)).with_context(|| format!("running {name}"))?;
+        let r = report::compute(&outcome.record);
+        eprintln!("{name}: {:.0} s simulated in {:.1} s", r.sim_s, outcome.timing.wall_s);
+        rows.push(Row {
+            kind: "PointCloudRaw".into(),
+            env,
+            ours: r.point_cloud_raw,
+            paper: paper("PointCloudRaw", env),
+        });
+        // The paper's rows first, in its order; then the messages it does not list.
+        let mut kinds: Vec<&String> = r.messages.keys().collect();
+        kinds.sort_by_key(|k| (PAPER_ORDER.iter().position(|p| p == k).unwrap_or(PAPER_ORDER.len()), k.as_str()));
+        for kind in kinds {
+            rows.push(Row { kind: kind.clone(), env, ours: r.messages[kind], paper: paper(kind, env) });
+        }
+        environments.push(Environment {
+            scenario: name,
+            env,
+            sim_s: r.sim_s,
+            total_bytes: r.messages.values().map(|m| m.bytes_total).sum(),
+            raw_bytes: r.point_cloud_raw.bytes_total,
+            ratio_to_raw: r.bytes_ratio_to_raw,
+            aligned_pairs: r.alignments.iter().filter(|a| a.first_aligned_s.is_some()).count(),
+            pairs: r.alignments.len(),
+        });
+    }
+    let duration_arg = options.duration.map(|d| format!(" --duration {d}")).unwrap_or_default();
+    let command = format!("sgm bench messages{duration_arg}");
+    print_table(&command, &rows, &environments);
+    if let Some(path) = &options.json {
+        let text = serde_json::to_string_pretty(&Report { command, rows, environments })?;
+        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn kb(bytes: f64) -> String {
+    format!("{:.2}", bytes / 1000.0)
+}
+
+fn print_table(command: &str, rows: &[Row], environments: &[Environment]) {
+    println!("# Message sizes, paper §V-C Table 4\n");
+    println!("Command: `{command}`. Sizes in KB (1000 bytes) of whole sealed envelopes; each cell is");
+    println!("paper / **ours**; \"–\" where the paper has no such message.\n");
+    println!("| message type | env. | mean KB | max KB | count |");
+    println!("|---|---|---|---|---|");
+    for r in rows {
+        let p = |k: usize, decimals: usize| r.paper.map_or("–".to_string(), |p| format!("{:.decimals$}", p[k]));
+        println!(
+            "| {} | {} | {} / **{}** | {} / **{}** | {} / **{}** |",
+            r.kind,
+            r.env,
+            p(0, 2),
+            kb(r.ours.bytes_mean),
+            p(1, 2),
+            kb(r.ours.bytes_max as f64),
+            p(2, 0),
+            r.ours.count
+        );
+    }
+    println!("\n| env. | simulated s | SGM total MB | raw total MB | SGM ÷ raw | aligned pairs |");
+    println!("|---|---|---|---|---|---|");
+    for e in environments {
+        println!(
+            "| {} | {:.0} | {:.2} | {:.1} | {:.3} % | {} of {} |",
+            e.env,
+            e.sim_s,
+            e.total_bytes as f64 / 1e6,
+            e.raw_bytes as f64 / 1e6,
+            e.ratio_to_raw * 100.0,
+            e.aligned_pairs,
+            e.pairs
+        );
+    }
+}
