@@ -15,10 +15,15 @@ fn kib(bytes: f64) -> String {
 pub fn render(report: &Report, timing: &Timing) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Run report: {}\n", report.scenario);
+    // A replayed bag has no simulated world to count.
+    let world = match report.world_objects {
+        0 => String::new(),
+        n => format!(" {n} objects in the world."),
+    };
     let _ = writeln!(
         s,
-        "Seed {}, {:.0} s simulated in {:.1} s wall ({:.0}× real time). {} objects in the world.\n",
-        report.seed, report.sim_s, timing.wall_s, timing.realtime_factor, report.world_objects
+        "Seed {}, {:.0} s simulated in {:.1} s wall ({:.0}× real time).{world}\n",
+        report.seed, report.sim_s, timing.wall_s, timing.realtime_factor
     );
     let _ = writeln!(
         s,
