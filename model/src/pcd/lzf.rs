@@ -106,12 +106,8 @@ pub fn compress(input: &[u8]) -> Vec<u8> {
             let len = (0..max_len).take_while(|&k| input[candidate + k] == input[ip + k]).count();
             (len >= 3).then_some((len, candidate))
         };
-        // Longest first; among equals the nearest (the bucket is newest first).
-        let best =
-            table[hash(ip)].iter().filter_map(matched).fold(None, |best: Option<(usize, usize)>, m| match best {
-                Some(b) if b.0 >= m.0 => Some(b),
-                _ => Some(m),
-            });
+        // The longest; among equals the nearest (the largest position).
+        let best = table[hash(ip)].iter().filter_map(matched).max();
         remember(&mut table, ip);
         if let Some((len, candidate)) = best {
             flush_literals(&mut out, literal_start, ip);
