@@ -244,23 +244,24 @@ pub fn compute(record: &RunRecord) -> Report {
         .map(|(k, truth)| {
             let samples = trajectory(&last, k, truth);
             let (e, t) = positions(&samples, &Pose3::identity());
-            let (keyframes, objects, confirmed, estimated) = match last.maps.get(k) {
-                Some(Some((map, _, _))) => (
-                    map.keyframes.len(),
-                    map.objects.len(),
-                    map.objects.iter().filter(|o| o.confirmed).count(),
-                    map.keyframes.iter().map(|f| Point3::from(f.world_from_body.translation.vector)).collect(),
-                ),
-                _ => (0, 0, 0, Vec::new()),
+            let map = match last.maps.get(k) {
+                Some(Some((map, _, _))) => Some(map),
+                _ => None,
             };
+            let (keyframes, objects, confirmed) = map.map_or((0, 0, 0), |m| {
+                (m.keyframes.len(), m.objects.len(), m.objects.iter().filter(|o| o.confirmed).count())
+            });
             // Along the true path; along the estimated keyframes when there is no truth.
-            let path = if t.is_empty() { &estimated } else { &t };
-            let distance_m = path.windows(2).map(|w| (w[1] - w[0]).norm()).fold(0.0, |a, b| a + b);
-            let known_world = !record.world_objects.is_empty();
-            let (found, spurious, error) = match last.maps.get(k) {
-                Some(Some((map, _, _))) => object_quality(map, truth, &record.world_objects),
-                _ => (0, 0, None),
+            let length = |path: &[Point3<f64>]| path.windows(2).map(|w| (w[1] - w[0]).norm()).fold(0.0, |a, b| a + b);
+            let distance_m = match map {
+                Some(m) if t.is_empty() => length(
+                    &m.keyframes.iter().map(|f| Point3::from(f.world_from_body.translation.vector)).collect::<Vec<_>>(),
+                ),
+                _ => length(&t),
             };
+            let known_world = !record.world_objects.is_empty();
+            let (found, spurious, error) =
+                map.map_or((0, 0, None), |m| object_quality(m, truth, &record.world_objects));
             RobotReport {
                 name: truth.name.clone(),
                 ate_rmse_m: ate(&e, &t).map(|a| a.rmse_m),
