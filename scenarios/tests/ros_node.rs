@@ -31,6 +31,18 @@ const ROBOTS: [&str; 2] = ["alpha", "bravo"];
 /// Bag time runs this many times faster than the wall clock.
 const RATE: f64 = 3.0;
 
+/// Polls `found` every 20 ms until it gives a value; fails with `what()` after `secs`.
+fn poll<T>(secs: u64, what: impl Fn() -> String, mut found: impl FnMut() -> Option<T>) -> T {
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    loop {
+        if let Some(value) = found() {
+            return value;
+        }
+        assert!(Instant::now() < deadline, "timed out: {}", what());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// Starts a ROS master on a free loopback port, in a thread that lives as long as the test.
 fn embedded_master() -> SocketAddr {
     let addr = TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).expect("a free port");
@@ -38,11 +50,7 @@ fn embedded_master() -> SocketAddr {
         let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
         runtime.block_on(ros_core_rs::core::Master::new(&addr).serve())
     });
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while TcpStream::connect(addr).is_err() {
-        assert!(Instant::now() < deadline, "the embedded master did not come up on {addr}");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    poll(10, || format!("the embedded master did not come up on {addr}"), || TcpStream::connect(addr).ok());
     addr
 }
 
@@ -91,15 +99,8 @@ impl Nodes {
             let sent = Command::new("kill").args(["-INT", &child.id().to_string()]).status();
             assert!(sent.is_ok_and(|s| s.success()), "SIGINT to {robot}");
         }
-        let deadline = Instant::now() + Duration::from_secs(20);
         for (robot, child, _) in &mut self.children {
-            let status = loop {
-                if let Ok(Some(status)) = child.try_wait() {
-                    break status;
-                }
-                assert!(Instant::now() < deadline, "{robot} did not exit on SIGINT");
-                std::thread::sleep(Duration::from_millis(50));
-            };
+            let status = poll(20, || format!("{robot} did not exit on SIGINT"), || child.try_wait().ok().flatten());
             assert!(status.success(), "{robot} exited with {status} on SIGINT");
         }
         self.children.clear();
@@ -143,14 +144,7 @@ impl<T: rosrust::Message> Latest<T> {
 
     /// Waits (at most `secs`) for a message `ok` accepts; `what` names it on failure.
     fn wait_for(&self, secs: u64, what: &str, ok: impl Fn(&T) -> bool) -> T {
-        let deadline = Instant::now() + Duration::from_secs(secs);
-        loop {
-            if let Some(m) = self.get().filter(|m| ok(m)) {
-                return m;
-            }
-            assert!(Instant::now() < deadline, "timed out waiting for {what}");
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        poll(secs, || format!("waiting for {what}"), || self.get().filter(|m| ok(m)))
     }
 }
 
@@ -168,18 +162,8 @@ impl Statuses {
     }
 
     fn wait_for(&self, robot: &str, secs: u64, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
-        let deadline = Instant::now() + Duration::from_secs(secs);
-        loop {
-            if let Some(s) = self.of(robot).filter(|s| ok(s)) {
-                return s;
-            }
-            assert!(
-                Instant::now() < deadline,
-                "timed out waiting for {robot}'s {what}; last status: {:?}",
-                self.of(robot)
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        let last = || format!("waiting for {robot}'s {what}; last status: {:?}", self.of(robot));
+        poll(secs, last, || self.of(robot).filter(|s| ok(s)))
     }
 
     fn aligned(status: &Value) -> bool {
@@ -317,11 +301,8 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
     }
     assert_eq!(feeds.len(), 8, "four sensor topics per robot: {:?}", feeds.keys().collect::<Vec<_>>());
     let statuses = Statuses::subscribe();
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while feeds.values().any(|f| f.subscribers() == 0) || ROBOTS.iter().any(|r| statuses.of(r).is_none()) {
-        assert!(Instant::now() < deadline, "the nodes did not subscribe (logs: {})", nodes.log("alpha"));
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let subscribed = || feeds.values().all(|f| f.subscribers() > 0) && ROBOTS.iter().all(|r| statuses.of(r).is_some());
+    poll(60, || format!("the nodes did not subscribe (logs: {})", nodes.log("alpha")), || subscribed().then_some(()));
 
     // Play the bags at RATE until both robots are aligned, stopping after a frame's cloud.
     let mut published: BTreeMap<&str, u64> = BTreeMap::new();
@@ -400,11 +381,12 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
     let lidar = "alpha/base_link";
     let mut zero_quaternion = nav_msgs::Odometry { header: header("alpha/odom"), ..Default::default() };
     zero_quaternion.child_frame_id = "alpha/base_link".into();
-    let deadline = Instant::now() + Duration::from_secs(20);
-    while [bad_points.subscriber_count(), bad_labels.subscriber_count(), bad_odometry.subscriber_count()].contains(&0) {
-        assert!(Instant::now() < deadline, "alpha did not connect to the test's second publishers");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let connected = || {
+        [bad_points.subscriber_count(), bad_labels.subscriber_count(), bad_odometry.subscriber_count()]
+            .iter()
+            .all(|&n| n > 0)
+    };
+    poll(20, || "alpha did not connect to the test's second publishers".into(), || connected().then_some(()));
     let before = statuses.of("alpha").unwrap();
     bad_points.send(cloud(lidar, 5, 12)).unwrap(); // int32 coordinates
     bad_points.send(cloud(lidar, 7, 5)).unwrap(); // 5 bytes of a 12-byte point
