@@ -2,7 +2,9 @@
 //! envelopes (team-key MAC, replay window, size limits), broadcasts ObjectData on significant
 //! change with a rate limit, coalesces keyframe requests over a window and bounds them in flight
 //! (never asking twice for a keyframe held or in flight; timeouts retried with back-off, then
-//! reported), paces keyframe responses, and accounts every message by type.
+//! reported), paces keyframe responses, and accounts every message by type. With the Scan
+//! Context baseline (`matcher.association = "scan_context"`) it broadcasts keyframe descriptors
+//! at the same pace instead of object data.
 
 use crate::clock::Clock;
 use crate::config::CommsConfig;
@@ -14,7 +16,10 @@ use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervis
 use nalgebra::Point3;
 use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
-use sgm_model::wire::messages::{unpack_covariance, KeyframeRequest, ObjectCloudRequest, ObjectData, RefusalReason};
+use sgm_model::wire::messages::{
+    unpack_covariance, KeyframeDescriptors, KeyframeRequest, ObjectCloudRequest, ObjectData, RefusalReason,
+    WireDescriptor,
+};
 use sgm_model::wire::{
     open, seal, Destination, Envelope, Message as WireMessage, RejectionCounts, ReplayWindow, TeamKey, TrafficAccount,
     PROTOCOL_VERSION,
@@ -28,6 +33,7 @@ pub struct CommsLinks {
     pub object_clouds: Recipient<NeighbourObjectClouds>,
     pub keyframes: Recipient<NeighbourKeyframe>,
     pub unavailable: Recipient<KeyframesUnavailable>,
+    pub descriptors: Recipient<NeighbourDescriptors>,
     pub serve: Recipient<Serve>,
 }
 
@@ -74,12 +80,16 @@ pub struct Comms {
     replay: BTreeMap<RobotId, ReplayWindow>,
     last_heard: BTreeMap<RobotId, Stamp>,
     status: CommsStatus,
-    // ObjectData broadcast.
+    // ObjectData broadcast (off when the Matcher associates by descriptors).
+    object_data: bool,
     revision: u32,
     latest_objects: Option<LocalObjects>,
     broadcast_centroids: BTreeMap<ObjectId, Point3<f64>>,
     change_pending: bool,
     last_broadcast: Option<Stamp>,
+    // Scan Context descriptors not yet broadcast.
+    descriptors: Vec<WireDescriptor>,
+    last_descriptors: Option<Stamp>,
     // Keyframes.
     requests: BTreeMap<RobotId, KeyframeRequests>,
     responses: VecDeque<Outgoing>,
@@ -109,15 +119,24 @@ impl Comms {
             replay: BTreeMap::new(),
             last_heard: BTreeMap::new(),
             status: CommsStatus::default(),
+            object_data: true,
             revision: 0,
             latest_objects: None,
             broadcast_centroids: BTreeMap::new(),
             change_pending: false,
             last_broadcast: None,
+            descriptors: Vec::new(),
+            last_descriptors: None,
             requests: BTreeMap::new(),
             responses: VecDeque::new(),
             keyframes_sent: BTreeMap::new(),
         }
+    }
+
+    /// Without object data: the Scan Context baseline shares keyframe descriptors instead.
+    pub fn without_object_data(mut self) -> Self {
+        self.object_data = false;
+        self
     }
 
     fn send(&mut self, to: Destination, message: WireMessage) {
@@ -135,7 +154,7 @@ impl Comms {
 
     fn try_broadcast(&mut self, now: Stamp) {
         let due = self.last_broadcast.is_none_or(|t| now - t >= self.config.object_data_interval_s);
-        if !self.change_pending || !due {
+        if !self.object_data || !self.change_pending || !due {
             return;
         }
         let Some(objects) = &self.latest_objects else { return };
@@ -149,6 +168,21 @@ impl Comms {
         self.change_pending = false;
         self.last_broadcast = Some(now);
         self.send(Destination::Broadcast, WireMessage::ObjectData(data));
+    }
+
+    /// Broadcasts the descriptors of keyframes made since the last broadcast, at most once per
+    /// `object_data_interval_s`, in envelopes of at most `limits.max_ids`.
+    fn broadcast_descriptors(&mut self, now: Stamp) {
+        let due = self.last_descriptors.is_none_or(|t| now - t >= self.config.object_data_interval_s);
+        if self.descriptors.is_empty() || !due {
+            return;
+        }
+        self.last_descriptors = Some(now);
+        let pending = std::mem::take(&mut self.descriptors);
+        for chunk in pending.chunks(self.config.limits.max_ids.max(1)) {
+            let message = WireMessage::KeyframeDescriptors(KeyframeDescriptors { descriptors: chunk.to_vec() });
+            self.send(Destination::Broadcast, message);
+        }
     }
 
     /// Queues keyframes for the next request window: never one held, in flight or already
@@ -271,6 +305,18 @@ impl Comms {
         let Some(links) = self.links.clone() else { return };
         match envelope.message {
             WireMessage::ObjectData(data) => links.objects.do_send(NeighbourObjects { robot: from, data }),
+            WireMessage::KeyframeDescriptors(m) => {
+                let total = m.descriptors.len();
+                let descriptors: Vec<_> = m
+                    .descriptors
+                    .into_iter()
+                    .filter_map(|d| Some((d.keyframe, d.world_from_body.to_pose()?, d.descriptor()?)))
+                    .collect();
+                self.status.rejected.malformed += (total - descriptors.len()) as u64;
+                if !descriptors.is_empty() {
+                    links.descriptors.do_send(NeighbourDescriptors { robot: from, descriptors });
+                }
+            }
             WireMessage::ObjectCloudRequest(r) => {
                 links.serve.do_send(Serve::ObjectClouds { robot: from, objects: r.objects })
             }
@@ -371,6 +417,15 @@ impl Handler<LocalObjects> for Comms {
     }
 }
 
+impl Handler<ShareDescriptor> for Comms {
+    type Result = ();
+    fn handle(&mut self, msg: ShareDescriptor, ctx: &mut Context<Self>) {
+        contained(ctx, "comms", || {
+            self.descriptors.push(WireDescriptor::quantise(msg.keyframe, &msg.world_from_body, &msg.descriptor));
+        });
+    }
+}
+
 impl Handler<RequestObjectClouds> for Comms {
     type Result = ();
     fn handle(&mut self, msg: RequestObjectClouds, ctx: &mut Context<Self>) {
@@ -418,6 +473,7 @@ impl Handler<Tick> for Comms {
     fn handle(&mut self, msg: Tick, ctx: &mut Context<Self>) {
         contained(ctx, "comms", || {
             self.try_broadcast(msg.now);
+            self.broadcast_descriptors(msg.now);
             self.flush_requests(msg.now);
             self.send_responses();
         });

@@ -5,6 +5,7 @@
 
 use crate::protocol::RetryConfig;
 use serde::{Deserialize, Serialize};
+use sgm_model::matching::scan_context::ScanContextConfig;
 use sgm_model::matching::MatcherConfig;
 use sgm_model::perception::classes::{ClassSpec, ClassTable};
 use sgm_model::perception::icp::IcpConfig;
@@ -117,6 +118,38 @@ pub enum Association {
     /// None: robots exchange object data but never align (the evaluation's "no inter-robot
     /// association" baseline).
     None,
+    /// Scan Context descriptors of every keyframe instead of objects, then coarse-to-fine
+    /// keyframe ICP (the evaluation's Swarm-SC baseline, paper §V-B).
+    ScanContext,
+}
+
+/// The Scan Context baseline's association (`association = "scan_context"`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ScanContextSection {
+    /// Descriptor shape: `rings`, `sectors`, `max_range_m`, `height_offset_m`. Defaults
+    /// 20, 60, 80 m, 2 m (Kim & Kim).
+    #[serde(flatten)]
+    pub descriptor: ScanContextConfig,
+    /// A keyframe pair is a candidate below this column-shift distance. Default 0.13 (Kim &
+    /// Kim's released code: "0.1–0.2 is fine" for 20 × 60 descriptors).
+    pub max_distance: f64,
+    /// Neighbour keyframes compared in full per query, the nearest by ring key. Default 10.
+    pub ring_key_candidates: usize,
+    /// Correspondence distance of the coarse ICP stage from the descriptor's yaw, m (the
+    /// fine stage uses `icp.max_correspondence_distance_m`). Default 5.
+    pub coarse_correspondence_m: f64,
+}
+
+impl Default for ScanContextSection {
+    fn default() -> Self {
+        Self {
+            descriptor: ScanContextConfig::default(),
+            max_distance: 0.13,
+            ring_key_candidates: 10,
+            coarse_correspondence_m: 5.0,
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -127,6 +160,8 @@ pub struct MatcherSection {
     /// Object-graph matching (paper §IV-C).
     #[serde(flatten)]
     pub matching: MatcherConfig,
+    /// The Scan Context baseline (used with `association = "scan_context"` only).
+    pub scan_context: ScanContextSection,
     /// Matched objects needed before object clouds are requested. Default 4.
     pub min_matched_objects: usize,
     /// Matching against one neighbour is tried at most this often (on new local objects or
@@ -162,6 +197,7 @@ impl Default for MatcherSection {
         Self {
             association: Association::Objects,
             matching: MatcherConfig::default(),
+            scan_context: ScanContextSection::default(),
             min_matched_objects: 4,
             match_interval_s: 2.0,
             icp: IcpConfig { max_correspondence_distance_m: 1.0, voxel_m: 0.1, ..IcpConfig::default() },
@@ -380,6 +416,20 @@ impl RobotConfig {
             m.icp.max_correspondence_distance_m,
             "> 0",
         )?;
+        let sc = &m.scan_context;
+        let shape = (1..=255).contains(&sc.descriptor.rings) && (1..=255).contains(&sc.descriptor.sectors);
+        check(shape, "matcher.scan_context.rings", sc.descriptor.rings, "rings and sectors 1–255")?;
+        check(shape, "matcher.scan_context.sectors", sc.descriptor.sectors, "rings and sectors 1–255")?;
+        let r = sc.descriptor.max_range_m;
+        check(positive(r), "matcher.scan_context.max_range_m", r, "> 0")?;
+        let h = sc.descriptor.height_offset_m;
+        check(h.is_finite(), "matcher.scan_context.height_offset_m", h, "finite")?;
+        let d = sc.max_distance;
+        check(d.is_finite() && (0.0..=1.0).contains(&d), "matcher.scan_context.max_distance", d, "0–1")?;
+        let c = sc.ring_key_candidates;
+        check(c >= 1, "matcher.scan_context.ring_key_candidates", c, "≥ 1")?;
+        let c = sc.coarse_correspondence_m;
+        check(positive(c), "matcher.scan_context.coarse_correspondence_m", c, "> 0")?;
         check(m.keyframe_neighbourhood <= 50, "matcher.keyframe_neighbourhood", m.keyframe_neighbourhood, "0–50")?;
         check(
             m.keyframe_voxel_m.is_finite() && (0.0..=5.0).contains(&m.keyframe_voxel_m),

@@ -46,6 +46,7 @@ pub mod fusion;
 pub mod matcher;
 pub mod messages;
 pub mod optimiser;
+pub mod place_candidates;
 pub mod protocol;
 pub mod quiescence;
 pub mod sensor;

@@ -4,15 +4,24 @@
 //! neighbour keyframes that observed the matched objects, ± `keyframe_neighbourhood` → each
 //! registered by ICP to the nearest local keyframe that observed a matched object → inter-robot
 //! factors and the neighbour keyframes (with their marginal covariances) to the Optimiser.
+//!
+//! With `association = "scan_context"` (the evaluation's Swarm-SC baseline) the first two
+//! steps differ: every local keyframe's Scan Context descriptor goes to Comms for broadcast;
+//! a local and a neighbour keyframe whose descriptors agree give the first estimate,
+//! local_from_remote = W_l(k_l) · Rz(−yaw) · W_r(k_r)⁻¹ (same place, turned by the descriptor's
+//! yaw); the neighbour keyframes around k_r are requested, k_r is registered onto k_l coarse
+//! to fine, and the rest is as above with the local keyframes around k_l as targets.
 
 use crate::clock::Clock;
 use crate::config::{Association, MatcherSection};
 use crate::containment::contained;
 use crate::messages::*;
+use crate::place_candidates::{PlaceCandidate, PlaceCandidates};
 use crate::protocol::{Neighbour, Protocol, RetryConfig};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use nalgebra::Point3;
 use sgm_model::geometry::{pose_error, Pose3};
+use sgm_model::matching::scan_context::{Place, ScanContext};
 use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
 use sgm_model::perception::icp::{register, IcpConfig};
 use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS, UNLABELLED};
@@ -27,6 +36,7 @@ use std::collections::{BTreeMap, BTreeSet};
 pub struct MatcherLinks {
     pub request_clouds: Recipient<RequestObjectClouds>,
     pub request_keyframes: Recipient<RequestKeyframes>,
+    pub share_descriptors: Recipient<ShareDescriptor>,
     pub optimiser: Recipient<InterRobotConstraints>,
 }
 
@@ -65,6 +75,11 @@ struct NeighbourEntry {
     round: BTreeSet<KeyframeId>,
     /// When matching against this neighbour was last tried.
     last_attempt: Option<Stamp>,
+    /// Scan Context association only: the neighbour's descriptors and the candidate pairs.
+    places: PlaceCandidates,
+    /// Scan Context association only: the pair of the current round and the local keyframes
+    /// around its local one (object association derives its targets from the object pairs).
+    place_round: Option<(PlaceCandidate, BTreeSet<KeyframeId>)>,
 }
 
 /// At most `n` of `ids`, spread evenly over them (deterministic).
@@ -102,6 +117,8 @@ pub struct Matcher {
     links: Option<MatcherLinks>,
     local: LocalObjects,
     keyframes: BTreeMap<KeyframeId, LocalKeyframeData>,
+    /// Scan Context association only: each local keyframe's descriptor.
+    places: BTreeMap<KeyframeId, Place>,
     neighbours: BTreeMap<RobotId, NeighbourEntry>,
 }
 
@@ -116,6 +133,7 @@ impl Matcher {
             links: None,
             local: LocalObjects::default(),
             keyframes: BTreeMap::new(),
+            places: BTreeMap::new(),
             neighbours: BTreeMap::new(),
         }
     }
@@ -131,6 +149,8 @@ impl Matcher {
             refuted: Vec::new(),
             round: BTreeSet::new(),
             last_attempt: None,
+            places: PlaceCandidates::default(),
+            place_round: None,
         })
     }
 
@@ -153,7 +173,7 @@ impl Matcher {
         let Some(data) = &entry.objects else { return };
         let waiting = matches!(entry.protocol, Some(Protocol::ObjectsReceived(_)));
         let due = entry.last_attempt.is_none_or(|t| now - t >= self.config.match_interval_s);
-        if !waiting || !due || self.config.association == Association::None {
+        if !waiting || !due || self.config.association != Association::Objects {
             return;
         }
         let remote_objects: Vec<GraphObject> = data
@@ -198,6 +218,85 @@ impl Matcher {
         if let Some(links) = &self.links {
             links.request_clouds.do_send(RequestObjectClouds { robot, objects: remote_ids });
         }
+    }
+
+    /// Scan Context association: compares the descriptors not yet compared and starts an
+    /// alignment round from the best candidate pair not refuted recently.
+    fn try_match_places(&mut self, robot: RobotId) {
+        let now = self.clock.now();
+        let Some(entry) = self.neighbours.get_mut(&robot) else { return };
+        let waiting = matches!(entry.protocol, Some(Protocol::ObjectsReceived(_)));
+        let due = entry.last_attempt.is_none_or(|t| now - t >= self.config.match_interval_s);
+        if !waiting || !due {
+            return;
+        }
+        entry.last_attempt = Some(now);
+        entry.places.update(&self.places, &self.config.scan_context);
+        let candidate = loop {
+            let Some(c) = entry.places.take_best() else { return };
+            let (Some(local), Some(remote)) = (self.keyframes.get(&c.local), entry.places.remote_pose(c.remote)) else {
+                continue;
+            };
+            let turn =
+                Pose3::from_parts(Default::default(), nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, -c.yaw));
+            let guess = local.world_from_body * turn * remote.inverse();
+            let refuted = entry.refuted.iter().any(|(t, when)| {
+                let e = pose_error(&guess, t);
+                now - when < REFUTED_FOR_S && e.translation_m < 2.0 && e.max_axis_rotation_deg() < 5.0
+            });
+            if !refuted {
+                break (c, guess);
+            }
+        };
+        let (c, guess) = candidate;
+        let k = self.config.keyframe_neighbourhood as u32;
+        let around = |id: KeyframeId| (id.0.saturating_sub(k)..=id.0.saturating_add(k)).map(KeyframeId);
+        let remote_ids: BTreeSet<KeyframeId> = around(c.remote).filter(|id| entry.places.knows_remote(*id)).collect();
+        let mut round = evenly(remote_ids, self.config.max_keyframes_per_alignment.max(1));
+        round.insert(c.remote);
+        let local_targets: BTreeSet<KeyframeId> =
+            around(c.local).filter(|id| self.keyframes.contains_key(id)).collect();
+        let wanted: BTreeSet<KeyframeId> =
+            round.iter().filter(|id| !entry.keyframes.contains_key(id)).copied().collect();
+        let retry = self.retry.clone();
+        if let Some(Protocol::ObjectsReceived(n)) = entry.protocol.take() {
+            let matched = n.matched(guess, Vec::new(), now, &retry);
+            entry.protocol = Some(matched.keyframes_requested(guess, wanted.clone(), now, &retry).into());
+        }
+        entry.round = round;
+        entry.place_round = Some((c, local_targets));
+        tracing::info!(robot = %self.robot, neighbour = %robot, local = c.local.0, remote = c.remote.0,
+            distance = c.distance, "scan contexts matched");
+        if wanted.is_empty() {
+            self.finish_alignment(robot);
+        } else if let Some(links) = &self.links {
+            links.request_keyframes.do_send(RequestKeyframes { robot, keyframes: wanted.into_iter().collect() });
+        }
+    }
+
+    /// Scan Context association: the round's neighbour keyframe registered onto its local one,
+    /// first with `coarse_correspondence_m` from the descriptor's yaw, then as fine as keyframe
+    /// ICP; the local_from_remote it implies, or `None` when either stage fails.
+    fn coarse_to_fine(&self, entry: &NeighbourEntry, pair: &PlaceCandidate, fine: &IcpConfig) -> Option<Pose3> {
+        let local = self.keyframes.get(&pair.local)?;
+        let remote = entry.keyframes.get(&pair.remote)?;
+        let target: Vec<Point3<f64>> = local.points.iter().map(|p| p.cast::<f64>()).collect();
+        let initial =
+            Pose3::from_parts(Default::default(), nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, -pair.yaw));
+        let coarse = IcpConfig {
+            max_correspondence_distance_m: self.config.scan_context.coarse_correspondence_m,
+            max_iterations: fine.max_iterations * 2,
+            ..fine.clone()
+        };
+        let mut local_from_remote_body = initial;
+        for config in [&coarse, fine] {
+            let result = register(&remote.points_in_body, &target, &local_from_remote_body, config).ok()?;
+            if !result.converged {
+                return None;
+            }
+            local_from_remote_body = result.target_from_source;
+        }
+        Some(local.world_from_body * local_from_remote_body * remote.world_from_body.inverse())
     }
 
     fn on_object_clouds(&mut self, msg: NeighbourObjectClouds) {
@@ -265,9 +364,12 @@ impl Matcher {
         let Some(entry) = self.neighbours.get(&robot) else { return };
         let Some(Protocol::KeyframesRequested(n)) = entry.protocol.clone() else { return };
         let mut local_from_remote = n.state.local_from_remote;
-        // Local keyframes that observed the matched objects are the registration targets.
-        let local_ids: BTreeSet<KeyframeId> =
-            n.state.pairs.iter().filter_map(|(l, _)| self.local.observed_in.get(l)).flatten().copied().collect();
+        // Local keyframes that observed the matched objects are the registration targets (with
+        // Scan Context, those around the round's local keyframe).
+        let local_ids: BTreeSet<KeyframeId> = match &entry.place_round {
+            Some((_, targets)) if self.config.association == Association::ScanContext => targets.clone(),
+            _ => n.state.pairs.iter().filter_map(|(l, _)| self.local.observed_in.get(l)).flatten().copied().collect(),
+        };
         let mut factors = Vec::new();
         let mut neighbour_keyframes = Vec::new();
         let mut implied = Vec::new();
@@ -276,6 +378,11 @@ impl Matcher {
             max_iterations: self.config.keyframe_max_iterations,
             ..self.config.icp.clone()
         };
+        if let (Some((pair, _)), Association::ScanContext) = (&entry.place_round, self.config.association) {
+            if let Some(refined) = self.coarse_to_fine(entry, pair, &keyframe_icp) {
+                local_from_remote = refined;
+            }
+        }
         let (check, min_agreement) = (&self.config.structure_check, self.config.min_structure_agreement);
         // Several neighbour keyframes usually register to one local keyframe: widen it once.
         let mut targets: BTreeMap<KeyframeId, Vec<Point3<f64>>> = BTreeMap::new();
@@ -362,9 +469,44 @@ impl Handler<LocalKeyframe> for Matcher {
     type Result = ();
     fn handle(&mut self, msg: LocalKeyframe, ctx: &mut Context<Self>) {
         contained(ctx, "matcher", || {
+            if self.config.association == Association::ScanContext {
+                let descriptor = ScanContext::new(&msg.points_in_body, &self.config.scan_context.descriptor);
+                if let Some(links) = &self.links {
+                    let (keyframe, world_from_body) = (msg.id, msg.world_from_body);
+                    let share = ShareDescriptor { keyframe, world_from_body, descriptor: descriptor.clone() };
+                    links.share_descriptors.do_send(share);
+                }
+                self.places.insert(msg.id, Place::new(descriptor));
+            }
             let labels = msg.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect();
             let points = msg.points_in_body.iter().map(|p| p.cast::<f32>()).collect();
             self.keyframes.insert(msg.id, LocalKeyframeData { world_from_body: msg.world_from_body, points, labels });
+            if self.config.association == Association::ScanContext {
+                let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
+                for robot in robots {
+                    self.try_match_places(robot);
+                }
+            }
+        });
+    }
+}
+
+impl Handler<NeighbourDescriptors> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourDescriptors, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            if self.config.association != Association::ScanContext {
+                return;
+            }
+            let now = self.clock.now();
+            let entry = self.entry(msg.robot);
+            for (id, world_from_body, descriptor) in msg.descriptors {
+                entry.places.add_remote(id, world_from_body, Place::new(descriptor));
+            }
+            // The number of descriptors held stands in for an object-data revision.
+            let revision = u32::try_from(entry.places.remote_count()).unwrap_or(u32::MAX);
+            entry.protocol = entry.protocol.take().map(|p| p.on_objects(revision, now));
+            self.try_match_places(msg.robot);
         });
     }
 }

@@ -4,6 +4,7 @@
 use actix::Message;
 use nalgebra::{Matrix6, Point3};
 use sgm_model::geometry::Pose3;
+use sgm_model::matching::scan_context::ScanContext;
 use sgm_model::matching::GraphObject;
 use sgm_model::perception::clustering::ObjectCandidate;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
@@ -114,6 +115,25 @@ pub struct KeyframesUnavailable {
     pub robot: RobotId,
     pub keyframes: Vec<KeyframeId>,
     pub reason: RefusalReason,
+}
+
+/// Comms → Matcher: Scan Context descriptors of a neighbour's keyframes arrived (association
+/// `scan_context` only), each with the keyframe's pose in the neighbour's world.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct NeighbourDescriptors {
+    pub robot: RobotId,
+    pub descriptors: Vec<(KeyframeId, Pose3, ScanContext)>,
+}
+
+/// Matcher → Comms: a local keyframe's Scan Context descriptor, for the next broadcast
+/// (association `scan_context` only).
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct ShareDescriptor {
+    pub keyframe: KeyframeId,
+    pub world_from_body: Pose3,
+    pub descriptor: ScanContext,
 }
 
 /// Matcher → Comms: ask a neighbour for object clouds.

@@ -7,7 +7,7 @@
 
 use crate::clock::Clock;
 use crate::comms::{Comms, CommsLinks};
-use crate::config::{ConfigError, RobotConfig};
+use crate::config::{Association, ConfigError, RobotConfig};
 use crate::fusion::Fusion;
 use crate::matcher::{Matcher, MatcherLinks};
 use crate::messages::{Connect, SensorFrame, Tick};
@@ -72,8 +72,15 @@ pub fn start_robot_on(
     let sequence_start = (clock.now().max(0.0) * 1e6) as u64;
     let comms_config = config.comms.clone();
     let comms_clock = clock.clone();
-    let comms =
-        Supervisor::start(move |_| Comms::new(robot, comms_config, key, comms_clock, transport, sequence_start));
+    let object_data = config.matcher.association != Association::ScanContext;
+    let comms = Supervisor::start(move |_| {
+        let comms = Comms::new(robot, comms_config, key, comms_clock, transport, sequence_start);
+        if object_data {
+            comms
+        } else {
+            comms.without_object_data()
+        }
+    });
     let tracker_config_classes = classes.clone();
     let tracker_config = (config.tracker.clone(), classes, config.optimiser.clone(), config.comms.cloud_resolution_m);
     let tracker = Supervisor::start(move |_| {
@@ -95,6 +102,7 @@ pub fn start_robot_on(
         object_clouds: matcher.clone().recipient(),
         keyframes: matcher.clone().recipient(),
         unavailable: matcher.clone().recipient(),
+        descriptors: matcher.clone().recipient(),
         serve: tracker.clone().recipient(),
     }));
     tracker.do_send(Connect(TrackerLinks {
@@ -107,6 +115,7 @@ pub fn start_robot_on(
     matcher.do_send(Connect(MatcherLinks {
         request_clouds: comms.clone().recipient(),
         request_keyframes: comms.clone().recipient(),
+        share_descriptors: comms.clone().recipient(),
         optimiser: optimiser.clone().recipient(),
     }));
     optimiser.do_send(Connect(OptimiserLinks {

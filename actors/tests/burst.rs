@@ -42,6 +42,8 @@ impl RadioModel for LossyLinks {
 struct Heard {
     served: BTreeMap<KeyframeId, usize>,
     reported: BTreeMap<KeyframeId, RefusalReason>,
+    /// Descriptor deliveries: (sender, keyframe ids).
+    descriptors: Vec<(RobotId, Vec<KeyframeId>)>,
 }
 
 struct Recorder(Arc<Mutex<Heard>>);
@@ -66,6 +68,13 @@ impl Handler<KeyframesUnavailable> for Recorder {
 impl Handler<NeighbourObjects> for Recorder {
     type Result = ();
     fn handle(&mut self, _: NeighbourObjects, _: &mut Context<Self>) {}
+}
+impl Handler<NeighbourDescriptors> for Recorder {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourDescriptors, _: &mut Context<Self>) {
+        let ids = msg.descriptors.iter().map(|d| d.0).collect();
+        self.0.lock().unwrap().descriptors.push((msg.robot, ids));
+    }
 }
 impl Handler<NeighbourObjectClouds> for Recorder {
     type Result = ();
@@ -137,6 +146,7 @@ async fn burst(model: Box<dyn RadioModel>, config: CommsConfig, seconds: u32) ->
         object_clouds: recorder.clone().recipient(),
         keyframes: recorder.clone().recipient(),
         unavailable: recorder.clone().recipient(),
+        descriptors: recorder.clone().recipient(),
         serve,
     };
     requester.do_send(Connect(links(recorder.clone().recipient())));
@@ -213,4 +223,76 @@ async fn a_burst_over_a_lossy_radio_is_bounded_and_nothing_is_silently_dropped()
             assert_eq!(served, 0);
         }
     }
+}
+
+/// The Scan Context baseline's path through Comms: descriptors shared between two broadcasts go
+/// out together (at most `limits.max_ids` per envelope, at most once per
+/// `object_data_interval_s`), arrive decoded with their poses, and no object data is sent.
+#[actix_rt::test]
+async fn descriptors_are_batched_broadcast_and_delivered() {
+    use sgm_model::matching::scan_context::ScanContext;
+    let config = CommsConfig {
+        limits: sgm_model::wire::WireLimits { max_ids: 4, ..Default::default() },
+        ..CommsConfig::default()
+    };
+    let radio = InProcessRadio::new(Box::new(PerfectLinks));
+    let clock = Clock::starting_at(0.0);
+    let key = TeamKey::from_passphrase(&config.team_key).unwrap();
+    let heard = Arc::new(Mutex::new(Heard::default()));
+    let recorder = Recorder(heard.clone()).start();
+    let mut robots = Vec::new();
+    for robot in [REQUESTER, SERVER] {
+        let transport = Box::new(radio.clone());
+        let comms =
+            Comms::new(robot, config.clone(), key.clone(), clock.clone(), transport, 0).without_object_data().start();
+        radio.attach(robot, comms.clone().recipient());
+        comms.do_send(Connect(CommsLinks {
+            objects: recorder.clone().recipient(),
+            object_clouds: recorder.clone().recipient(),
+            keyframes: recorder.clone().recipient(),
+            unavailable: recorder.clone().recipient(),
+            descriptors: recorder.clone().recipient(),
+            serve: recorder.clone().recipient(),
+        }));
+        robots.push(comms);
+    }
+    let sender = &robots[0];
+    let points: Vec<Point3<f64>> = (0..50).map(|k| Point3::new(f64::from(k) * 0.5 + 1.0, 2.0, 0.5)).collect();
+    let descriptor = ScanContext::new(&points, &Default::default());
+    // Objects are ignored by a Comms without object data.
+    sender.do_send(LocalObjects {
+        objects: vec![sgm_model::matching::GraphObject {
+            id: sgm_model::scene_graph::ObjectId(1),
+            label: sgm_model::scene_graph::LabelId(3),
+            centroid: Point3::origin(),
+            size: None,
+        }],
+        ..Default::default()
+    });
+    for (step, ids) in [(0u32, 0..6u32), (1, 6..7), (30, 7..8)] {
+        let now = f64::from(step) * 0.1;
+        clock.advance_to(now);
+        for id in ids {
+            let world_from_body =
+                Pose3::from_parts(nalgebra::Translation3::new(f64::from(id), 0.0, 0.0), Default::default());
+            sender.do_send(ShareDescriptor {
+                keyframe: KeyframeId(id),
+                world_from_body,
+                descriptor: descriptor.clone(),
+            });
+        }
+        sender.do_send(Tick { now });
+        settle().await;
+        radio.deliver_due(now);
+        settle().await;
+    }
+    let status = sender.send(GetCommsStatus).await.unwrap();
+    let heard = std::mem::take(&mut *heard.lock().unwrap());
+    let batches: Vec<Vec<u32>> = heard.descriptors.iter().map(|(_, ids)| ids.iter().map(|k| k.0).collect()).collect();
+    // At t = 0: six descriptors in envelopes of four and two; keyframe 6 (t = 0.1) waits for the
+    // next broadcast (interval 2 s) and goes out with keyframe 7 at t = 3.
+    assert_eq!(batches, vec![vec![0, 1, 2, 3], vec![4, 5], vec![6, 7]]);
+    assert!(heard.descriptors.iter().all(|(from, _)| *from == REQUESTER));
+    assert_eq!(status.sent.get(sgm_model::wire::MessageKind::KeyframeDescriptors).count, 3);
+    assert_eq!(status.sent.get(sgm_model::wire::MessageKind::ObjectData).count, 0);
 }

@@ -146,6 +146,39 @@ impl ScanContext {
     }
 }
 
+/// A descriptor with its ring key, ready for retrieval.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Place {
+    pub descriptor: ScanContext,
+    pub ring_key: Vec<f32>,
+}
+
+impl Place {
+    pub fn new(descriptor: ScanContext) -> Self {
+        let ring_key = descriptor.ring_key();
+        Self { descriptor, ring_key }
+    }
+}
+
+/// Kim & Kim's two-stage retrieval: the `candidates` places of `database` nearest to `query`
+/// by ring key (Euclidean), then of those the one with the smallest column-shift distance.
+/// Ties keep the earlier entry, so the result is deterministic for an ordered database.
+pub fn retrieve<'a, K: Copy + 'a>(
+    query: &Place,
+    database: impl IntoIterator<Item = (K, &'a Place)>,
+    candidates: usize,
+) -> Option<(K, ScanContextMatch)> {
+    let key_distance =
+        |p: &Place| -> f32 { query.ring_key.iter().zip(&p.ring_key).map(|(a, b)| (a - b) * (a - b)).sum::<f32>() };
+    let mut nearest: Vec<(f32, K, &Place)> = database.into_iter().map(|(k, p)| (key_distance(p), k, p)).collect();
+    nearest.sort_by(|a, b| a.0.total_cmp(&b.0));
+    nearest.truncate(candidates);
+    nearest
+        .into_iter()
+        .map(|(_, k, p)| (k, query.descriptor.compare(&p.descriptor)))
+        .min_by(|a, b| a.1.distance.total_cmp(&b.1.distance))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -237,5 +270,41 @@ mod tests {
                 prop_assert!((original.yaw_of_shift(turn) - yaw).abs() < 1e-12);
             }
         }
+    }
+
+    #[test]
+    fn retrieval_finds_the_same_place_turned() {
+        // A place: walls at ranges r (away from ring edges) whose height varies with the bearing b as h·(1 + sin(f·b)),
+        // sampled at sector centres so that a turn by whole sectors moves no point across a bin
+        // edge.
+        let sector = std::f64::consts::TAU / 60.0;
+        let place = |walls: &[(f64, f64, f64)], turn: usize| {
+            let points: Vec<Point3<f64>> = walls
+                .iter()
+                .flat_map(|&(r, h, f)| {
+                    (0..60).map(move |j| {
+                        let b = (j as f64 + 0.5) * sector;
+                        let turned = b + turn as f64 * sector;
+                        Point3::new(r * turned.cos(), r * turned.sin(), h * (1.0 + (f * b).sin()))
+                    })
+                })
+                .collect();
+            Place::new(ScanContext::new(&points, &ScanContextConfig::default()))
+        };
+        let a = [(5.0, 3.0, 1.0), (13.0, 1.0, 2.0), (30.0, 6.0, 3.0)];
+        let b = [(9.0, 2.0, 1.0), (21.0, 5.0, 5.0)];
+        let c = [(3.0, 1.0, 1.0), (41.0, 2.0, 2.0), (61.0, 4.0, 3.0), (9.0, 0.5, 1.0)];
+        let turn = 10; // 60°
+        let database = [(1, place(&a, 0)), (2, place(&b, 0)), (3, place(&c, 0))];
+        let query = place(&c, turn);
+        let (id, m) = retrieve(&query, database.iter().map(|(k, p)| (*k, p)), 10).unwrap();
+        assert_eq!(id, 3);
+        assert!(m.distance < 0.05, "{m:?}");
+        // The database scan, shifted by `shift` sectors, lines up with the query.
+        assert_eq!(m.shift, 50, "{m:?}");
+        assert_eq!(query.descriptor.yaw_of_shift(m.shift), 50.0 * std::f64::consts::TAU / 60.0);
+        // One candidate by ring key: still the right place (ring keys are yaw-invariant).
+        assert_eq!(retrieve(&query, database.iter().map(|(k, p)| (*k, p)), 1).map(|r| r.0), Some(3));
+        assert_eq!(retrieve(&query, std::iter::empty::<(u8, &Place)>(), 10), None);
     }
 }

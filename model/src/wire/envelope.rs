@@ -130,6 +130,7 @@ fn check_limits(message: &Message, limits: &WireLimits) -> Result<(), WireError>
         Message::KeyframeRequest(m) => ("keyframe ids", m.keyframes.len(), limits.max_ids),
         Message::KeyframeRefusal(m) => ("keyframe ids", m.keyframes.len(), limits.max_ids),
         Message::KeyframeResponse(_) => ("responses", 1, 1),
+        Message::KeyframeDescriptors(m) => ("descriptors", m.descriptors.len(), limits.max_ids),
     };
     if count > max {
         return Err(WireError::Limit { kind, what, count, max });

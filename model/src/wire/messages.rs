@@ -6,12 +6,14 @@
 //! | `ObjectCloudRequest` / `Response` | after a match | sparse object clouds + observing keyframe ids |
 //! | `KeyframeRequest` / `Response` | for keyframes not yet held | compressed cloud, pose, covariance |
 //! | `KeyframeRefusal` | a request the sender cannot serve now | the keyframe ids and why |
+//! | `KeyframeDescriptors` | new keyframes, with `matcher.association = "scan_context"` only | Scan Context descriptors and poses (the evaluation's Swarm-SC baseline) |
 //!
 //! Centroids travel as integers in units of `resolution_mm` (zigzag varints under postcard: two
 //! bytes per axis within ±163 m at 2 cm), sizes as bytes in 5 cm steps: an object costs 9–13
 //! bytes. Clouds are [`super::cloud_codec`] streams.
 
 use crate::geometry::Pose3;
+use crate::matching::scan_context::ScanContext;
 use crate::scene_graph::{KeyframeId, LabelId, ObjectId};
 use nalgebra::{Matrix6, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -25,16 +27,18 @@ pub enum MessageKind {
     KeyframeRequest,
     KeyframeResponse,
     KeyframeRefusal,
+    KeyframeDescriptors,
 }
 
 impl MessageKind {
-    pub const ALL: [MessageKind; 6] = [
+    pub const ALL: [MessageKind; 7] = [
         MessageKind::ObjectData,
         MessageKind::ObjectCloudRequest,
         MessageKind::ObjectCloudResponse,
         MessageKind::KeyframeRequest,
         MessageKind::KeyframeResponse,
         MessageKind::KeyframeRefusal,
+        MessageKind::KeyframeDescriptors,
     ];
 
     pub fn name(self) -> &'static str {
@@ -45,6 +49,7 @@ impl MessageKind {
             MessageKind::KeyframeRequest => "KeyframeRequest",
             MessageKind::KeyframeResponse => "KeyframeResponse",
             MessageKind::KeyframeRefusal => "KeyframeRefusal",
+            MessageKind::KeyframeDescriptors => "KeyframeDescriptors",
         }
     }
 }
@@ -58,6 +63,7 @@ pub enum Message {
     KeyframeRequest(KeyframeRequest),
     KeyframeResponse(KeyframeResponse),
     KeyframeRefusal(KeyframeRefusal),
+    KeyframeDescriptors(KeyframeDescriptors),
 }
 
 impl Message {
@@ -69,6 +75,7 @@ impl Message {
             Message::KeyframeRequest(_) => MessageKind::KeyframeRequest,
             Message::KeyframeResponse(_) => MessageKind::KeyframeResponse,
             Message::KeyframeRefusal(_) => MessageKind::KeyframeRefusal,
+            Message::KeyframeDescriptors(_) => MessageKind::KeyframeDescriptors,
         }
     }
 }
@@ -185,6 +192,50 @@ pub enum RefusalReason {
     Busy,
 }
 
+/// Step of a descriptor's heights, m (a byte each: up to 25.5 m).
+pub const DESCRIPTOR_HEIGHT_STEP_M: f32 = 0.1;
+
+/// Scan Context descriptors of the sender's keyframes (the Swarm-SC baseline's association).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct KeyframeDescriptors {
+    pub descriptors: Vec<WireDescriptor>,
+}
+
+/// One keyframe's descriptor: its pose in the sender's world, and rings × sectors heights in
+/// steps of [`DESCRIPTOR_HEIGHT_STEP_M`], ring-major.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireDescriptor {
+    pub keyframe: KeyframeId,
+    pub world_from_body: WirePose,
+    pub rings: u8,
+    pub sectors: u8,
+    #[serde(with = "serde_bytes")]
+    pub cells: Vec<u8>,
+}
+
+impl WireDescriptor {
+    /// Quantises `descriptor` (heights saturate at 25.5 m; shapes beyond 255 rings or sectors
+    /// are cut to 255).
+    pub fn quantise(keyframe: KeyframeId, world_from_body: &Pose3, descriptor: &ScanContext) -> Self {
+        let (rings, sectors) = (descriptor.rings.min(255), descriptor.sectors.min(255));
+        let cells = (0..rings)
+            .flat_map(|r| (0..sectors).map(move |j| (r, j)))
+            .map(|(r, j)| (descriptor.cell(r, j) / DESCRIPTOR_HEIGHT_STEP_M).round().clamp(0.0, 255.0) as u8)
+            .collect();
+        Self { keyframe, world_from_body: world_from_body.into(), rings: rings as u8, sectors: sectors as u8, cells }
+    }
+
+    /// The descriptor back; `None` when the cells do not fill rings × sectors.
+    pub fn descriptor(&self) -> Option<ScanContext> {
+        let (rings, sectors) = (usize::from(self.rings), usize::from(self.sectors));
+        (self.cells.len() == rings * sectors).then(|| ScanContext {
+            rings,
+            sectors,
+            cells: self.cells.iter().map(|&c| f32::from(c) * DESCRIPTOR_HEIGHT_STEP_M).collect(),
+        })
+    }
+}
+
 /// A pose as translation and unit quaternion (x, y, z, w).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WirePose {
@@ -257,6 +308,23 @@ mod tests {
             assert!((w.size_m() - s).abs().max() <= 0.025 + 1e-12 || s.max() > 12.75);
         }
         assert_eq!(data.objects[1].size, [255, 0, 0]);
+    }
+
+    #[test]
+    fn descriptors_round_trip_within_half_a_step() {
+        let points: Vec<Point3<f64>> = (0..400)
+            .map(|k| Point3::new((k % 37) as f64 - 18.0, (k % 23) as f64 - 11.0, (k % 7) as f64 * 0.37))
+            .collect();
+        let descriptor = ScanContext::new(&points, &Default::default());
+        let pose = pose_from_rpy_translation(0.0, 0.0, 1.0, Vector3::new(3.0, 4.0, 0.0));
+        let wire = WireDescriptor::quantise(KeyframeId(9), &pose, &descriptor);
+        assert_eq!(wire.cells.len(), 20 * 60);
+        let back = wire.descriptor().unwrap();
+        assert!(back.cells.iter().zip(&descriptor.cells).all(|(a, b)| (a - b).abs() <= 0.05 + 1e-6));
+        assert!(back.compare(&descriptor).distance < 1e-3);
+        let mut short = wire.clone();
+        short.cells.pop();
+        assert_eq!(short.descriptor(), None, "cells that do not fill the shape are refused");
     }
 
     #[test]

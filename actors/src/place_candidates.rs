@@ -1,0 +1,179 @@
+//! The Scan Context baseline's side of the Matcher, per neighbour: the neighbour's keyframe
+//! descriptors, and the keyframe pairs whose descriptors agree, best first. Every pair is
+//! compared once: each new local keyframe queries the neighbour's descriptors, each new
+//! neighbour descriptor queries the local keyframes (Kim & Kim's ring-key pre-selection, then
+//! the column-shift distance, `model::matching::scan_context::retrieve`).
+
+use crate::config::ScanContextSection;
+use sgm_model::geometry::Pose3;
+use sgm_model::matching::scan_context::{retrieve, Place};
+use sgm_model::scene_graph::KeyframeId;
+use std::collections::{BTreeMap, BTreeSet};
+
+/// A local and a neighbour keyframe that look like the same place.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlaceCandidate {
+    pub local: KeyframeId,
+    pub remote: KeyframeId,
+    /// Column-shift distance, in [0, 1].
+    pub distance: f64,
+    /// The neighbour's scan is ours turned by this yaw about z: local_body_from_remote_body
+    /// ≈ Rz(−yaw) (same place, so no translation), rad.
+    pub yaw: f64,
+}
+
+/// Candidates kept waiting at most (the best).
+const MAX_WAITING: usize = 64;
+
+#[derive(Clone, Debug, Default)]
+pub struct PlaceCandidates {
+    /// The neighbour's descriptors and keyframe poses (its world).
+    remote: BTreeMap<KeyframeId, (Pose3, Place)>,
+    queried_local: BTreeSet<KeyframeId>,
+    queried_remote: BTreeSet<KeyframeId>,
+    /// Pairs already handed out (never handed out twice).
+    tried: BTreeSet<(KeyframeId, KeyframeId)>,
+    /// Best first.
+    waiting: Vec<PlaceCandidate>,
+}
+
+impl PlaceCandidates {
+    pub fn add_remote(&mut self, id: KeyframeId, world_from_body: Pose3, place: Place) {
+        self.remote.entry(id).or_insert((world_from_body, place));
+    }
+
+    pub fn remote_count(&self) -> usize {
+        self.remote.len()
+    }
+
+    pub fn remote_pose(&self, id: KeyframeId) -> Option<Pose3> {
+        self.remote.get(&id).map(|r| r.0)
+    }
+
+    pub fn knows_remote(&self, id: KeyframeId) -> bool {
+        self.remote.contains_key(&id)
+    }
+
+    /// Compares every pair not yet compared and keeps those under `max_distance`.
+    pub fn update(&mut self, local: &BTreeMap<KeyframeId, Place>, config: &ScanContextSection) {
+        let k = config.ring_key_candidates;
+        let mut found = Vec::new();
+        for (id, place) in local.iter().filter(|(id, _)| !self.queried_local.contains(id)) {
+            let database = self.remote.iter().map(|(r, (_, p))| (*r, p));
+            if let Some((remote, m)) = retrieve(place, database, k) {
+                found.push((*id, remote, m, place));
+            }
+        }
+        self.queried_local.extend(local.keys().copied());
+        for (id, (_, place)) in self.remote.iter().filter(|(id, _)| !self.queried_remote.contains(id)) {
+            if let Some((local_id, m)) = retrieve(place, local.iter().map(|(l, p)| (*l, p)), k) {
+                // `place` is the query here: turn the match around (ours ↔ theirs).
+                let shift = (place.descriptor.sectors - m.shift) % place.descriptor.sectors.max(1);
+                let m = sgm_model::matching::scan_context::ScanContextMatch { shift, ..m };
+                if let Some(l) = local.get(&local_id) {
+                    found.push((local_id, *id, m, l));
+                }
+            }
+        }
+        self.queried_remote.extend(self.remote.keys().copied());
+        for (local, remote, m, place) in found {
+            let pair = (local, remote);
+            let known = self.waiting.iter().any(|c| (c.local, c.remote) == pair);
+            if m.distance > config.max_distance || known || self.tried.contains(&pair) {
+                continue;
+            }
+            let yaw = place.descriptor.yaw_of_shift(m.shift);
+            self.waiting.push(PlaceCandidate { local, remote, distance: m.distance, yaw });
+        }
+        self.waiting
+            .sort_by(|a, b| a.distance.total_cmp(&b.distance).then((a.local, a.remote).cmp(&(b.local, b.remote))));
+        self.waiting.truncate(MAX_WAITING);
+    }
+
+    /// The best candidate not handed out before.
+    pub fn take_best(&mut self) -> Option<PlaceCandidate> {
+        if self.waiting.is_empty() {
+            return None;
+        }
+        let best = self.waiting.remove(0);
+        self.tried.insert((best.local, best.remote));
+        Some(best)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Point3, Vector3};
+    use sgm_model::geometry::pose_from_rpy_translation;
+    use sgm_model::matching::scan_context::ScanContext;
+
+    const SECTOR: f64 = std::f64::consts::TAU / 60.0;
+
+    /// A place (`seed` makes places differ): three walls whose heights vary with the bearing,
+    /// sampled at sector centres, seen from a body turned by `turn` whole sectors.
+    fn scan(seed: u64, turn: usize) -> Vec<Point3<f64>> {
+        let s = seed as f64;
+        let walls = [(5.0 + s * 3.1, 1.0 + s * 0.3, 1.0), (17.0 + s * 2.3, 2.0, 2.0 + s), (45.0 - s, 3.0, 3.0)];
+        walls
+            .iter()
+            .flat_map(|&(r, h, f)| {
+                (0..60).map(move |j| {
+                    let bearing = (j as f64 + 0.5) * SECTOR;
+                    let seen = bearing - turn as f64 * SECTOR;
+                    Point3::new(r * seen.cos(), r * seen.sin(), h * (1.0 + (f * bearing + s).sin()))
+                })
+            })
+            .collect()
+    }
+
+    fn place(points: &[Point3<f64>]) -> Place {
+        Place::new(ScanContext::new(points, &Default::default()))
+    }
+
+    #[test]
+    fn the_same_place_is_found_with_its_yaw_and_handed_out_once() {
+        let config = ScanContextSection::default();
+        let local: BTreeMap<KeyframeId, Place> = (0..5).map(|k| (KeyframeId(k), place(&scan(k as u64, 0)))).collect();
+        let mut c = PlaceCandidates::default();
+        // The neighbour's keyframe 40 stands where our keyframe 3 stood, turned by 6 sectors
+        // (36°); its keyframe 41 is somewhere new.
+        let pose = pose_from_rpy_translation(0.0, 0.0, 0.0, Vector3::zeros());
+        c.add_remote(KeyframeId(40), pose, place(&scan(3, 6)));
+        c.add_remote(KeyframeId(41), pose, place(&scan(9, 0)));
+        c.update(&local, &config);
+        let best = c.take_best().expect("a candidate");
+        assert_eq!((best.local, best.remote), (KeyframeId(3), KeyframeId(40)));
+        assert!(best.distance < 1e-9, "{best:?}");
+        // A point at bearing b in our body is at b − 6 sectors in theirs: theirs = Rz(−36°)·ours.
+        assert!((best.yaw - 54.0 * SECTOR).abs() < 1e-9, "yaw {}", best.yaw);
+        assert!(c.take_best().is_none(), "keyframe 41 matches nothing: {:?}", c.take_best());
+        // Nothing is handed out twice, also after more updates.
+        c.update(&local, &config);
+        assert!(c.take_best().is_none_or(|n| (n.local, n.remote) != (best.local, best.remote)));
+    }
+
+    #[test]
+    fn both_directions_find_the_pair() {
+        // The local keyframe arrives after the neighbour's descriptor: found by the local query.
+        let config = ScanContextSection::default();
+        let pose = pose_from_rpy_translation(0.0, 0.0, 0.0, Vector3::zeros());
+        let mut c = PlaceCandidates::default();
+        c.add_remote(KeyframeId(7), pose, place(&scan(2, 10)));
+        c.update(&BTreeMap::new(), &config);
+        assert!(c.take_best().is_none());
+        let local: BTreeMap<KeyframeId, Place> = [(KeyframeId(1), place(&scan(2, 0)))].into();
+        c.update(&local, &config);
+        let a = c.take_best().expect("found by the local query");
+        // The neighbour's descriptor arrives after the local keyframe: found by its query.
+        let mut d = PlaceCandidates::default();
+        d.update(&local, &config);
+        d.add_remote(KeyframeId(7), pose, place(&scan(2, 10)));
+        d.update(&local, &config);
+        let b = d.take_best().expect("found by the neighbour's query");
+        assert_eq!((a.local, a.remote), (b.local, b.remote));
+        assert!((a.yaw - 50.0 * SECTOR).abs() < 1e-9, "yaw {}", a.yaw);
+        assert!((a.yaw - b.yaw).abs() < 1e-12, "the same yaw either way: {} {}", a.yaw, b.yaw);
+        assert!((a.distance - b.distance).abs() < 1e-12);
+    }
+}
