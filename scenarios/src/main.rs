@@ -202,6 +202,52 @@ enum BenchCommand {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Paper §V-B, Table 3: team ATE of SGM against Swarm-SC (Scan Context association), no
+    /// association, and raw sharing to a central server, on outdoor_two_robots and
+    /// indoor_three_robots.
+    Baselines {
+        /// Cut each mission to this many simulated seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Also write the table as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+    /// Success and error against mislabel rate, trajectory overlap and centroid noise; bytes
+    /// against team size (2–16 robots).
+    Sweeps {
+        /// Cut each mission to this many simulated seconds and sweep fewer values.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Also write the tables as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Draw the plots (PNG) into this directory.
+        #[arg(long)]
+        plots: Option<PathBuf>,
+    },
+    /// Every bench above in one report (report.md, report.json and plots) in --out.
+    All {
+        #[arg(long, default_value = "bench-report")]
+        out: PathBuf,
+        /// Matching repetitions per table cell (the paper uses 20).
+        #[arg(long, default_value_t = 20)]
+        reps: usize,
+        /// Cut each mission to this many simulated seconds and sweep fewer values.
+        #[arg(long)]
+        duration: Option<f64>,
+    },
+}
+
+/// Prints a bench's section and writes its JSON; the exit status.
+fn emit(name: &str, section: anyhow::Result<bench::Section>, json: Option<&std::path::Path>) -> ExitCode {
+    match section.and_then(|s| s.emit(json)) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("sgm bench {name}: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 /// Log lines go to stderr, filtered by `RUST_LOG` (default: warnings, and the node's own
@@ -283,19 +329,24 @@ fn main() -> ExitCode {
         }
         Command::EncodeCloud { cloud, resolution } => cli::encode_cloud_cmd::run(&cloud, resolution),
         Command::Bench { which: BenchCommand::Matching { reps, seed, json, config, skip_dense, error_on } } => {
-            match bench::matching::run(bench::matching::Options { reps, seed, json, config, skip_dense, error_on }) {
-                Ok(()) => ExitCode::SUCCESS,
-                Err(e) => {
-                    eprintln!("sgm bench matching: {e:#}");
-                    ExitCode::FAILURE
-                }
-            }
+            let options = bench::matching::Options { reps, seed, config, skip_dense, error_on };
+            emit("matching", bench::matching::run(options), json.as_deref())
         }
         Command::Bench { which: BenchCommand::Messages { duration, json } } => {
-            match bench::messages::run_bench(bench::messages::Options { duration, json }) {
+            emit("messages", bench::messages::run_bench(duration), json.as_deref())
+        }
+        Command::Bench { which: BenchCommand::Baselines { duration, json } } => {
+            emit("baselines", bench::baselines::run_bench(duration), json.as_deref())
+        }
+        Command::Bench { which: BenchCommand::Sweeps { duration, json, plots } } => {
+            let options = bench::sweeps::Options { duration, plots };
+            emit("sweeps", bench::sweeps::run_bench(&options), json.as_deref())
+        }
+        Command::Bench { which: BenchCommand::All { out, reps, duration } } => {
+            match bench::all::run_bench(bench::all::Options { out, reps, duration }) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
-                    eprintln!("sgm bench messages: {e:#}");
+                    eprintln!("sgm bench all: {e:#}");
                     ExitCode::FAILURE
                 }
             }

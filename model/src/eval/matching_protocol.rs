@@ -34,11 +34,13 @@ pub struct WorldSpec {
     pub objects: usize,
     pub classes: u16,
     pub error_on: ErrorOn,
+    /// Scales the "Err" errors (1: the paper's ±1 m, ±0.5 m, ±2.5°, ±10°), for sweeps.
+    pub noise_scale: f64,
 }
 
 impl Default for WorldSpec {
     fn default() -> Self {
-        Self { side_m: 60.0, objects: 50, classes: 6, error_on: ErrorOn::Both }
+        Self { side_m: 60.0, objects: 50, classes: 6, error_on: ErrorOn::Both, noise_scale: 1.0 }
     }
 }
 
@@ -110,7 +112,7 @@ fn make_graph(
     objects: &[WorldObject],
     chosen: &[usize],
     graph_from_world: &Pose3,
-    noisy: bool,
+    noise: Option<f64>,
     relabel: &[(usize, LabelId)],
     rng: &mut ChaCha8Rng,
 ) -> (ObjectGraph, Vec<(usize, ObjectId)>) {
@@ -121,12 +123,12 @@ fn make_graph(
     for (k, &w) in order.iter().enumerate() {
         let o = objects[w];
         let (mut centroid, mut roll, mut pitch, mut yaw) = (o.centroid, 0.0, 0.0, o.yaw);
-        if noisy {
+        if let Some(k) = noise.filter(|k| *k > 0.0) {
             centroid +=
-                Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-0.5..0.5));
-            roll = rng.random_range(-2.5f64..2.5).to_radians();
-            pitch = rng.random_range(-2.5f64..2.5).to_radians();
-            yaw += rng.random_range(-10.0f64..10.0).to_radians();
+                Vector3::new(rng.random_range(-k..k), rng.random_range(-k..k), rng.random_range(-0.5 * k..0.5 * k));
+            roll = rng.random_range(-2.5 * k..2.5 * k).to_radians();
+            pitch = rng.random_range(-2.5 * k..2.5 * k).to_radians();
+            yaw += rng.random_range(-10.0 * k..10.0 * k).to_radians();
         }
         let label = relabel.iter().find(|(i, _)| *i == w).map(|(_, l)| *l).unwrap_or(o.label);
         let id = ObjectId(k as u32);
@@ -188,12 +190,18 @@ pub fn generate_pair(world_spec: &WorldSpec, spec: &PairSpec, seed: u64) -> Tria
         &objects,
         &local_chosen,
         &world_from_local.inverse(),
-        spec.noisy && world_spec.error_on == ErrorOn::Both,
+        (spec.noisy && world_spec.error_on == ErrorOn::Both).then_some(world_spec.noise_scale),
         &[],
         &mut rng,
     );
-    let (remote, remote_ids) =
-        make_graph(&remote_objects, &remote_chosen, &world_from_remote.inverse(), spec.noisy, &relabel, &mut rng);
+    let (remote, remote_ids) = make_graph(
+        &remote_objects,
+        &remote_chosen,
+        &world_from_remote.inverse(),
+        spec.noisy.then_some(world_spec.noise_scale),
+        &relabel,
+        &mut rng,
+    );
     let true_pairs = if overlap == 0 {
         Vec::new()
     } else {

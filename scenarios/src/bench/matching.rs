@@ -2,13 +2,14 @@
 //! dense paper formulation re-implemented and run on the same pairs, and false claims on
 //! non-overlapping pairs. Success: translation error < 2 m and every axis rotation error < 20°.
 
-use anyhow::Context;
+use super::Section;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 use sgm_model::eval::matching_protocol::{generate_pair, score_trial, ErrorOn, PairSpec, TrialScore, WorldSpec};
 use sgm_model::matching::paper_baseline::match_dense;
 use sgm_model::matching::{match_graphs, LabelSimilarity, MatchOutcome, MatcherConfig};
 use sgm_scenarios::settings::load_matcher_config;
+use std::fmt::Write;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -128,14 +129,13 @@ pub enum ErrorOnArg {
 pub struct Options {
     pub reps: usize,
     pub seed: u64,
-    pub json: Option<PathBuf>,
     pub config: Option<PathBuf>,
     pub skip_dense: bool,
     pub error_on: ErrorOnArg,
 }
 
-pub fn run(options: Options) -> anyhow::Result<()> {
-    let Options { reps, seed, json, config: config_path, skip_dense, error_on } = options;
+pub fn run(options: Options) -> anyhow::Result<Section> {
+    let Options { reps, seed, config: config_path, skip_dense, error_on } = options;
     let world = WorldSpec {
         error_on: match error_on {
             ErrorOnArg::Both => ErrorOn::Both,
@@ -145,7 +145,6 @@ pub fn run(options: Options) -> anyhow::Result<()> {
     };
     anyhow::ensure!(reps > 0, "--reps must be at least 1");
     let config_path = config_path.as_deref();
-    let json = json.as_deref();
     let config = load_matcher_config(config_path)?;
     let overrides: Vec<String> =
         std::env::vars().filter(|(k, _)| k.starts_with("SGM__")).map(|(k, v)| format!("{k}={v} ")).collect();
@@ -199,37 +198,39 @@ pub fn run(options: Options) -> anyhow::Result<()> {
         ErrorOnArg::Remote => format!("{skip_arg} --error-on remote"),
     };
     let command = format!("{}sgm bench matching --reps {reps} --seed {seed}{config_arg}{skip_arg}", overrides.concat());
-    print_tables(&command, reps, &table1, &table2, &false_claims);
-    if let Some(path) = json {
-        let report = Report { command, reps, seed, table1, table2, false_claims };
-        let text = serde_json::to_string_pretty(&report)?;
-        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
-    }
-    Ok(())
+    let markdown = tables(&command, reps, &table1, &table2, &false_claims);
+    let report = Report { command, reps, seed, table1, table2, false_claims };
+    Ok(Section { markdown, json: serde_json::to_value(report)? })
 }
 
-fn print_tables(command: &str, reps: usize, table1: &[Row], table2: &[Row], false_claims: &[Row]) {
-    println!("# Object-graph matching, paper §V-A ({reps} repetitions per cell)\n");
-    println!("Command: `{command}`. Columns give paper / dense paper formulation (ours, re-implemented) / SGM.");
-    println!("Time: median per match on one core, noisy (Err) pairs.\n");
-    println!("## Table 1: success and recall against graph size (no mislabels)\n");
-    println!("| G1 | G2 | overlap | success NoErr % | success Err % | recall NoErr % | recall Err % | time ms |");
-    println!("|---|---|---|---|---|---|---|---|");
+fn tables(command: &str, reps: usize, table1: &[Row], table2: &[Row], false_claims: &[Row]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Object-graph matching, paper §V-A ({reps} repetitions per cell)\n");
+    let _ =
+        writeln!(s, "Command: `{command}`. Columns give paper / dense paper formulation (ours, re-implemented) / SGM.");
+    let _ = writeln!(s, "Time: median per match on one core, noisy (Err) pairs.\n");
+    let _ = writeln!(s, "## Table 1: success and recall against graph size (no mislabels)\n");
+    let _ = writeln!(
+        s,
+        "| G1 | G2 | overlap | success NoErr % | success Err % | recall NoErr % | recall Err % | time ms |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
     for r in table1 {
-        println!("| {} | {} | {} | {} |", r.local, r.remote, r.overlap, cells(r));
+        let _ = writeln!(s, "| {} | {} | {} | {} |", r.local, r.remote, r.overlap, cells(r));
     }
-    println!("\n## Table 2: success and recall with mislabels (35 / 32 objects, 17 shared)\n");
-    println!("| mislabels | success NoErr % | success Err % | recall NoErr % | recall Err % | time ms |");
-    println!("|---|---|---|---|---|---|");
+    let _ = writeln!(s, "\n## Table 2: success and recall with mislabels (35 / 32 objects, 17 shared)\n");
+    let _ = writeln!(s, "| mislabels | success NoErr % | success Err % | recall NoErr % | recall Err % | time ms |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|");
     for r in table2 {
-        println!("| {} | {} |", r.mislabels, cells(r));
+        let _ = writeln!(s, "| {} | {} |", r.mislabels, cells(r));
     }
-    println!("\n## False claims on non-overlapping pairs (a transform returned where none exists)\n");
-    println!("| G1 | G2 | claims NoErr % (dense / SGM) | claims Err % (dense / SGM) |");
-    println!("|---|---|---|---|");
+    let _ = writeln!(s, "\n## False claims on non-overlapping pairs (a transform returned where none exists)\n");
+    let _ = writeln!(s, "| G1 | G2 | claims NoErr % (dense / SGM) | claims Err % (dense / SGM) |");
+    let _ = writeln!(s, "|---|---|---|---|");
     for r in false_claims {
         let d = dense_or_nan(r);
-        println!(
+        let _ = writeln!(
+            s,
             "| {} | {} | {} / {} | {} / {} |",
             r.local,
             r.remote,
@@ -239,6 +240,7 @@ fn print_tables(command: &str, reps: usize, table1: &[Row], table2: &[Row], fals
             num(r.sgm[1].claims_pct, 1)
         );
     }
+    s
 }
 
 /// A percentage or time with `decimals`, "–" where not measured.

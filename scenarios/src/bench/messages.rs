@@ -4,14 +4,10 @@
 //! upper bound) and the paper's own figures. Sizes are whole sealed envelopes (header, payload
 //! and MAC), in KB of 1000 bytes as the paper's table appears to use.
 
-use anyhow::Context;
+use super::{duration_arg, load_cut, run_report, Section, PAPER_SCENARIOS};
 use serde::Serialize;
-use sgm_scenarios::report::{self, MessageRow};
-use sgm_scenarios::runner::run;
-use sgm_scenarios::scenario::Scenario;
-use std::path::PathBuf;
-
-const SCENARIOS: [(&str, &str); 2] = [("outdoor_two_robots", "Outdoor"), ("indoor_three_robots", "Indoor")];
+use sgm_scenarios::report::MessageRow;
+use std::fmt::Write;
 
 const PAPER_ORDER: [&str; 3] = ["ObjectData", "KeyframeRequest", "KeyframeResponse"];
 
@@ -59,24 +55,11 @@ struct Report {
     environments: Vec<Environment>,
 }
 
-pub struct Options {
-    /// Cut each mission to this many seconds (the test suite's reduced mode).
-    pub duration: Option<f64>,
-    pub json: Option<PathBuf>,
-}
-
-pub fn run_bench(options: Options) -> anyhow::Result<()> {
+/// `duration`: cut each mission to this many seconds (the test suite's reduced mode).
+pub fn run_bench(duration: Option<f64>) -> anyhow::Result<Section> {
     let (mut rows, mut environments) = (Vec::new(), Vec::new());
-    for (name, env) in SCENARIOS {
-        let mut scenario = Scenario::load(name)?;
-        if let Some(d) = options.duration {
-            anyhow::ensure!(d > 0.0, "--duration must be positive");
-            scenario.scenario.duration_s = scenario.scenario.duration_s.min(d);
-        }
-        let system = actix_rt::System::new();
-        let outcome = system.block_on(run(&scenario, None)).with_context(|| format!("running {name}"))?;
-        let r = report::compute(&outcome.record);
-        eprintln!("{name}: {:.0} s simulated in {:.1} s", r.sim_s, outcome.timing.wall_s);
+    for (name, env) in PAPER_SCENARIOS {
+        let r = run_report(&load_cut(name, duration)?, name)?;
         rows.push(Row {
             kind: "PointCloudRaw".into(),
             env,
@@ -100,29 +83,26 @@ pub fn run_bench(options: Options) -> anyhow::Result<()> {
             pairs: r.alignments.len(),
         });
     }
-    let duration_arg = options.duration.map(|d| format!(" --duration {d}")).unwrap_or_default();
-    let command = format!("sgm bench messages{duration_arg}");
-    print_table(&command, &rows, &environments);
-    if let Some(path) = &options.json {
-        let text = serde_json::to_string_pretty(&Report { command, rows, environments })?;
-        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
-    }
-    Ok(())
+    let command = format!("sgm bench messages{}", duration_arg(duration));
+    let markdown = table(&command, &rows, &environments);
+    Ok(Section { markdown, json: serde_json::to_value(Report { command, rows, environments })? })
 }
 
 fn kb(bytes: f64) -> String {
     format!("{:.2}", bytes / 1000.0)
 }
 
-fn print_table(command: &str, rows: &[Row], environments: &[Environment]) {
-    println!("# Message sizes, paper §V-C Table 4\n");
-    println!("Command: `{command}`. Sizes in KB (1000 bytes) of whole sealed envelopes; each cell is");
-    println!("paper / **ours**; \"–\" where the paper has no such message.\n");
-    println!("| message type | env. | mean KB | max KB | count |");
-    println!("|---|---|---|---|---|");
+fn table(command: &str, rows: &[Row], environments: &[Environment]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Message sizes, paper §V-C Table 4\n");
+    let _ = writeln!(s, "Command: `{command}`. Sizes in KB (1000 bytes) of whole sealed envelopes; each cell is");
+    let _ = writeln!(s, "paper / **ours**; \"–\" where the paper has no such message.\n");
+    let _ = writeln!(s, "| message type | env. | mean KB | max KB | count |");
+    let _ = writeln!(s, "|---|---|---|---|---|");
     for r in rows {
         let p = |k: usize, decimals: usize| r.paper.map_or("–".to_string(), |p| format!("{:.decimals$}", p[k]));
-        println!(
+        let _ = writeln!(
+            s,
             "| {} | {} | {} / **{}** | {} / **{}** | {} / **{}** |",
             r.kind,
             r.env,
@@ -134,10 +114,11 @@ fn print_table(command: &str, rows: &[Row], environments: &[Environment]) {
             r.ours.count
         );
     }
-    println!("\n| env. | simulated s | SGM total MB | raw total MB | SGM ÷ raw | aligned pairs |");
-    println!("|---|---|---|---|---|---|");
+    let _ = writeln!(s, "\n| env. | simulated s | SGM total MB | raw total MB | SGM ÷ raw | aligned pairs |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|");
     for e in environments {
-        println!(
+        let _ = writeln!(
+            s,
             "| {} | {:.0} | {:.2} | {:.1} | {:.3} % | {} of {} |",
             e.env,
             e.sim_s,
@@ -148,4 +129,5 @@ fn print_table(command: &str, rows: &[Row], environments: &[Environment]) {
             e.pairs
         );
     }
+    s
 }

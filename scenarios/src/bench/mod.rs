@@ -1,2 +1,62 @@
+//! `sgm bench …`: the paper's experiments. Each bench returns a [`Section`] (a markdown table
+//! that names the command which made it, and the same figures as JSON); `sgm bench all`
+//! gathers every section into one report.
+
+pub mod all;
+pub mod baselines;
 pub mod matching;
 pub mod messages;
+pub mod sweeps;
+
+use anyhow::Context;
+use sgm_scenarios::report::{self, Report};
+use sgm_scenarios::runner::run;
+use sgm_scenarios::scenario::Scenario;
+use std::path::Path;
+
+/// One bench's output.
+pub struct Section {
+    pub markdown: String,
+    pub json: serde_json::Value,
+}
+
+impl Section {
+    /// Prints the markdown; writes the JSON to `json` if given.
+    pub fn emit(&self, json: Option<&Path>) -> anyhow::Result<()> {
+        println!("{}", self.markdown);
+        if let Some(path) = json {
+            let text = serde_json::to_string_pretty(&self.json)?;
+            std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+        }
+        Ok(())
+    }
+}
+
+/// The paper's two real-world environments as library scenarios.
+pub const PAPER_SCENARIOS: [(&str, &str); 2] = [("outdoor_two_robots", "Outdoor"), ("indoor_three_robots", "Indoor")];
+
+/// A library scenario, its mission cut to `duration` s when given (the test suite's reduced
+/// mode).
+pub fn load_cut(name: &str, duration: Option<f64>) -> anyhow::Result<Scenario> {
+    let mut scenario = Scenario::load(name)?;
+    if let Some(d) = duration {
+        anyhow::ensure!(d.is_finite() && d > 0.0, "--duration must be positive, not {d}");
+        scenario.scenario.duration_s = scenario.scenario.duration_s.min(d);
+    }
+    Ok(scenario)
+}
+
+/// Runs `scenario` to its end in a fresh actix system and computes its report; `label` names
+/// the run in the progress line on stderr.
+pub fn run_report(scenario: &Scenario, label: &str) -> anyhow::Result<Report> {
+    let system = actix_rt::System::new();
+    let outcome = system.block_on(run(scenario, None)).with_context(|| format!("running {label}"))?;
+    let r = report::compute(&outcome.record);
+    eprintln!("{label}: {:.0} s simulated in {:.1} s", r.sim_s, outcome.timing.wall_s);
+    Ok(r)
+}
+
+/// `--duration D` as it appears in a command line, or nothing.
+pub fn duration_arg(duration: Option<f64>) -> String {
+    duration.map(|d| format!(" --duration {d}")).unwrap_or_default()
+}

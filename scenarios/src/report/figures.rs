@@ -87,6 +87,14 @@ pub struct Report {
     pub team_ate_rmse_m: Option<f64>,
     /// Robots merged into the team ATE (the reference first).
     pub team_ate_robots: Vec<String>,
+    /// Team ATE of every robot: those the reference has not aligned are placed by the only
+    /// guess a team without association has, their start frame on the reference's (Table 3's
+    /// convention, so that methods that align fewer robots are not flattered), m.
+    pub team_ate_all_start_guess_m: Option<f64>,
+    /// Team ATE of every robot with each map joined to the reference by the true transform
+    /// (each map placed on the truth by its best fit): what a central optimiser holding every
+    /// raw scan with a perfect association reaches without re-optimising the maps, m.
+    pub team_ate_oracle_join_m: Option<f64>,
     pub robots: Vec<RobotReport>,
     pub alignments: Vec<AlignmentReport>,
     /// Sent by the whole team, per message type (paper Table 4).
@@ -163,9 +171,19 @@ fn positions(samples: &[(f64, Pose3, Pose3)], transform: &Pose3) -> (Vec<Point3<
 
 /// Team ATE at one observation, and the robots it merged.
 fn team_ate(observation: &Observation, record: &RunRecord) -> (Option<f64>, Vec<String>) {
+    team_ate_placed(observation, record, |k| reference_from(observation, k))
+}
+
+/// Team ATE with robot k's map placed in the reference's world by `placed(k)` (skipped when
+/// `None`), and the robots it merged.
+fn team_ate_placed(
+    observation: &Observation,
+    record: &RunRecord,
+    placed: impl Fn(usize) -> Option<Pose3>,
+) -> (Option<f64>, Vec<String>) {
     let (mut estimate, mut truth, mut names) = (Vec::new(), Vec::new(), Vec::new());
     for (k, robot) in record.robots.iter().enumerate() {
-        let Some(transform) = reference_from(observation, k) else { continue };
+        let Some(transform) = placed(k) else { continue };
         let samples = trajectory(observation, k, robot);
         if samples.is_empty() {
             continue;
@@ -317,6 +335,11 @@ pub fn compute(record: &RunRecord) -> Report {
         bytes_max: record.robots.iter().map(|r| r.raw_max_bytes).max().unwrap_or(0),
     };
     let (team_ate_rmse_m, team_ate_robots) = team_ate(&last, record);
+    let start_guess = |k| Some(reference_from(&last, k).unwrap_or_else(Pose3::identity));
+    let team_ate_all_start_guess_m = team_ate_placed(&last, record, start_guess).0;
+    let fits = maps_on_truth(&last, record);
+    let oracle = |k| true_local_from_remote(&fits, record, 0, k);
+    let team_ate_oracle_join_m = team_ate_placed(&last, record, oracle).0;
     let series = record
         .observations
         .iter()
@@ -333,6 +356,8 @@ pub fn compute(record: &RunRecord) -> Report {
         sim_s: record.sim_s,
         team_ate_rmse_m,
         team_ate_robots,
+        team_ate_all_start_guess_m,
+        team_ate_oracle_join_m,
         robots,
         alignments,
         messages,

@@ -5,7 +5,7 @@
 mod figures;
 mod map_cloud;
 mod markdown;
-mod plots;
+pub mod plots;
 mod truth;
 mod tum;
 

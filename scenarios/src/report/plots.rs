@@ -235,3 +235,69 @@ fn bytes(report: &Report, path: &Path, text: bool) -> Result<(), String> {
     }
     root.present().map_err(err)
 }
+
+/// One line of a [`lines`] plot.
+pub struct Series<'a> {
+    pub name: &'a str,
+    pub points: Vec<(f64, f64)>,
+}
+
+/// A line plot with markers of `series` (the benches' sweeps); `log_y` for byte counts.
+pub fn lines(path: &Path, x_desc: &str, y_desc: &str, series: &[Series], log_y: bool) -> Result<(), String> {
+    let text = font();
+    let all = series.iter().flat_map(|s| s.points.iter());
+    let (mut x0, mut x1, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+    let mut y0 = f64::INFINITY;
+    for &(x, y) in all {
+        (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+    }
+    if !x0.is_finite() {
+        (x0, x1, y0, y1) = (0.0, 1.0, 1.0, 1.0);
+    }
+    if x1 <= x0 {
+        x1 = x0 + 1.0;
+    }
+    let root = BitMapBackend::new(path, (800, 500)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let mut builder = ChartBuilder::on(&root);
+    builder.margin(20).x_label_area_size(if text { 40 } else { 5 }).y_label_area_size(if text { 80 } else { 5 });
+    let colour = |k: usize| ROBOT_COLOURS[k % ROBOT_COLOURS.len()];
+    macro_rules! draw {
+        ($chart:expr) => {{
+            let mut chart = $chart;
+            let mut mesh = chart.configure_mesh();
+            if text {
+                mesh.x_desc(x_desc).y_desc(y_desc);
+            } else {
+                mesh.x_labels(0).y_labels(0);
+            }
+            mesh.draw().map_err(err)?;
+            for (k, s) in series.iter().enumerate() {
+                let c = colour(k);
+                let drawn =
+                    chart.draw_series(LineSeries::new(s.points.iter().copied(), c.stroke_width(2))).map_err(err)?;
+                if text {
+                    drawn
+                        .label(s.name)
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+                }
+                chart.draw_series(s.points.iter().map(|p| Circle::new(*p, 4, c.filled()))).map_err(err)?;
+            }
+            if text {
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.8))
+                    .border_style(BLACK)
+                    .draw()
+                    .map_err(err)?;
+            }
+        }};
+    }
+    if log_y {
+        let range = (y0.max(1.0) / 2.0)..(y1.max(1.0) * 2.0);
+        draw!(builder.build_cartesian_2d(x0..x1, range.log_scale()).map_err(err)?);
+    } else {
+        draw!(builder.build_cartesian_2d(x0..x1, 0.0..(y1 * 1.1).max(1e-3)).map_err(err)?);
+    }
+    root.present().map_err(err)
+}
