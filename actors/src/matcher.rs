@@ -108,6 +108,19 @@ fn medoid(poses: &[Pose3]) -> Option<Pose3> {
 /// How long a refuted transform is remembered, s.
 const REFUTED_FOR_S: f64 = 120.0;
 
+/// Whether `transform` lands within 2 m and 5° of one refuted less than [`REFUTED_FOR_S`] ago.
+fn refuted_recently(refuted: &[(Pose3, Stamp)], transform: &Pose3, now: Stamp) -> bool {
+    refuted.iter().any(|(t, when)| {
+        let e = pose_error(transform, t);
+        now - when < REFUTED_FOR_S && e.translation_m < 2.0 && e.max_axis_rotation_deg() < 5.0
+    })
+}
+
+/// A turn by `yaw` about z, rad.
+fn yaw_turn(yaw: f64) -> Pose3 {
+    Pose3::from_parts(Default::default(), nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, yaw))
+}
+
 pub struct Matcher {
     robot: RobotId,
     config: MatcherSection,
@@ -200,11 +213,7 @@ impl Matcher {
         if alignment.matches.len() < min_matched {
             return;
         }
-        let refuted_recently = refuted.iter().any(|(t, when)| {
-            let e = pose_error(&alignment.local_from_remote, t);
-            now - when < REFUTED_FOR_S && e.translation_m < 2.0 && e.max_axis_rotation_deg() < 5.0
-        });
-        if refuted_recently {
+        if refuted_recently(&refuted, &alignment.local_from_remote, now) {
             return;
         }
         let pairs: Vec<(ObjectId, ObjectId)> = alignment.matches.iter().map(|m| (m.local, m.remote)).collect();
@@ -237,14 +246,8 @@ impl Matcher {
             let (Some(local), Some(remote)) = (self.keyframes.get(&c.local), entry.places.remote_pose(c.remote)) else {
                 continue;
             };
-            let turn =
-                Pose3::from_parts(Default::default(), nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, -c.yaw));
-            let guess = local.world_from_body * turn * remote.inverse();
-            let refuted = entry.refuted.iter().any(|(t, when)| {
-                let e = pose_error(&guess, t);
-                now - when < REFUTED_FOR_S && e.translation_m < 2.0 && e.max_axis_rotation_deg() < 5.0
-            });
-            if !refuted {
+            let guess = local.world_from_body * yaw_turn(-c.yaw) * remote.inverse();
+            if !refuted_recently(&entry.refuted, &guess, now) {
                 break (c, guess);
             }
         };
@@ -281,8 +284,7 @@ impl Matcher {
         let local = self.keyframes.get(&pair.local)?;
         let remote = entry.keyframes.get(&pair.remote)?;
         let target: Vec<Point3<f64>> = local.points.iter().map(|p| p.cast::<f64>()).collect();
-        let initial =
-            Pose3::from_parts(Default::default(), nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, -pair.yaw));
+        let initial = yaw_turn(-pair.yaw);
         let coarse = IcpConfig {
             max_correspondence_distance_m: self.config.scan_context.coarse_correspondence_m,
             max_iterations: fine.max_iterations * 2,
