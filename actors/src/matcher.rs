@@ -501,9 +501,13 @@ impl Handler<NeighbourDescriptors> for Matcher {
                 return;
             }
             let now = self.clock.now();
+            let shape = (self.config.scan_context.descriptor.rings, self.config.scan_context.descriptor.sectors);
             let entry = self.entry(msg.robot);
+            // A descriptor of another shape can never match ours: not kept.
             for (id, world_from_body, descriptor) in msg.descriptors {
-                entry.places.add_remote(id, world_from_body, Place::new(descriptor));
+                if (descriptor.rings, descriptor.sectors) == shape {
+                    entry.places.add_remote(id, world_from_body, Place::new(descriptor));
+                }
             }
             // The number of descriptors held stands in for an object-data revision.
             let revision = u32::try_from(entry.places.remote_count()).unwrap_or(u32::MAX);

@@ -120,7 +120,7 @@ fn samples(waypoints: &[[f64; 2]], step: f64) -> Vec<[f64; 2]> {
 }
 
 /// Share of `b`'s path within `radius` m of `a`'s path.
-pub fn overlap(a: &[[f64; 2]], b: &[[f64; 2]], radius: f64) -> f64 {
+fn overlap(a: &[[f64; 2]], b: &[[f64; 2]], radius: f64) -> f64 {
     let (sa, sb) = (samples(a, 0.5), samples(b, 0.5));
     let near = sb.iter().filter(|p| sa.iter().any(|q| (p[0] - q[0]).hypot(p[1] - q[1]) <= radius)).count();
     near as f64 / sb.len().max(1) as f64
