@@ -77,8 +77,9 @@ struct NeighbourEntry {
     last_attempt: Option<Stamp>,
     /// Scan Context association only: the neighbour's descriptors and the candidate pairs.
     places: PlaceCandidates,
-    /// Scan Context association only: the pair of the current round and the local keyframes
-    /// around its local one (object association derives its targets from the object pairs).
+    /// Scan Context association only (never set otherwise): the pair of the current round and
+    /// the local keyframes around its local one (object association derives its targets from
+    /// the object pairs).
     place_round: Option<(PlaceCandidate, BTreeSet<KeyframeId>)>,
 }
 
@@ -369,7 +370,7 @@ impl Matcher {
         // Local keyframes that observed the matched objects are the registration targets (with
         // Scan Context, those around the round's local keyframe).
         let local_ids: BTreeSet<KeyframeId> = match &entry.place_round {
-            Some((_, targets)) if self.config.association == Association::ScanContext => targets.clone(),
+            Some((_, targets)) => targets.clone(),
             _ => n.state.pairs.iter().filter_map(|(l, _)| self.local.observed_in.get(l)).flatten().copied().collect(),
         };
         let mut factors = Vec::new();
@@ -380,7 +381,7 @@ impl Matcher {
             max_iterations: self.config.keyframe_max_iterations,
             ..self.config.icp.clone()
         };
-        if let (Some((pair, _)), Association::ScanContext) = (&entry.place_round, self.config.association) {
+        if let Some((pair, _)) = &entry.place_round {
             if let Some(refined) = self.coarse_to_fine(entry, pair, &keyframe_icp) {
                 local_from_remote = refined;
             }

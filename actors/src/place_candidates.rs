@@ -61,29 +61,26 @@ impl PlaceCandidates {
         for (id, place) in local.iter().filter(|(id, _)| !self.queried_local.contains(id)) {
             let database = self.remote.iter().map(|(r, (_, p))| (*r, p));
             if let Some((remote, m)) = retrieve(place, database, k) {
-                found.push((*id, remote, m, place));
+                let yaw = place.descriptor.yaw_of_shift(m.shift);
+                found.push(PlaceCandidate { local: *id, remote, distance: m.distance, yaw });
             }
         }
         self.queried_local.extend(local.keys().copied());
         for (id, (_, place)) in self.remote.iter().filter(|(id, _)| !self.queried_remote.contains(id)) {
             if let Some((local_id, m)) = retrieve(place, local.iter().map(|(l, p)| (*l, p)), k) {
-                // `place` is the query here: turn the match around (ours ↔ theirs).
-                let shift = (place.descriptor.sectors - m.shift) % place.descriptor.sectors.max(1);
-                let m = sgm_model::matching::scan_context::ScanContextMatch { shift, ..m };
-                if let Some(l) = local.get(&local_id) {
-                    found.push((local_id, *id, m, l));
-                }
+                // `place` is the query here: the match turned around (ours ↔ theirs).
+                let sectors = place.descriptor.sectors.max(1);
+                let yaw = place.descriptor.yaw_of_shift((sectors - m.shift) % sectors);
+                found.push(PlaceCandidate { local: local_id, remote: *id, distance: m.distance, yaw });
             }
         }
         self.queried_remote.extend(self.remote.keys().copied());
-        for (local, remote, m, place) in found {
-            let pair = (local, remote);
-            let known = self.waiting.iter().any(|c| (c.local, c.remote) == pair);
-            if m.distance > config.max_distance || known || self.tried.contains(&pair) {
-                continue;
+        for c in found {
+            let pair = (c.local, c.remote);
+            let known = self.waiting.iter().any(|w| (w.local, w.remote) == pair);
+            if c.distance <= config.max_distance && !known && !self.tried.contains(&pair) {
+                self.waiting.push(c);
             }
-            let yaw = place.descriptor.yaw_of_shift(m.shift);
-            self.waiting.push(PlaceCandidate { local, remote, distance: m.distance, yaw });
         }
         self.waiting
             .sort_by(|a, b| a.distance.total_cmp(&b.distance).then((a.local, a.remote).cmp(&(b.local, b.remote))));

@@ -14,7 +14,9 @@
 //! reference has not aligned sits at the reference's start frame, the only guess left without
 //! association. A method that aligns wrongly or not at all pays for it.
 
-use super::{duration_arg, load_cut, run_report, Section, PAPER_SCENARIOS};
+use super::{
+    aligned_right, duration_arg, load_cut, or_dash, radio_bytes, run_report, Section, PAPER_SCENARIOS, WRONG_M,
+};
 use serde::Serialize;
 use sgm_actors::config::Association;
 use sgm_scenarios::report::Report;
@@ -27,9 +29,6 @@ fn paper(env: &str) -> [f64; 3] {
         _ => [3.36, 5.70, 0.81],
     }
 }
-
-/// An alignment this far from the truth counts as wrong, m.
-const WRONG_M: f64 = 2.0;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct MethodRow {
@@ -67,7 +66,7 @@ struct Json {
 
 fn method_row(env: &'static str, method: &'static str, r: &Report) -> MethodRow {
     let aligned: Vec<_> = r.alignments.iter().filter(|a| a.state == "Aligned").collect();
-    let wrong = aligned.iter().filter(|a| a.translation_error_m.is_none_or(|e| e > WRONG_M)).count();
+    let wrong = aligned.iter().filter(|a| !aligned_right(a)).count();
     MethodRow {
         env,
         method,
@@ -76,7 +75,7 @@ fn method_row(env: &'static str, method: &'static str, r: &Report) -> MethodRow 
         wrong_pairs: wrong,
         pairs: r.alignments.len(),
         first_aligned_s: r.alignments.iter().filter_map(|a| a.first_aligned_s).min_by(f64::total_cmp),
-        bytes_total: r.messages.values().map(|m| m.bytes_total).sum(),
+        bytes_total: radio_bytes(r),
     }
 }
 
@@ -125,10 +124,6 @@ pub fn run_bench(duration: Option<f64>) -> anyhow::Result<Section> {
     Ok(Section { markdown, json: serde_json::to_value(Json { command, rows, environments })? })
 }
 
-fn metres(v: Option<f64>) -> String {
-    v.map_or("–".into(), |v| format!("{v:.2}"))
-}
-
 fn table(command: &str, rows: &[MethodRow], environments: &[Environment]) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Team ATE against baselines, paper §V-B Table 3\n");
@@ -143,11 +138,11 @@ fn table(command: &str, rows: &[MethodRow], environments: &[Environment]) -> Str
             "| {} | {} | {} | {} of {} ({}) | {} | {:.2} |",
             r.env,
             r.method,
-            metres(r.team_ate_m),
+            or_dash(r.team_ate_m, 2),
             r.aligned_pairs,
             r.pairs,
             r.wrong_pairs,
-            r.first_aligned_s.map_or("–".into(), |t| format!("{t:.0}")),
+            or_dash(r.first_aligned_s, 0),
             r.bytes_total as f64 / 1e6
         );
     }

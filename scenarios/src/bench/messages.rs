@@ -4,7 +4,7 @@
 //! upper bound) and the paper's own figures. Sizes are whole sealed envelopes (header, payload
 //! and MAC), in KB of 1000 bytes as the paper's table appears to use.
 
-use super::{duration_arg, load_cut, run_report, Section, PAPER_SCENARIOS};
+use super::{duration_arg, load_cut, radio_bytes, run_report, Section, PAPER_SCENARIOS};
 use serde::Serialize;
 use sgm_scenarios::report::MessageRow;
 use std::fmt::Write;
@@ -76,7 +76,7 @@ pub fn run_bench(duration: Option<f64>) -> anyhow::Result<Section> {
             scenario: name,
             env,
             sim_s: r.sim_s,
-            total_bytes: r.messages.values().map(|m| m.bytes_total).sum(),
+            total_bytes: radio_bytes(&r),
             raw_bytes: r.point_cloud_raw.bytes_total,
             ratio_to_raw: r.bytes_ratio_to_raw,
             aligned_pairs: r.alignments.iter().filter(|a| a.first_aligned_s.is_some()).count(),

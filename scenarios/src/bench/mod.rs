@@ -56,6 +56,24 @@ pub fn run_report(scenario: &Scenario, label: &str) -> anyhow::Result<Report> {
     Ok(r)
 }
 
+/// An alignment farther than this from the truth counts as wrong, m.
+pub const WRONG_M: f64 = 2.0;
+
+/// Whether an alignment report is aligned and within [`WRONG_M`] of the truth.
+pub fn aligned_right(a: &sgm_scenarios::report::AlignmentReport) -> bool {
+    a.state == "Aligned" && a.translation_error_m.is_some_and(|e| e <= WRONG_M)
+}
+
+/// Bytes the whole team sent over the radio.
+pub fn radio_bytes(r: &Report) -> u64 {
+    r.messages.values().map(|m| m.bytes_total).sum()
+}
+
+/// `v` with `decimals` for a table cell, "–" when there is none.
+pub fn or_dash(v: Option<f64>, decimals: usize) -> String {
+    v.map_or("–".into(), |v| format!("{v:.decimals$}"))
+}
+
 /// `--duration D` as it appears in a command line, or nothing.
 pub fn duration_arg(duration: Option<f64>) -> String {
     duration.map(|d| format!(" --duration {d}")).unwrap_or_default()

@@ -12,7 +12,7 @@
 //! Success of a mission: every directed pair aligned and none more than 2 m from the truth.
 //! Team ATE as in Table 3 (`Report::team_ate_all_start_guess_m`).
 
-use super::{duration_arg, load_cut, run_report, Section};
+use super::{aligned_right, duration_arg, load_cut, or_dash, radio_bytes, run_report, Section, WRONG_M};
 use serde::Serialize;
 use sgm_model::eval::matching_protocol::{generate_pair, score_trial, PairSpec, WorldSpec};
 use sgm_model::geometry::pose_error;
@@ -22,9 +22,6 @@ use sgm_scenarios::report::Report;
 use sgm_scenarios::scenario::{RobotSpec, RouteSpec, Scenario};
 use std::fmt::Write;
 use std::path::Path;
-
-/// An alignment this far from the truth counts as wrong, m.
-const WRONG_M: f64 = 2.0;
 
 /// What a sweep point measured.
 #[derive(Clone, Debug, Serialize)]
@@ -60,17 +57,9 @@ pub struct Options {
 /// Success and mean figures of the missions of one sweep value.
 fn mission_point(x: f64, reports: &[Report]) -> Point {
     let n = reports.len().max(1) as f64;
-    let success = reports
-        .iter()
-        .filter(|r| {
-            !r.alignments.is_empty()
-                && r.alignments
-                    .iter()
-                    .all(|a| a.state == "Aligned" && a.translation_error_m.is_some_and(|e| e <= WRONG_M))
-        })
-        .count();
+    let success = reports.iter().filter(|r| !r.alignments.is_empty() && r.alignments.iter().all(aligned_right)).count();
     let errors: Vec<f64> = reports.iter().filter_map(|r| r.team_ate_all_start_guess_m).collect();
-    let bytes: f64 = reports.iter().map(|r| r.messages.values().map(|m| m.bytes_total).sum::<u64>() as f64).sum();
+    let bytes: f64 = reports.iter().map(|r| radio_bytes(r) as f64).sum();
     let raw: f64 = reports.iter().map(|r| r.point_cloud_raw.bytes_total as f64).sum();
     Point {
         x,
@@ -82,7 +71,8 @@ fn mission_point(x: f64, reports: &[Report]) -> Point {
     }
 }
 
-/// Missions of `scenario` changed by `set` for every value, over `seeds`.
+/// One point per value: the missions `build` makes for it with each seed (`build` returns the
+/// measured x, e.g. the overlap share, and the scenario).
 fn sweep_missions(
     what: &str,
     values: &[f64],
@@ -256,10 +246,6 @@ fn plot(json: &Json, dir: &Path) -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)
 }
 
-fn cell(v: Option<f64>, decimals: usize) -> String {
-    v.map_or("–".into(), |v| format!("{v:.decimals$}"))
-}
-
 fn table(json: &Json, plotted: bool) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Sweeps\n");
@@ -277,9 +263,9 @@ fn table(json: &Json, plotted: bool) -> String {
                 p.x,
                 p.runs,
                 p.success_pct,
-                cell(p.error_m, 2),
-                cell(p.bytes_total.map(|b| b / 1e6), 2),
-                cell(p.raw_bytes.map(|b| b / 1e6), 1)
+                or_dash(p.error_m, 2),
+                or_dash(p.bytes_total.map(|b| b / 1e6), 2),
+                or_dash(p.raw_bytes.map(|b| b / 1e6), 1)
             );
         }
     };
@@ -288,7 +274,7 @@ fn table(json: &Json, plotted: bool) -> String {
     let _ = writeln!(s, "\n## Centroid noise (matcher, paper §V-A protocol, 35 / 32 objects, 17 shared)\n");
     let _ = writeln!(s, "| σ m | pairs | success % | mean translation error of claims m |\n|---|---|---|---|");
     for p in &json.centroid_noise {
-        let _ = writeln!(s, "| {:.1} | {} | {:.0} | {} |", p.x, p.runs, p.success_pct, cell(p.error_m, 2));
+        let _ = writeln!(s, "| {:.1} | {} | {:.0} | {} |", p.x, p.runs, p.success_pct, or_dash(p.error_m, 2));
     }
     mission(&mut s, "Team size (team_of_eight's campus, generated routes)", "robots", &json.team_size, 0);
     s

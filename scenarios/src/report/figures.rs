@@ -337,7 +337,6 @@ pub fn compute(record: &RunRecord) -> Report {
     let (team_ate_rmse_m, team_ate_robots) = team_ate(&last, record);
     let start_guess = |k| Some(reference_from(&last, k).unwrap_or_else(Pose3::identity));
     let team_ate_all_start_guess_m = team_ate_placed(&last, record, start_guess).0;
-    let fits = maps_on_truth(&last, record);
     let oracle = |k| true_local_from_remote(&fits, record, 0, k);
     let team_ate_oracle_join_m = team_ate_placed(&last, record, oracle).0;
     let series = record
