@@ -10,6 +10,7 @@ use sgm_model::matching::MatcherConfig;
 use sgm_model::perception::classes::{ClassSpec, ClassTable};
 use sgm_model::perception::icp::IcpConfig;
 use sgm_model::perception::keyframes::KeyframeConfig;
+use sgm_model::perception::label_vote::LabelVote;
 use sgm_model::perception::loop_closure::LoopClosureConfig;
 use sgm_model::perception::structure_check::StructureCheck;
 use sgm_model::perception::tracker::TrackerConfig;
@@ -58,6 +59,10 @@ pub struct FusionConfig {
     /// Clusters flatter than this are not objects: labels that bled onto the ground behind an
     /// object in the image, m. Default 0.2.
     pub min_object_height_m: f64,
+    /// Each labelled return takes the most common class among its neighbours first: labels
+    /// that bled across depth edges in the image go back to what surrounds them in 3D
+    /// (`model::perception::label_vote`).
+    pub label_vote: LabelVote,
     /// The class table. Default: [`default_classes`].
     pub classes: Vec<ClassSpec>,
 }
@@ -69,6 +74,7 @@ impl Default for FusionConfig {
             max_range_m: 60.0,
             object_range_m: 30.0,
             min_object_height_m: 0.2,
+            label_vote: LabelVote::default(),
             classes: default_classes(),
         }
     }
@@ -386,6 +392,7 @@ impl RobotConfig {
             f.min_object_height_m,
             "finite and ≥ 0",
         )?;
+        check(non_negative(f.label_vote.voxel_m), "fusion.label_vote.voxel_m", f.label_vote.voxel_m, "finite and ≥ 0")?;
         let k = &self.tracker.keyframes;
         check(positive(k.min_translation_m), "tracker.keyframes.min_translation_m", k.min_translation_m, "> 0")?;
         check(positive(k.min_rotation_rad), "tracker.keyframes.min_rotation_rad", k.min_rotation_rad, "> 0")?;

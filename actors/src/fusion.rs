@@ -1,6 +1,7 @@
 //! `Fusion` (paper §IV-A): LiDAR points take the class of their pixel in the segmented image
-//! (`model::perception::projection`), or keep per-point labels given upstream; classes that are
-//! not objects are cleared; points beyond range are dropped; objects are clustered per class
+//! (`model::perception::projection`), or keep per-point labels given upstream; a vote among
+//! 3D neighbours undoes labels that bled across depth edges (`model::perception::label_vote`);
+//! classes that are not objects are cleared; points beyond range are dropped; objects are clustered per class
 //! (`model::perception::clustering`). Out: a [`LabelledScan`] to the Tracker.
 
 use crate::config::FusionConfig;
@@ -9,6 +10,7 @@ use crate::messages::{FrameLabels, LabelledScan, SensorFrame};
 use actix::{Actor, Context, Handler, Recipient, Supervised};
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::perception::clustering::{cluster, ClusterConfig};
+use sgm_model::perception::label_vote::{vote, LabelVote};
 use sgm_model::perception::projection::label_points;
 use sgm_model::scene_graph::LabelId;
 
@@ -17,6 +19,7 @@ pub struct Fusion {
     clustering: ClusterConfig,
     max_range_m: f64,
     object_range_m: f64,
+    label_vote: LabelVote,
     tracker: Recipient<LabelledScan>,
 }
 
@@ -25,7 +28,14 @@ impl Fusion {
     pub fn new(config: &FusionConfig, classes: ClassTable, tracker: Recipient<LabelledScan>) -> Self {
         let mut clustering = classes.cluster_config(config.cluster_tolerance_m);
         clustering.min_height_m = config.min_object_height_m;
-        Self { classes, clustering, max_range_m: config.max_range_m, object_range_m: config.object_range_m, tracker }
+        Self {
+            classes,
+            clustering,
+            max_range_m: config.max_range_m,
+            object_range_m: config.object_range_m,
+            label_vote: config.label_vote.clone(),
+            tracker,
+        }
     }
 }
 
@@ -51,6 +61,9 @@ impl Handler<SensorFrame> for Fusion {
                     }
                 }
             };
+            let classes = &self.classes;
+            let labels =
+                vote(&frame.points_in_body, &labels, &self.label_vote, |l| classes.object_label(l.0).is_some());
             let (r2, near) = (self.max_range_m * self.max_range_m, self.object_range_m * self.object_range_m);
             let n = labels.len();
             let (mut points, mut kept, mut clustered) =

@@ -210,7 +210,13 @@ impl Matcher {
             entry.last_attempt = Some(now);
         }
         let report = match_graphs(&local, &remote, &self.labels, &self.config.matching);
-        let MatchOutcome::Aligned(alignment) = report.outcome else { return };
+        let alignment = match report.outcome {
+            MatchOutcome::Aligned(alignment) => alignment,
+            MatchOutcome::Refused(refusal) => {
+                tracing::debug!(robot = %self.robot, neighbour = %robot, reason = %refusal.reason, "object graphs not matched");
+                return;
+            }
+        };
         if alignment.matches.len() < min_matched {
             return;
         }

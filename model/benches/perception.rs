@@ -8,7 +8,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::clustering::{cluster, ClusterConfig};
+use sgm_model::perception::label_vote::{vote, LabelVote};
 use sgm_model::perception::projection::{label_points, CameraModel, LabelImage};
+use sgm_model::scene_graph::LabelId;
 use std::hint::black_box;
 
 fn scene() -> (Vec<Point3<f64>>, CameraModel, LabelImage, Pose3) {
@@ -63,6 +65,13 @@ fn fusion_and_clustering(c: &mut Criterion) {
             let labels = label_points(black_box(&points), &camera_from_lidar, &camera, &image).unwrap_or_default();
             cluster(&points, &labels, &config)
         })
+    });
+    // The label vote as Fusion runs it: every labelled return votes (ground as class 0), object
+    // returns are re-voted.
+    let with_ground: Vec<_> =
+        labels.iter().enumerate().map(|(k, l)| if k % 2 == 0 { l.map(|_| LabelId(0)) } else { *l }).collect();
+    c.bench_function("label_vote_20k", |b| {
+        b.iter(|| vote(black_box(&points), &with_ground, &LabelVote::default(), |l| l.0 != 0))
     });
 }
 

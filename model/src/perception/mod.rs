@@ -6,6 +6,7 @@ pub mod classes;
 pub mod clustering;
 pub mod icp;
 pub mod keyframes;
+pub mod label_vote;
 pub mod loop_closure;
 pub mod normals;
 pub mod object_cloud;
