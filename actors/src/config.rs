@@ -179,7 +179,8 @@ pub struct MatcherSection {
     /// Default 5.
     pub keyframe_neighbourhood: usize,
     /// Neighbour keyframes registered per alignment round, at most (spread evenly over those
-    /// the neighbourhood names): bounds radio bytes and ICP time. Default 16.
+    /// the neighbourhood names): bounds radio bytes and ICP time. Default 8 (16 cost twice the bytes for
+    /// the same alignments: book, evaluation chapter).
     pub max_keyframes_per_alignment: usize,
     /// Voxel size of keyframe-to-keyframe ICP (`icp.voxel_m` is for object clouds), m.
     /// Default 0.3.
@@ -208,7 +209,7 @@ impl Default for MatcherSection {
             match_interval_s: 2.0,
             icp: IcpConfig { max_correspondence_distance_m: 1.0, voxel_m: 0.1, ..IcpConfig::default() },
             keyframe_neighbourhood: 5,
-            max_keyframes_per_alignment: 16,
+            max_keyframes_per_alignment: 8,
             keyframe_voxel_m: 0.3,
             keyframe_max_iterations: 20,
             structure_check: StructureCheck::default(),

@@ -23,6 +23,7 @@ fn bench_all_writes_every_table_with_its_rows() {
         "## Sweeps",
         "### Mislabel rate",
         "### Trajectory overlap",
+        "### Trajectory overlap, Swarm-SC (ours)",
         "### Centroid noise",
         "### Team size",
     ] {
@@ -62,11 +63,14 @@ fn bench_all_writes_every_table_with_its_rows() {
     assert_eq!(len(&json["messages"]["environments"]), 2);
 
     let sweeps = &json["sweeps"];
-    for key in ["mislabel_rate", "overlap", "centroid_noise", "team_size"] {
+    for key in ["mislabel_rate", "overlap", "overlap_scan_context", "centroid_noise", "team_size"] {
         assert_eq!(len(&sweeps[key]), 2, "{key}: two values in reduced mode");
     }
     let overlap: Vec<f64> = sweeps["overlap"].as_array().unwrap().iter().map(|p| p["x"].as_f64().unwrap()).collect();
     assert!(overlap[0] > 0.9 && overlap[1] < overlap[0], "moving bravo away lowers the overlap: {overlap:?}");
+    let sc: Vec<f64> =
+        sweeps["overlap_scan_context"].as_array().unwrap().iter().map(|p| p["x"].as_f64().unwrap()).collect();
+    assert_eq!(sc, overlap, "Swarm-SC runs the same missions");
     let team: Vec<f64> =
         sweeps["team_size"].as_array().unwrap().iter().map(|p| p["raw_bytes"].as_f64().unwrap()).collect();
     assert!(team[1] > 1.5 * team[0], "twice the robots, about twice the raw bytes: {team:?}");

@@ -4,6 +4,9 @@
 //!   0.4 (each object given a wrong class in that share of frames), over several seeds.
 //! - **Trajectory overlap** (whole missions): `quickstart` on a 140 m campus with bravo's loop
 //!   moved east step by step; the overlap is the share of bravo's path within 10 m of alpha's.
+//!   The same missions again with the Swarm-SC baseline's association (Scan Context), the
+//!   fair version of Table 3's outdoor comparison: low overlap is where the paper's Swarm-SC
+//!   failed.
 //! - **Centroid noise** (the matcher alone, paper §V-A protocol): 35 / 32 objects, 17 shared,
 //!   every centroid off by up to ±σ in x and y (±σ/2 in z, yaw ±10°·σ), 20 pairs per σ.
 //! - **Team size** (whole missions): 2 to 16 robots with generated routes on a 120 m campus;
@@ -18,6 +21,7 @@ use sgm_model::eval::matching_protocol::{generate_pair, score_trial, PairSpec, W
 use sgm_model::geometry::pose_error;
 use sgm_model::matching::{match_graphs, LabelSimilarity, MatchOutcome, MatcherConfig};
 use sgm_scenarios::report::plots::{lines, Series};
+use sgm_actors::config::Association;
 use sgm_scenarios::report::Report;
 use sgm_scenarios::scenario::{RobotSpec, RouteSpec, Scenario};
 use std::fmt::Write;
@@ -42,6 +46,7 @@ struct Json {
     command: String,
     mislabel_rate: Vec<Point>,
     overlap: Vec<Point>,
+    overlap_scan_context: Vec<Point>,
     centroid_noise: Vec<Point>,
     team_size: Vec<Point>,
 }
@@ -208,13 +213,18 @@ pub fn run_bench(options: &Options) -> anyhow::Result<Section> {
     let shifts: &[f64] = if reduced { &[0.0, 45.0] } else { &[0.0, 15.0, 30.0, 45.0] };
     let overlap =
         sweep_missions("bravo shifted m", shifts, seeds, |shift, seed| overlap_scenario(shift, seed, duration))?;
+    let overlap_scan_context = sweep_missions("bravo shifted m (Swarm-SC)", shifts, seeds, |shift, seed| {
+        let (share, mut s) = overlap_scenario(shift, seed, duration)?;
+        s.matcher.association = Association::ScanContext;
+        Ok((share, s))
+    })?;
     let sigmas: &[f64] = if reduced { &[0.0, 1.0] } else { &[0.0, 0.5, 1.0, 1.5, 2.0, 3.0] };
     let centroid_noise = centroid_noise(sigmas, if reduced { 5 } else { 20 });
     let sizes: &[f64] = if reduced { &[2.0, 4.0] } else { &[2.0, 4.0, 8.0, 12.0, 16.0] };
     let team_size = sweep_missions("robots", sizes, &[1], |n, _| Ok((n, team_scenario(n as usize, duration)?)))?;
 
     let command = format!("sgm bench sweeps{}", duration_arg(duration));
-    let json = Json { command, mislabel_rate, overlap, centroid_noise, team_size };
+    let json = Json { command, mislabel_rate, overlap, overlap_scan_context, centroid_noise, team_size };
     if let Some(dir) = &options.plots {
         plot(&json, dir)?;
     }
@@ -225,14 +235,20 @@ fn plot(json: &Json, dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)?;
     let success = |p: &[Point]| p.iter().map(|p| (p.x, p.success_pct)).collect::<Vec<_>>();
     let error = |p: &[Point]| p.iter().filter_map(|p| Some((p.x, p.error_m?))).collect::<Vec<_>>();
-    for (name, points, x_desc, error_desc) in [
-        ("sweep_mislabel", &json.mislabel_rate, "mislabel rate", "team ATE (m)"),
-        ("sweep_overlap", &json.overlap, "share of bravo's path within 10 m of alpha's", "team ATE (m)"),
-        ("sweep_centroid_noise", &json.centroid_noise, "centroid noise σ (m)", "translation error (m)"),
+    let overlap_desc = "share of bravo's path within 10 m of alpha's";
+    for (name, methods, x_desc, error_desc) in [
+        ("sweep_mislabel", vec![("SGM", &json.mislabel_rate)], "mislabel rate", "team ATE (m)"),
+        (
+            "sweep_overlap",
+            vec![("SGM", &json.overlap), ("Swarm-SC (ours)", &json.overlap_scan_context)],
+            overlap_desc,
+            "team ATE (m)",
+        ),
+        ("sweep_centroid_noise", vec![("SGM", &json.centroid_noise)], "centroid noise σ (m)", "translation error (m)"),
     ] {
-        let s = [Series { name: "success %", points: success(points) }];
+        let s: Vec<Series> = methods.iter().map(|(m, p)| Series { name: m, points: success(p) }).collect();
         lines(&dir.join(format!("{name}_success.png")), x_desc, "success %", &s, false).map_err(anyhow::Error::msg)?;
-        let e = [Series { name: error_desc, points: error(points) }];
+        let e: Vec<Series> = methods.iter().map(|(m, p)| Series { name: m, points: error(p) }).collect();
         lines(&dir.join(format!("{name}_error.png")), x_desc, error_desc, &e, false).map_err(anyhow::Error::msg)?;
     }
     let bytes = [
@@ -271,6 +287,13 @@ fn table(json: &Json, plotted: bool) -> String {
     };
     mission(&mut s, "Mislabel rate (quickstart)", "mislabel rate", &json.mislabel_rate, 2);
     mission(&mut s, "Trajectory overlap (quickstart on 140 m)", "overlap share", &json.overlap, 2);
+    mission(
+        &mut s,
+        "Trajectory overlap, Swarm-SC (ours) association (same missions)",
+        "overlap share",
+        &json.overlap_scan_context,
+        2,
+    );
     let _ = writeln!(s, "\n## Centroid noise (matcher, paper §V-A protocol, 35 / 32 objects, 17 shared)\n");
     let _ = writeln!(s, "| σ m | pairs | success % | mean translation error of claims m |\n|---|---|---|---|");
     for p in &json.centroid_noise {
