@@ -17,11 +17,11 @@
 
 use super::{aligned_right, duration_arg, load_cut, or_dash, radio_bytes, run_report, Section, WRONG_M};
 use serde::Serialize;
+use sgm_actors::config::Association;
 use sgm_model::eval::matching_protocol::{generate_pair, score_trial, PairSpec, WorldSpec};
 use sgm_model::geometry::pose_error;
 use sgm_model::matching::{match_graphs, LabelSimilarity, MatchOutcome, MatcherConfig};
 use sgm_scenarios::report::plots::{lines, Series};
-use sgm_actors::config::Association;
 use sgm_scenarios::report::Report;
 use sgm_scenarios::scenario::{RobotSpec, RouteSpec, Scenario};
 use std::fmt::Write;
