@@ -478,6 +478,9 @@ impl Handler<LocalKeyframe> for Matcher {
     type Result = ();
     fn handle(&mut self, msg: LocalKeyframe, ctx: &mut Context<Self>) {
         contained(ctx, "matcher", || {
+            let labels = msg.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect();
+            let points = msg.points_in_body.iter().map(|p| p.cast::<f32>()).collect();
+            self.keyframes.insert(msg.id, LocalKeyframeData { world_from_body: msg.world_from_body, points, labels });
             if self.config.association == Association::ScanContext {
                 let descriptor = ScanContext::new(&msg.points_in_body, &self.config.scan_context.descriptor);
                 if let Some(links) = &self.links {
@@ -486,11 +489,6 @@ impl Handler<LocalKeyframe> for Matcher {
                     links.share_descriptors.do_send(share);
                 }
                 self.places.insert(msg.id, Place::new(descriptor));
-            }
-            let labels = msg.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect();
-            let points = msg.points_in_body.iter().map(|p| p.cast::<f32>()).collect();
-            self.keyframes.insert(msg.id, LocalKeyframeData { world_from_body: msg.world_from_body, points, labels });
-            if self.config.association == Association::ScanContext {
                 let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
                 for robot in robots {
                     self.try_match_places(robot);

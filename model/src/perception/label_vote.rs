@@ -67,24 +67,24 @@ pub fn vote(
         .map(|k| (key(&points[k]), k))
         .collect();
     keyed.sort_unstable();
-    // Unique voxels (sorted) and their histograms.
+    // Unique voxels (sorted), their histograms, and where their members start in `keyed`.
     let mut voxels: Vec<[i64; 3]> = Vec::new();
     let mut histograms: Vec<Histogram> = Vec::new();
-    for (v, k) in &keyed {
+    let mut starts: Vec<usize> = Vec::new();
+    for (n, (v, k)) in keyed.iter().enumerate() {
         if voxels.last() != Some(v) {
             voxels.push(*v);
             histograms.push(Vec::new());
+            starts.push(n);
         }
         if let (Some(h), Some(l)) = (histograms.last_mut(), labels[*k]) {
             add(h, l, 1);
         }
     }
+    starts.push(keyed.len());
     let mut block = Histogram::new();
-    let mut start = 0;
     for (i, voxel) in voxels.iter().enumerate() {
-        let end = start + histograms[i].iter().map(|(_, c)| *c as usize).sum::<usize>();
-        let members = &keyed[start..end];
-        start = end;
+        let members = &keyed[starts[i]..starts[i + 1]];
         if !histograms[i].iter().any(|(l, _)| revote(*l)) {
             continue;
         }
