@@ -42,6 +42,8 @@ pub struct Synchroniser {
     camera: Option<CameraModel>,
     clouds: VecDeque<(Stamp, Scan)>,
     latest: Stamp,
+    /// No more input will come (a bag's end): nothing waits for a partner any longer.
+    ended: bool,
     pub counts: SyncCounts,
 }
 
@@ -74,6 +76,7 @@ impl Synchroniser {
             camera: None,
             clouds: VecDeque::new(),
             latest: f64::NEG_INFINITY,
+            ended: false,
             counts: SyncCounts::default(),
         }
     }
@@ -146,8 +149,11 @@ impl Synchroniser {
             .filter(|(s, _)| (s - t).abs() <= tolerance)
             .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()));
         match nearest {
-            // An image exactly at t cannot be beaten; otherwise a closer one may still come.
-            Some((s, image)) if *s == t || self.images.back().is_some_and(|(last, _)| *last >= t + tolerance) => {
+            // An image exactly at t cannot be beaten; otherwise a closer one may still come,
+            // unless the input has ended.
+            Some((s, image))
+                if *s == t || self.ended || self.images.back().is_some_and(|(last, _)| *last >= t + tolerance) =>
+            {
                 Outcome::Ready(image.clone())
             }
             Some(_) => Outcome::Wait,
@@ -188,7 +194,7 @@ impl Synchroniser {
         let mut frames = Vec::new();
         while let Some((t, _)) = self.clouds.front() {
             let t = *t;
-            let stale = self.latest - t > self.config.max_wait_s;
+            let stale = self.ended || self.latest - t > self.config.max_wait_s;
             let pose = match self.pose_at(t) {
                 Outcome::Ready(pose) => pose,
                 Outcome::Wait if !stale => break,
@@ -222,6 +228,14 @@ impl Synchroniser {
         frames
     }
 
+    /// The input has ended (the last message of a bag): the frames that can still be
+    /// assembled, with the nearest image in tolerance and no waiting for later partners; every
+    /// other waiting cloud is dropped and counted. Afterwards nothing is pending.
+    pub fn finish(&mut self) -> Vec<SensorFrame> {
+        self.ended = true;
+        self.ready()
+    }
+
     /// Forgets odometry and images no waiting or future cloud can use.
     fn prune(&mut self) {
         let horizon = self.clouds.front().map_or(self.latest - self.config.max_wait_s, |(t, _)| *t)
@@ -250,6 +264,36 @@ mod tests {
 
     fn image() -> LabelImage {
         LabelImage::new(2, 2, vec![1; 4]).unwrap()
+    }
+
+    /// A bag that ends before a cloud's partners: the cloud waits until the input ends, then
+    /// is assembled if it can be (an image in tolerance) or dropped and counted, never left
+    /// pending (a replay waits for nothing pending).
+    #[test]
+    fn the_end_of_input_settles_every_waiting_cloud() {
+        let pose = Pose3::identity();
+        // Odometry stops before the last cloud: it can never get a pose.
+        let mut s = Synchroniser::new(SyncConfig::default(), LabelSource::Cloud, Pose3::identity());
+        s.odometry(0.0, pose);
+        s.cloud(0.0, scan(3));
+        s.cloud(0.5, scan(3));
+        assert_eq!(s.ready().len(), 1);
+        assert_eq!(s.pending(), 1, "the second cloud waits for odometry after it");
+        assert!(s.finish().is_empty());
+        assert_eq!((s.pending(), s.counts.no_odometry, s.counts.frames), (0, 1, 1));
+
+        // The only image is 10 ms after the cloud, in tolerance: a closer one might have come,
+        // but the bag has ended, so the cloud takes it.
+        let mut s = Synchroniser::new(SyncConfig::default(), LabelSource::Image, Pose3::identity());
+        s.camera_info(camera());
+        s.odometry(0.0, pose);
+        s.odometry(0.4, pose);
+        s.cloud(0.2, scan(3));
+        s.image(0.21, image());
+        assert!(s.ready().is_empty());
+        assert_eq!(s.pending(), 1);
+        let frames = s.finish();
+        assert_eq!((frames.len(), s.pending(), s.counts.no_image), (1, 0, 0));
     }
 
     #[test]

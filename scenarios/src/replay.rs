@@ -197,7 +197,10 @@ pub async fn replay(
         let mut frames = Vec::new();
         for (k, robot) in robots.iter_mut().enumerate() {
             robot.pull(limit, &mut epoch, RobotId(k as u16 + 1), &shared)?;
-            for frame in robot.sync.ready() {
+            // At the bag's end no partner can come: settle every waiting cloud now, or the
+            // replay would wait for it forever.
+            let ready = if robot.stream.peek().is_none() { robot.sync.finish() } else { robot.sync.ready() };
+            for frame in ready {
                 robot.frames += 1;
                 frames.push((k, frame));
             }

@@ -1,8 +1,8 @@
 //! The book's reference chapters against the code. `book/src/configuration.md`: every key of
 //! `RobotConfig` is listed with its true default, nothing listed is unknown, and every TOML
 //! example loads. `book/src/scenarios.md`: the same for the scenario file's own sections and a
-//! robot entry. `book/src/ros.md`: the `[ros]` section's keys, and its TOML example loads as a
-//! node configuration.
+//! robot entry. `book/src/ros.md`: the `[ros]` section's keys. Every TOML example anywhere in
+//! the book loads as the file it shows.
 
 use serde_json::Value;
 use sgm_actors::config::RobotConfig;
@@ -129,39 +129,64 @@ fn book_ros_reference() {
     check_reference("ros.md", &rows(section), &defaults);
 }
 
-#[test]
-fn every_toml_example_in_the_ros_chapter_loads() {
-    let blocks = toml_blocks(ROS);
-    assert!(!blocks.is_empty());
-    for block in blocks {
-        let file = tempfile::Builder::new().suffix(".toml").tempfile().unwrap();
-        std::fs::write(file.path(), block).unwrap();
-        if let Err(e) = NodeConfig::load(Some(file.path())) {
-            panic!("{e}\n{block}");
+/// Every chapter under `book/src`, by file name.
+fn every_chapter() -> Vec<(String, String)> {
+    let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../book/src");
+    let mut out: Vec<(String, String)> = std::fs::read_dir(&src)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "md"))
+        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read_to_string(&p).unwrap()))
+        .collect();
+    out.sort();
+    out
+}
+
+/// A block's text, with a whole-block `{{#include FILE}}` replaced by the file.
+fn resolve_include(block: &str) -> String {
+    let trimmed = block.trim();
+    match trimmed.strip_prefix("{{#include ").and_then(|r| r.strip_suffix("}}")) {
+        Some(file) => {
+            let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../book/src").join(file.trim());
+            std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
         }
+        None => block.to_string(),
     }
 }
 
+/// Every ```toml block in the book loads as what it shows: a scenario file (it has a
+/// `[scenario]` table), a node configuration (it has `[ros]` tables), or else a robot
+/// configuration.
 #[test]
-fn every_toml_example_in_the_configuration_chapter_loads() {
-    let blocks = toml_blocks(CONFIGURATION);
-    assert!(blocks.len() >= 2);
-    for block in blocks {
-        let file = tempfile::Builder::new().suffix(".toml").tempfile().unwrap();
-        std::fs::write(file.path(), block).unwrap();
-        if let Err(e) = RobotConfig::load_with_env(Some(file.path()), "SGM_BOOK_TEST") {
-            panic!("{e}\n{block}");
+fn every_toml_example_in_the_book_loads() {
+    let (mut scenarios, mut nodes, mut robots) = (0, 0, 0);
+    for (chapter, text) in every_chapter() {
+        for block in toml_blocks(&text) {
+            let block = resolve_include(block);
+            let has_table = |name: &str| {
+                block.lines().any(|l| l.trim() == format!("[{name}]") || l.trim().starts_with(&format!("[{name}.")))
+            };
+            let result = if has_table("scenario") {
+                scenarios += 1;
+                Scenario::from_toml(&block, "book", "SGM_BOOK_SCENARIO_TEST").map(|_| ()).map_err(|e| e.to_string())
+            } else {
+                let file = tempfile::Builder::new().suffix(".toml").tempfile().unwrap();
+                std::fs::write(file.path(), &block).unwrap();
+                if has_table("ros") {
+                    nodes += 1;
+                    NodeConfig::load(Some(file.path())).map(|_| ()).map_err(|e| e.to_string())
+                } else {
+                    robots += 1;
+                    RobotConfig::load_with_env(Some(file.path()), "SGM_BOOK_TEST")
+                        .map(|_| ())
+                        .map_err(|e| e.to_string())
+                }
+            };
+            if let Err(e) = result {
+                panic!("book/src/{chapter}: a TOML example does not load: {e}\n{block}");
+            }
         }
     }
-}
-
-#[test]
-fn every_toml_example_in_the_scenarios_chapter_loads() {
-    let blocks = toml_blocks(SCENARIOS);
-    assert!(!blocks.is_empty());
-    for block in blocks {
-        if let Err(e) = Scenario::from_toml(block, "book", "SGM_BOOK_SCENARIO_TEST") {
-            panic!("{e}\n{block}");
-        }
-    }
+    assert!(scenarios >= 1 && nodes >= 1 && robots >= 2, "{scenarios} scenario, {nodes} node, {robots} robot examples");
 }
