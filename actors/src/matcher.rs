@@ -137,13 +137,19 @@ pub struct Matcher {
 }
 
 impl Matcher {
-    pub fn new(robot: RobotId, config: MatcherSection, retry: RetryConfig, clock: Clock, label_count: usize) -> Self {
+    pub fn new(
+        robot: RobotId,
+        config: MatcherSection,
+        retry: RetryConfig,
+        clock: Clock,
+        labels: LabelSimilarity,
+    ) -> Self {
         Self {
             robot,
             config,
             retry,
             clock,
-            labels: LabelSimilarity::hard(label_count),
+            labels,
             links: None,
             local: LocalObjects::default(),
             keyframes: BTreeMap::new(),

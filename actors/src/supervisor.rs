@@ -16,8 +16,9 @@ use crate::sensor::Sensor;
 use crate::tracker::{Tracker, TrackerLinks};
 use crate::transport::{InProcessRadio, Transport};
 use actix::{Actor, Addr, Context, Handler, Supervisor};
+use sgm_model::matching::{LabelSimilarity, MatcherConfig};
 use sgm_model::perception::classes::ClassTable;
-use sgm_model::scene_graph::RobotId;
+use sgm_model::scene_graph::{LabelId, RobotId};
 
 /// Addresses of one robot's actors (stable across restarts).
 #[derive(Clone)]
@@ -66,7 +67,7 @@ pub fn start_robot_on(
         value: "(table)".into(),
         allowed: e.to_string(),
     })?;
-    let label_count = classes.classes().iter().map(|c| usize::from(c.id) + 1).max().unwrap_or(1);
+    let labels = label_similarity(&classes, &config.matcher.matching)?;
 
     // Sequence numbers start at the clock in microseconds: a restarted robot never reuses one.
     let sequence_start = (clock.now().max(0.0) * 1e6) as u64;
@@ -88,7 +89,7 @@ pub fn start_robot_on(
         Tracker::new(robot, t, classes, &o, r)
     });
     let (matcher_config, retry, matcher_clock) = (config.matcher.clone(), config.comms.retry.clone(), clock.clone());
-    let matcher = Supervisor::start(move |_| Matcher::new(robot, matcher_config, retry, matcher_clock, label_count));
+    let matcher = Supervisor::start(move |_| Matcher::new(robot, matcher_config, retry, matcher_clock, labels.clone()));
     let optimiser_config = config.optimiser.clone();
     let optimiser = Supervisor::start(move |_| Optimiser::new(robot, optimiser_config));
     let (fusion_config, fusion_classes) = (config.fusion.clone(), tracker_config_classes);
@@ -158,5 +159,58 @@ impl Handler<Tick> for RobotSupervisor {
         self.clock.advance_to(tick.now);
         self.matcher.do_send(tick);
         self.comms.do_send(tick);
+    }
+}
+
+/// d_v's label table for the class table: `matcher.mislabel_similarity` between different
+/// classes, `matcher.label_confusion` overriding named pairs. A pair naming a class that
+/// `fusion.classes` does not have is a configuration error.
+fn label_similarity(classes: &ClassTable, matching: &MatcherConfig) -> Result<LabelSimilarity, ConfigError> {
+    let count = classes.classes().iter().map(|c| usize::from(c.id) + 1).max().unwrap_or(1);
+    let mut labels = LabelSimilarity::uniform(count, matching.mislabel_similarity);
+    for (k, pair) in matching.label_confusion.iter().enumerate() {
+        let id = |name: &str, side: &str| {
+            classes.by_name(name).map(|c| LabelId(c.id)).ok_or_else(|| ConfigError::Invalid {
+                key: format!("matcher.label_confusion[{k}].{side}"),
+                value: format!("{name:?}"),
+                allowed: "the name of a class in fusion.classes".into(),
+            })
+        };
+        labels.set(id(&pair.a, "a")?, id(&pair.b, "b")?, pair.similarity);
+    }
+    Ok(labels)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sgm_model::matching::LabelConfusion;
+
+    fn classes() -> ClassTable {
+        ClassTable::new(crate::config::RobotConfig::default().fusion.classes).expect("the default class table")
+    }
+
+    #[test]
+    fn the_robot_matches_with_the_configured_label_similarity() {
+        let classes = classes();
+        let id = |name: &str| LabelId(classes.by_name(name).expect(name).id);
+        let (chair, bench, tree) = (id("chair"), id("bench"), id("tree"));
+        let mut matching = MatcherConfig { mislabel_similarity: 0.2, ..MatcherConfig::default() };
+        matching.label_confusion.push(LabelConfusion { a: "chair".into(), b: "bench".into(), similarity: 0.7 });
+        let labels = label_similarity(&classes, &matching).expect("valid");
+        assert_eq!(labels.get(chair, chair), 1.0);
+        assert_eq!(labels.get(chair, bench), 0.7);
+        assert_eq!(labels.get(bench, chair), 0.7);
+        assert_eq!(labels.get(chair, tree), 0.2);
+        let hard = label_similarity(&classes, &MatcherConfig { mislabel_similarity: 0.0, ..MatcherConfig::default() });
+        assert!(!hard.expect("valid").is_soft());
+    }
+
+    #[test]
+    fn a_confusion_naming_an_unknown_class_is_refused_by_name() {
+        let mut matching = MatcherConfig::default();
+        matching.label_confusion.push(LabelConfusion { a: "chair".into(), b: "sofa".into(), similarity: 0.6 });
+        let error = label_similarity(&classes(), &matching).err().expect("refused").to_string();
+        assert!(error.contains("matcher.label_confusion[0].b") && error.contains("\"sofa\""), "{error}");
     }
 }
