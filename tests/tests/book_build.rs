@@ -3,24 +3,14 @@
 //! names an element id on that page. Every `{{#include}}` names a file that exists, and every
 //! chapter is reachable from `SUMMARY.md`.
 
+mod common;
+
+use common::{chapters, files_with_extension, workspace};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Component, Path, PathBuf};
 
 fn book_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../book")
-}
-
-/// Every `*.html` under `dir`, recursively.
-fn html_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
-    for entry in entries.flatten() {
-        let path = entry.path();
-        if path.is_dir() {
-            html_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "html") {
-            out.push(path);
-        }
-    }
+    workspace().join("book")
 }
 
 /// The values of every `attr="…"` in `html`, HTML entities for `&` undone.
@@ -79,8 +69,7 @@ fn the_book_builds_and_every_internal_link_resolves() {
     book.config.build.build_dir = out.path().to_path_buf();
     book.build().unwrap_or_else(|e| panic!("book/ does not build: {e:#}"));
 
-    let mut pages = Vec::new();
-    html_files(out.path(), &mut pages);
+    let pages = files_with_extension(out.path(), "html");
     let ids: BTreeMap<PathBuf, BTreeSet<String>> = pages
         .iter()
         .map(|page| {
@@ -130,18 +119,6 @@ fn the_book_builds_and_every_internal_link_resolves() {
     assert!(broken.is_empty(), "broken links in the book:\n{}", broken.join("\n"));
 }
 
-/// The chapter files under `book/src`, by name.
-fn chapters() -> BTreeMap<String, String> {
-    let src = book_root().join("src");
-    std::fs::read_dir(&src)
-        .unwrap()
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|e| e == "md"))
-        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read_to_string(&p).unwrap()))
-        .collect()
-}
-
 #[test]
 fn every_include_names_a_file() {
     let src = book_root().join("src");
@@ -161,22 +138,10 @@ fn every_include_names_a_file() {
 
 #[test]
 fn every_chapter_is_in_the_summary() {
-    let chapters = chapters();
+    let chapters: BTreeMap<String, String> = chapters().into_iter().collect();
     let summary = chapters.get("SUMMARY.md").expect("book/src/SUMMARY.md");
     for name in chapters.keys().filter(|n| *n != "SUMMARY.md") {
         assert!(summary.contains(&format!("({name})")), "book/src/{name} is not linked from SUMMARY.md");
-    }
-}
-
-/// The file names of every `*.rs` under `dir`.
-fn rust_file_names(dir: &Path, out: &mut BTreeSet<String>) {
-    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
-        let path = entry.path();
-        if path.is_dir() {
-            rust_file_names(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.insert(entry.file_name().to_string_lossy().into_owned());
-        }
     }
 }
 
@@ -187,10 +152,11 @@ fn rust_file_names(dir: &Path, out: &mut BTreeSet<String>) {
 fn every_file_the_book_names_exists() {
     let repo = book_root().join("..");
     let extensions = [".rs", ".toml", ".sh", ".py", ".launch", ".xml"];
-    let mut source_names = BTreeSet::new();
-    for crate_dir in ["model", "actors", "bridge", "scenarios", "tests"] {
-        rust_file_names(&repo.join(crate_dir), &mut source_names);
-    }
+    let source_names: BTreeSet<String> = ["model", "actors", "bridge", "scenarios", "tests"]
+        .iter()
+        .flat_map(|dir| files_with_extension(&repo.join(dir), "rs"))
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect();
     let mut named = 0;
     let mut missing = Vec::new();
     for (name, text) in chapters() {

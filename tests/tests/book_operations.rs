@@ -8,6 +8,9 @@
 //! `scenarios/src`, without their unit-test modules (whose expected strings would otherwise
 //! vouch for themselves).
 
+mod common;
+
+use common::{files_with_extension, workspace};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
@@ -19,32 +22,12 @@ const LEVELS: [&str; 6] = ["trace", "debug", "info", "warn", "error", "off"];
 const LOG_MACROS: [&str; 5] =
     ["tracing::trace!", "tracing::debug!", "tracing::info!", "tracing::warn!", "tracing::error!"];
 
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// Every `.rs` file under `dir`, recursively.
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
-    for entry in entries.flatten() {
-        let path = entry.path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
-}
-
 /// (crate directory, path under it, source without its unit tests) of every source file.
 fn sources() -> Vec<(&'static str, PathBuf, String)> {
     let mut out = Vec::new();
     for (_, dir) in CRATES {
         let src = workspace().join(dir).join("src");
-        let mut files = Vec::new();
-        rust_files(&src, &mut files);
-        files.sort();
-        for file in files {
+        for file in files_with_extension(&src, "rs") {
             let text = std::fs::read_to_string(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
             // The unit-test module closes every file that has one.
             let code = text.split("#[cfg(test)]").next().unwrap_or("").to_string();

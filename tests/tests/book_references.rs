@@ -4,6 +4,9 @@
 //! robot entry. `book/src/ros.md`: the `[ros]` section's keys. Every TOML example anywhere in
 //! the book loads as the file it shows.
 
+mod common;
+
+use common::{chapters, workspace};
 use serde_json::Value;
 use sgm_actors::config::RobotConfig;
 use sgm_bridge::config::RosConfig;
@@ -129,26 +132,12 @@ fn book_ros_reference() {
     check_reference("ros.md", &rows(section), &defaults);
 }
 
-/// Every chapter under `book/src`, by file name.
-fn every_chapter() -> Vec<(String, String)> {
-    let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../book/src");
-    let mut out: Vec<(String, String)> = std::fs::read_dir(&src)
-        .unwrap()
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|e| e == "md"))
-        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read_to_string(&p).unwrap()))
-        .collect();
-    out.sort();
-    out
-}
-
 /// A block's text, with a whole-block `{{#include FILE}}` replaced by the file.
 fn resolve_include(block: &str) -> String {
     let trimmed = block.trim();
     match trimmed.strip_prefix("{{#include ").and_then(|r| r.strip_suffix("}}")) {
         Some(file) => {
-            let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../book/src").join(file.trim());
+            let path = workspace().join("book/src").join(file.trim());
             std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
         }
         None => block.to_string(),
@@ -161,7 +150,7 @@ fn resolve_include(block: &str) -> String {
 #[test]
 fn every_toml_example_in_the_book_loads() {
     let (mut scenarios, mut nodes, mut robots) = (0, 0, 0);
-    for (chapter, text) in every_chapter() {
+    for (chapter, text) in chapters() {
         for block in toml_blocks(&text) {
             let block = resolve_include(block);
             let has_table = |name: &str| {
