@@ -210,7 +210,7 @@ mod tests {
     fn a_confusion_naming_an_unknown_class_is_refused_by_name() {
         let mut matching = MatcherConfig::default();
         matching.label_confusion.push(LabelConfusion { a: "chair".into(), b: "sofa".into(), similarity: 0.6 });
-        let error = label_similarity(&classes(), &matching).err().expect("refused").to_string();
+        let error = label_similarity(&classes(), &matching).expect_err("refused").to_string();
         assert!(error.contains("matcher.label_confusion[0].b") && error.contains("\"sofa\""), "{error}");
     }
 }
