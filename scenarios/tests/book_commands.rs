@@ -86,8 +86,7 @@ fn sgm_invocations(line: &str) -> Vec<Vec<String>> {
             let mut w = Vec::new();
             let mut tokens = words(segment).into_iter();
             while let Some(t) = tokens.next() {
-                let redirect =
-                    ["<", ">", "2>", "&>"].iter().any(|r| t.trim_start_matches('>').is_empty() || t.starts_with(r));
+                let redirect = ["<", ">", "2>", "&>"].iter().any(|r| t.starts_with(r));
                 if redirect {
                     if matches!(t.as_str(), "<" | ">" | ">>" | "2>" | "2>>" | "&>") {
                         tokens.next();

@@ -10,7 +10,7 @@
 
 mod common;
 
-use common::{files_with_extension, workspace};
+use common::{files_with_extension, table_cells, workspace};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
@@ -205,11 +205,7 @@ fn code_spans(text: &str) -> Vec<String> {
 fn troubleshooting_rows() -> Vec<Vec<String>> {
     let section = OPERATIONS.split("\n## Troubleshooting\n").nth(1).expect("a `## Troubleshooting` section");
     let section = section.split("\n## ").next().unwrap_or(section);
-    let mut rows: Vec<Vec<String>> = section
-        .lines()
-        .filter(|l| l.starts_with('|'))
-        .map(|l| l.trim().trim_matches('|').split('|').map(|c| c.trim().to_string()).collect())
-        .collect();
+    let mut rows: Vec<Vec<String>> = section.lines().filter(|l| l.starts_with('|')).map(table_cells).collect();
     assert!(rows.len() > 2, "no troubleshooting table");
     let header = rows.remove(0);
     assert_eq!(header, ["symptom", "message", "likely cause", "check / do"], "the table's columns");

@@ -21,6 +21,9 @@ use sgm_model::wire::{
     open, seal, Destination, Envelope, Message, MessageKind, RejectionCounts, ReplayError, ReplayWindow, TeamKey,
     WireError, WireLimits, MAC_BYTES, PROTOCOL_VERSION,
 };
+mod common;
+
+use common::table_cells;
 use std::collections::BTreeSet;
 
 const WIRE: &str = include_str!("../../book/src/wire.md");
@@ -100,13 +103,7 @@ fn hex(bytes: &[u8]) -> String {
 fn table_after(marker: &str) -> Vec<Vec<String>> {
     let lines = block_after(marker);
     assert!(lines.len() > 2 && lines[1].starts_with("|---"), "{marker}: no table after the marker");
-    lines[2..]
-        .iter()
-        .map(|l| {
-            let l = l.trim().trim_start_matches('|').trim_end_matches('|');
-            l.split('|').map(|c| c.trim().to_string()).collect()
-        })
-        .collect()
+    lines[2..].iter().map(|l| table_cells(l)).collect()
 }
 
 fn check_dump(marker: &str, envelope: &Envelope) {

@@ -27,6 +27,11 @@ pub fn files_with_extension(dir: &Path, extension: &str) -> Vec<PathBuf> {
     out
 }
 
+/// The trimmed cells of one markdown table line (`| a | b |` → `["a", "b"]`).
+pub fn table_cells(line: &str) -> Vec<String> {
+    line.trim().trim_start_matches('|').trim_end_matches('|').split('|').map(|c| c.trim().to_string()).collect()
+}
+
 /// The book's chapters (`book/src/*.md`) as (file name, text), sorted by name.
 pub fn chapters() -> Vec<(String, String)> {
     files_with_extension(&workspace().join("book/src"), "md")
