@@ -1,8 +1,12 @@
 //! `Comms`: the robot's only door to other robots (paper §IV-B..F, DESIGN.md §4). Seals and opens
 //! envelopes (team-key MAC, replay window, size limits), broadcasts ObjectData on significant
-//! change with a rate limit, coalesces keyframe requests over a window and bounds them in flight
-//! (never asking twice for a keyframe held or in flight; timeouts retried with back-off, then
-//! reported), paces keyframe responses, and accounts every message by type. With the Scan
+//! change with a rate limit (and again after `object_data_refresh_s` of quiet, or soon after a
+//! neighbour is first heard or comes back, so a lost broadcast or a late joiner is never left
+//! without it), coalesces keyframe requests over a window and bounds them in flight (never
+//! asking twice for a keyframe held or in flight; timeouts retried with back-off, then
+//! reported), paces keyframe responses, and accounts every message by type. A neighbour silent
+//! for `link_timeout_s` is down: its requests are neither retried nor given up until it is heard
+//! again, when they are asked for afresh. With the Scan
 //! Context baseline (`matcher.association = "scan_context"`) it broadcasts keyframe descriptors
 //! at the same pace instead of object data.
 
@@ -35,6 +39,7 @@ pub struct CommsLinks {
     pub unavailable: Recipient<KeyframesUnavailable>,
     pub descriptors: Recipient<NeighbourDescriptors>,
     pub serve: Recipient<Serve>,
+    pub link: Recipient<LinkChanged>,
 }
 
 /// What Comms has seen, for status and reports.
@@ -53,6 +58,29 @@ pub struct CommsStatus {
     /// the Matcher).
     pub keyframes_refused_locally: u64,
     pub neighbours: Vec<RobotId>,
+    /// Neighbours silent for `link_timeout_s`, now.
+    pub links_down: Vec<RobotId>,
+    /// Links that went down, then came back, in all.
+    pub link_losses: u64,
+    /// Every keyframe asked of each neighbour, and what became of it.
+    pub keyframe_ledger: BTreeMap<RobotId, KeyframeLedger>,
+    /// ObjectData revision last broadcast (0: none yet).
+    pub object_data_revision: u32,
+}
+
+/// What became of the keyframes wanted from one neighbour. Each id is counted once in
+/// `wanted`, and once in exactly one of the other fields:
+/// `wanted = received + refused + given_up + pending`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct KeyframeLedger {
+    pub wanted: u64,
+    pub received: u64,
+    /// The neighbour answered that it does not have them, or sent an undecodable one.
+    pub refused: u64,
+    /// Every retry timed out, or too many were waiting here already.
+    pub given_up: u64,
+    /// Waiting to be asked, or asked and not yet answered.
+    pub pending: u64,
 }
 
 #[derive(Message)]
@@ -66,7 +94,24 @@ struct KeyframeRequests {
     wanted: BTreeSet<KeyframeId>,
     in_flight: BTreeMap<KeyframeId, Wait>,
     held: BTreeSet<KeyframeId>,
+    /// Answered "not here" (or undecodable), and not wanted since.
+    refused: BTreeSet<KeyframeId>,
+    /// Every retry timed out, or too many were waiting; not wanted since.
+    given_up: BTreeSet<KeyframeId>,
     window_opened: Option<Stamp>,
+    /// Since when requests have been in flight without a break (for the link timeout).
+    owed_since: Option<Stamp>,
+    /// While the link is down: when it was last probed.
+    last_probe: Option<Stamp>,
+}
+
+impl KeyframeRequests {
+    fn ledger(&self) -> KeyframeLedger {
+        let pending = (self.wanted.len() + self.in_flight.len()) as u64;
+        let (received, refused, given_up) =
+            (self.held.len() as u64, self.refused.len() as u64, self.given_up.len() as u64);
+        KeyframeLedger { wanted: received + refused + given_up + pending, received, refused, given_up, pending }
+    }
 }
 
 pub struct Comms {
@@ -79,6 +124,7 @@ pub struct Comms {
     sequence: u64,
     replay: BTreeMap<RobotId, ReplayWindow>,
     last_heard: BTreeMap<RobotId, Stamp>,
+    links_down: BTreeSet<RobotId>,
     status: CommsStatus,
     // ObjectData broadcast (off when the Matcher associates by descriptors).
     object_data: bool,
@@ -86,6 +132,8 @@ pub struct Comms {
     latest_objects: Option<LocalObjects>,
     broadcast_centroids: BTreeMap<ObjectId, Point3<f64>>,
     change_pending: bool,
+    /// Someone needs the current ObjectData again (a new or returning neighbour).
+    repeat_pending: bool,
     last_broadcast: Option<Stamp>,
     // Scan Context descriptors not yet broadcast.
     descriptors: Vec<WireDescriptor>,
@@ -118,12 +166,14 @@ impl Comms {
             sequence: sequence_start,
             replay: BTreeMap::new(),
             last_heard: BTreeMap::new(),
+            links_down: BTreeSet::new(),
             status: CommsStatus::default(),
             object_data: true,
             revision: 0,
             latest_objects: None,
             broadcast_centroids: BTreeMap::new(),
             change_pending: false,
+            repeat_pending: false,
             last_broadcast: None,
             descriptors: Vec::new(),
             last_descriptors: None,
@@ -152,13 +202,22 @@ impl Comms {
         }
     }
 
+    /// Broadcasts ObjectData when the map changed significantly, when a neighbour needs it
+    /// again, or after `object_data_refresh_s` without a broadcast — at most once per
+    /// `object_data_interval_s`. An unchanged map is sent again under its old revision, which a
+    /// neighbour holding it ignores. Revisions never repeat, also after a restart without a
+    /// snapshot: a new one is at least the clock in whole seconds.
     fn try_broadcast(&mut self, now: Stamp) {
-        let due = self.last_broadcast.is_none_or(|t| now - t >= self.config.object_data_interval_s);
-        if !self.object_data || !self.change_pending || !due {
+        let since = self.last_broadcast.map(|t| now - t);
+        let due = since.is_none_or(|s| s >= self.config.object_data_interval_s);
+        let stale = since.is_some_and(|s| s >= self.config.object_data_refresh_s);
+        if !self.object_data || !due || !(self.change_pending || self.repeat_pending || stale) {
             return;
         }
         let Some(objects) = &self.latest_objects else { return };
-        self.revision += 1;
+        if self.change_pending || self.revision == 0 {
+            self.revision = (self.revision + 1).max(now.clamp(0.0, f64::from(u32::MAX)) as u32);
+        }
         let data = ObjectData::quantise(
             self.revision,
             self.config.centroid_resolution_mm,
@@ -166,8 +225,64 @@ impl Comms {
         );
         self.broadcast_centroids = objects.objects.iter().map(|o| (o.id, o.centroid)).collect();
         self.change_pending = false;
+        self.repeat_pending = false;
         self.last_broadcast = Some(now);
+        self.status.object_data_revision = self.revision;
         self.send(Destination::Broadcast, WireMessage::ObjectData(data));
+    }
+
+    /// A neighbour owing us keyframes and silent for `link_timeout_s` since the later of when it
+    /// was last heard and when it began to owe goes down (reported to the Matcher). One with
+    /// nothing outstanding may be quiet for as long as it likes.
+    fn watch_links(&mut self, now: Stamp) {
+        let silent: Vec<RobotId> = self
+            .last_heard
+            .iter()
+            .filter(|(r, heard)| {
+                let owed = self.requests.get(r).and_then(|q| q.owed_since);
+                owed.is_some_and(|since| now - since.max(**heard) >= self.config.link_timeout_s)
+                    && !self.links_down.contains(r)
+            })
+            .map(|(r, _)| *r)
+            .collect();
+        for robot in silent {
+            tracing::info!(robot = %self.robot, neighbour = %robot, "link lost");
+            self.links_down.insert(robot);
+            self.status.link_losses += 1;
+            if let Some(links) = &self.links {
+                links.link.do_send(LinkChanged { robot, up: false });
+            }
+        }
+        self.status.links_down = self.links_down.iter().copied().collect();
+    }
+
+    /// A neighbour was heard: a new one, or one back from silence, is sent our ObjectData soon;
+    /// one back from silence has its unanswered keyframe requests asked for afresh.
+    fn heard(&mut self, from: RobotId, now: Stamp) {
+        let first = self.last_heard.insert(from, now).is_none();
+        if first {
+            self.status.neighbours.push(from);
+            self.status.neighbours.sort();
+            self.repeat_pending = true;
+        }
+        if self.links_down.remove(&from) {
+            tracing::info!(robot = %self.robot, neighbour = %from, "link back");
+            self.status.links_down = self.links_down.iter().copied().collect();
+            self.repeat_pending = true;
+            if let Some(q) = self.requests.get_mut(&from) {
+                let unanswered: Vec<KeyframeId> = q.in_flight.keys().copied().collect();
+                q.in_flight.clear();
+                q.owed_since = None;
+                q.last_probe = None;
+                q.wanted.extend(unanswered);
+                if !q.wanted.is_empty() {
+                    q.window_opened = Some(now);
+                }
+            }
+            if let Some(links) = &self.links {
+                links.link.do_send(LinkChanged { robot: from, up: true });
+            }
+        }
     }
 
     /// Broadcasts the descriptors of keyframes made since the last broadcast, at most once per
@@ -197,8 +312,11 @@ impl Comms {
             }
             if q.wanted.len() < self.config.max_keyframes_waiting {
                 q.wanted.insert(id);
+                q.given_up.remove(&id);
+                q.refused.remove(&id);
             } else {
                 overflow.push(id);
+                q.given_up.insert(id);
             }
         }
         if !q.wanted.is_empty() && q.window_opened.is_none() {
@@ -217,18 +335,31 @@ impl Comms {
         let robots: Vec<RobotId> = self.requests.keys().copied().collect();
         for robot in robots {
             let Some(q) = self.requests.get_mut(&robot) else { continue };
+            // Towards a silent neighbour nothing is retried, nor given up (see `heard`); it is
+            // probed once per `link_timeout_s` with a request for a few of the keyframes it owes,
+            // whose answer brings the link back.
+            if self.links_down.contains(&robot) {
+                if q.last_probe.is_none_or(|t| now - t >= self.config.link_timeout_s) {
+                    q.last_probe = Some(now);
+                    let keyframes = q.in_flight.keys().take(self.config.max_keyframes_per_request).copied().collect();
+                    self.send(Destination::Robot(robot), WireMessage::KeyframeRequest(KeyframeRequest { keyframes }));
+                }
+                continue;
+            }
             // Timeouts: retry with back-off, or report.
             let expired: Vec<(KeyframeId, Wait)> =
                 q.in_flight.iter().filter(|(_, w)| w.expired(now)).map(|(k, w)| (*k, *w)).collect();
             let (mut retry, mut given_up) = (Vec::new(), Vec::new());
             for (id, wait) in expired {
-                match wait.retry(now, &self.config.retry) {
+                let heard = self.last_heard.get(&robot).is_some_and(|t| *t >= wait.sent);
+                match wait.retry(now, &self.config.retry, heard) {
                     Some(next) => {
                         q.in_flight.insert(id, next);
                         retry.push(id);
                     }
                     None => {
                         q.in_flight.remove(&id);
+                        q.given_up.insert(id);
                         given_up.push(id);
                     }
                 }
@@ -246,6 +377,7 @@ impl Comms {
                 q.window_opened = if q.wanted.is_empty() { None } else { Some(now) };
             }
             self.status.max_keyframes_in_flight = self.status.max_keyframes_in_flight.max(q.in_flight.len());
+            q.owed_since = if q.in_flight.is_empty() { None } else { q.owed_since.or(Some(now)) };
             let mut ids = retry;
             ids.extend(fresh);
             for chunk in ids.chunks(self.config.max_keyframes_per_request) {
@@ -297,11 +429,7 @@ impl Comms {
         }
         let from = envelope.from;
         self.status.received.record(envelope.message.kind(), bytes.len());
-        self.last_heard.insert(from, self.clock.now());
-        if !self.status.neighbours.contains(&from) {
-            self.status.neighbours.push(from);
-            self.status.neighbours.sort();
-        }
+        self.heard(from, self.clock.now());
         let Some(links) = self.links.clone() else { return };
         match envelope.message {
             WireMessage::ObjectData(data) => links.objects.do_send(NeighbourObjects { robot: from, data }),
@@ -337,15 +465,18 @@ impl Comms {
             }
             WireMessage::KeyframeResponse(r) => {
                 let q = self.requests.entry(from).or_default();
-                if q.in_flight.remove(&r.keyframe).is_none() && q.held.contains(&r.keyframe) {
+                let asked = q.in_flight.remove(&r.keyframe).is_some() | q.wanted.remove(&r.keyframe);
+                if !asked && q.held.contains(&r.keyframe) {
                     return; // a late duplicate of a retried request
                 }
-                q.held.insert(r.keyframe);
+                // One given up on that arrives late after all is received.
+                q.given_up.remove(&r.keyframe);
                 let pose = r.world_from_body.to_pose();
                 let covariance = unpack_covariance(&r.covariance);
                 let points = cloud_codec::decode_at_most(&r.cloud, self.config.limits.max_cloud_points);
                 match (pose, covariance, points) {
                     (Some(world_from_body), Some(covariance), Ok(points_in_body)) => {
+                        q.held.insert(r.keyframe);
                         links.keyframes.do_send(NeighbourKeyframe {
                             robot: from,
                             id: r.keyframe,
@@ -355,6 +486,7 @@ impl Comms {
                         })
                     }
                     _ => {
+                        q.refused.insert(r.keyframe);
                         self.status.rejected.malformed += 1;
                         links.unavailable.do_send(KeyframesUnavailable {
                             robot: from,
@@ -369,7 +501,9 @@ impl Comms {
             WireMessage::KeyframeRefusal(r) => {
                 let q = self.requests.entry(from).or_default();
                 for id in &r.keyframes {
-                    q.in_flight.remove(id);
+                    if q.in_flight.remove(id).is_some() {
+                        q.refused.insert(*id);
+                    }
                 }
                 links.unavailable.do_send(KeyframesUnavailable {
                     robot: from,
@@ -472,6 +606,7 @@ impl Handler<Tick> for Comms {
     type Result = ();
     fn handle(&mut self, msg: Tick, ctx: &mut Context<Self>) {
         contained(ctx, "comms", || {
+            self.watch_links(msg.now);
             self.try_broadcast(msg.now);
             self.broadcast_descriptors(msg.now);
             self.flush_requests(msg.now);
@@ -483,7 +618,9 @@ impl Handler<Tick> for Comms {
 impl Handler<GetCommsStatus> for Comms {
     type Result = MessageResult<GetCommsStatus>;
     fn handle(&mut self, _: GetCommsStatus, _: &mut Context<Self>) -> Self::Result {
-        MessageResult(self.status.clone())
+        let mut status = self.status.clone();
+        status.keyframe_ledger = self.requests.iter().map(|(r, q)| (*r, q.ledger())).collect();
+        MessageResult(status)
     }
 }
 

@@ -244,6 +244,11 @@ pub struct CommsConfig {
     pub team_key: String,
     /// Shortest interval between two ObjectData broadcasts, s. Default 2.
     pub object_data_interval_s: f64,
+    /// ObjectData is broadcast again, unchanged, after this long without a broadcast, so a lost
+    /// one is made good and neighbours keep hearing us (keep it below `link_timeout_s`); a
+    /// neighbour first heard or back from silence gets it at the next `object_data_interval_s`,
+    /// s. Default 10.
+    pub object_data_refresh_s: f64,
     /// Objects whose centroid moved farther than this count as a significant change, m.
     /// Default 0.5.
     pub significant_move_m: f64,
@@ -260,7 +265,8 @@ pub struct CommsConfig {
     pub max_keyframes_per_request: usize,
     /// Keyframe responses sent per tick, at most (the outgoing budget). Default 16.
     pub max_responses_per_tick: usize,
-    /// A neighbour silent for this long is considered lost, s. Default 30.
+    /// A neighbour silent for this long is down: requests to it wait, neither retried nor given
+    /// up, and are asked afresh when it is heard again, s. Default 30.
     pub link_timeout_s: f64,
     /// Cloud quantum of keyframe responses, m. Default 0.01.
     pub cloud_resolution_m: f64,
@@ -276,6 +282,7 @@ impl Default for CommsConfig {
         Self {
             team_key: DEVELOPMENT_TEAM_KEY.into(),
             object_data_interval_s: 2.0,
+            object_data_refresh_s: 10.0,
             significant_move_m: 0.5,
             centroid_resolution_mm: 20,
             request_window_s: 0.5,
@@ -489,6 +496,12 @@ impl RobotConfig {
         let c = &self.comms;
         c.team_key()?;
         check(positive(c.object_data_interval_s), "comms.object_data_interval_s", c.object_data_interval_s, "> 0")?;
+        check(
+            c.object_data_refresh_s.is_finite() && c.object_data_refresh_s >= c.object_data_interval_s,
+            "comms.object_data_refresh_s",
+            c.object_data_refresh_s,
+            "finite, ≥ comms.object_data_interval_s",
+        )?;
         check(positive(c.significant_move_m), "comms.significant_move_m", c.significant_move_m, "> 0")?;
         check(c.centroid_resolution_mm >= 1, "comms.centroid_resolution_mm", c.centroid_resolution_mm, "1–65535")?;
         check(

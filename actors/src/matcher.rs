@@ -17,7 +17,7 @@ use crate::config::{Association, MatcherSection};
 use crate::containment::contained;
 use crate::messages::*;
 use crate::place_candidates::{PlaceCandidate, PlaceCandidates};
-use crate::protocol::{Neighbour, Protocol, RetryConfig};
+use crate::protocol::{Neighbour, Protocol, RetryConfig, Wait};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use nalgebra::Point3;
 use sgm_model::geometry::{pose_error, Pose3};
@@ -28,7 +28,7 @@ use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS, UNLABELLED};
 use sgm_model::perception::structure_check::structure_agreement;
 use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
-use sgm_model::wire::messages::ObjectData;
+use sgm_model::wire::messages::{ObjectData, RefusalReason};
 use std::collections::{BTreeMap, BTreeSet};
 
 /// Where the Matcher sends what it produces.
@@ -81,6 +81,14 @@ struct NeighbourEntry {
     /// the local keyframes around its local one (object association derives its targets from
     /// the object pairs).
     place_round: Option<(PlaceCandidate, BTreeSet<KeyframeId>)>,
+    /// Comms reported the link down: nothing is matched, requested or retried until it is back.
+    link_down: bool,
+    /// A keyframe of the current round was given up on (lost, not refused): too few factors
+    /// then say nothing against the match.
+    round_incomplete: bool,
+    /// The last round was cut short by losses, not refuted: match again once
+    /// `match_interval_s` has passed, even if no new object data comes.
+    match_again: bool,
 }
 
 /// At most `n` of `ids`, spread evenly over them (deterministic).
@@ -171,6 +179,9 @@ impl Matcher {
             last_attempt: None,
             places: PlaceCandidates::default(),
             place_round: None,
+            link_down: false,
+            round_incomplete: false,
+            match_again: false,
         })
     }
 
@@ -193,7 +204,7 @@ impl Matcher {
         let Some(data) = &entry.objects else { return };
         let waiting = matches!(entry.protocol, Some(Protocol::ObjectsReceived(_)));
         let due = entry.last_attempt.is_none_or(|t| now - t >= self.config.match_interval_s);
-        if !waiting || !due || self.config.association != Association::Objects {
+        if !waiting || !due || entry.link_down || self.config.association != Association::Objects {
             return;
         }
         let remote_objects: Vec<GraphObject> = data
@@ -214,6 +225,7 @@ impl Matcher {
         let refuted = entry.refuted.clone();
         if let Some(entry) = self.neighbours.get_mut(&robot) {
             entry.last_attempt = Some(now);
+            entry.match_again = false;
         }
         let report = match_graphs(&local, &remote, &self.labels, &self.config.matching);
         let alignment = match report.outcome {
@@ -249,10 +261,11 @@ impl Matcher {
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
         let waiting = matches!(entry.protocol, Some(Protocol::ObjectsReceived(_)));
         let due = entry.last_attempt.is_none_or(|t| now - t >= self.config.match_interval_s);
-        if !waiting || !due {
+        if !waiting || !due || entry.link_down {
             return;
         }
         entry.last_attempt = Some(now);
+        entry.match_again = false;
         entry.places.update(&self.places, &self.config.scan_context);
         let candidate = loop {
             let Some(c) = entry.places.take_best() else { return };
@@ -280,6 +293,7 @@ impl Matcher {
             entry.protocol = Some(matched.keyframes_requested(guess, wanted.clone(), now, &retry).into());
         }
         entry.round = round;
+        entry.round_incomplete = false;
         entry.place_round = Some((c, local_targets));
         tracing::info!(robot = %self.robot, neighbour = %robot, local = c.local.0, remote = c.remote.0,
             distance = c.distance, "scan contexts matched");
@@ -353,7 +367,9 @@ impl Matcher {
         let wanted: BTreeSet<KeyframeId> =
             round.iter().filter(|id| !entry.keyframes.contains_key(id)).copied().collect();
         entry.round = round;
+        entry.round_incomplete = false;
         entry.protocol = Some(matched.keyframes_requested(local_from_remote, wanted.clone(), now, &retry).into());
+        tracing::debug!(robot = %self.robot, neighbour = %msg.robot, wanted = wanted.len(), "object clouds in, keyframes wanted");
         if wanted.is_empty() {
             self.finish_alignment(msg.robot);
         } else if let Some(links) = &self.links {
@@ -425,6 +441,15 @@ impl Matcher {
             implied.push(local.world_from_body * result.target_from_source * kf.world_from_body.inverse());
         }
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
+        if factors.len() < self.config.min_keyframe_factors && entry.round_incomplete {
+            // Keyframes were lost on the way: too few to judge the match, which is tried again.
+            tracing::info!(robot = %self.robot, neighbour = %robot, factors = factors.len(), "alignment round incomplete");
+            if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
+                entry.protocol = Some(n.gave_up(now).into());
+            }
+            entry.match_again = true;
+            return;
+        }
         if factors.len() < self.config.min_keyframe_factors {
             tracing::info!(robot = %self.robot, neighbour = %robot, factors = factors.len(), "object match refuted");
             entry.refuted.push((n.state.local_from_remote, now));
@@ -582,6 +607,11 @@ impl Handler<KeyframesUnavailable> for Matcher {
     type Result = ();
     fn handle(&mut self, msg: KeyframesUnavailable, ctx: &mut Context<Self>) {
         contained(ctx, "matcher", || {
+            // Busy: given up after every retry, or refused for load; the keyframe was not
+            // shown to be absent.
+            if msg.reason == RefusalReason::Busy {
+                self.entry(msg.robot).round_incomplete = true;
+            }
             for id in msg.keyframes {
                 self.on_keyframe_resolved(msg.robot, id);
             }
@@ -598,10 +628,13 @@ impl Handler<Tick> for Matcher {
             for robot in robots {
                 let Some(entry) = self.neighbours.get_mut(&robot) else { continue };
                 let Some(Protocol::Matched(mut n)) = entry.protocol.clone() else { continue };
-                if !n.state.wait.expired(msg.now) {
+                if entry.link_down || !n.state.wait.expired(msg.now) {
                     continue;
                 }
-                match n.state.wait.retry(msg.now, &self.retry) {
+                // Comms reports the link down after `link_timeout_s` of silence; until then the
+                // neighbour counts as heard, and a lost cloud response is asked for again at
+                // the same pace. (While it is down nothing is retried: see above.)
+                match n.state.wait.retry(msg.now, &self.retry, !entry.link_down) {
                     Some(next) => {
                         n.state.wait = next;
                         let objects = n.state.pairs.iter().map(|p| p.1).collect();
@@ -610,8 +643,49 @@ impl Handler<Tick> for Matcher {
                             links.request_clouds.do_send(RequestObjectClouds { robot, objects });
                         }
                     }
-                    None => entry.protocol = Some(n.gave_up(msg.now).into()),
+                    None => {
+                        entry.protocol = Some(n.gave_up(msg.now).into());
+                        entry.match_again = true;
+                    }
                 }
+            }
+            // Rounds cut short by losses: try again (the neighbour may have stopped changing).
+            let again: Vec<RobotId> = self.neighbours.iter().filter(|(_, e)| e.match_again).map(|(r, _)| *r).collect();
+            for robot in again {
+                match self.config.association {
+                    Association::ScanContext => self.try_match_places(robot),
+                    _ => self.try_match(robot),
+                }
+            }
+        });
+    }
+}
+
+impl Handler<LinkChanged> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: LinkChanged, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            let now = self.clock.now();
+            let retry = self.retry.clone();
+            let entry = self.entry(msg.robot);
+            entry.link_down = !msg.up;
+            if !msg.up {
+                return;
+            }
+            // Back: a pending object-cloud request is sent again at once (its retries were
+            // paused); a neighbour waiting to be matched is matched now.
+            entry.last_attempt = None;
+            if let Some(Protocol::Matched(mut n)) = entry.protocol.clone() {
+                n.state.wait = Wait::new(now, &retry);
+                let objects = n.state.pairs.iter().map(|p| p.1).collect();
+                entry.protocol = Some(n.into());
+                if let Some(links) = &self.links {
+                    links.request_clouds.do_send(RequestObjectClouds { robot: msg.robot, objects });
+                }
+            }
+            match self.config.association {
+                Association::ScanContext => self.try_match_places(msg.robot),
+                _ => self.try_match(msg.robot),
             }
         });
     }

@@ -117,6 +117,15 @@ pub struct KeyframesUnavailable {
     pub reason: RefusalReason,
 }
 
+/// Comms → Matcher: a neighbour fell silent for `comms.link_timeout_s` (`up: false`), or was
+/// heard again (`up: true`). While a link is down nothing is retried or given up towards it.
+#[derive(Message, Clone, Copy, Debug, PartialEq, Eq)]
+#[rtype(result = "()")]
+pub struct LinkChanged {
+    pub robot: RobotId,
+    pub up: bool,
+}
+
 /// Comms → Matcher: Scan Context descriptors of a neighbour's keyframes arrived (association
 /// `scan_context` only), each with the keyframe's pose in the neighbour's world.
 #[derive(Message, Clone, Debug)]

@@ -36,26 +36,33 @@ impl Default for RetryConfig {
     }
 }
 
-/// A pending request: when it expires and how often it was sent.
+/// A pending request: when it was last sent, when that attempt expires, and how often it was
+/// sent.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Wait {
+    pub sent: Stamp,
     pub deadline: Stamp,
     pub attempts: u32,
 }
 
 impl Wait {
     pub fn new(now: Stamp, config: &RetryConfig) -> Self {
-        Self { deadline: now + config.timeout_s, attempts: 1 }
+        Self { sent: now, deadline: now + config.timeout_s, attempts: 1 }
     }
 
     pub fn expired(&self, now: Stamp) -> bool {
         now >= self.deadline
     }
 
-    /// The next attempt, or `None` when retries are exhausted.
-    pub fn retry(&self, now: Stamp, config: &RetryConfig) -> Option<Wait> {
+    /// The next attempt, or `None` when retries are exhausted. `heard_since_sent`: the
+    /// neighbour was heard after the last attempt went out. Then the link works and the answer
+    /// was lost at random: the next attempt waits `timeout_s` again. Otherwise the neighbour
+    /// may be gone or swamped, and each attempt waits `backoff` times longer than the last.
+    pub fn retry(&self, now: Stamp, config: &RetryConfig, heard_since_sent: bool) -> Option<Wait> {
+        let growth = if heard_since_sent { 1.0 } else { config.backoff.powi(self.attempts as i32) };
         (self.attempts <= config.max_retries).then(|| Wait {
-            deadline: now + config.timeout_s * config.backoff.powi(self.attempts as i32),
+            sent: now,
+            deadline: now + config.timeout_s * growth,
             attempts: self.attempts + 1,
         })
     }
@@ -263,7 +270,7 @@ mod tests {
         let retry = RetryConfig::default();
         let n = Neighbour::discovered(RobotId(2), 0.0).objects_received(3, 1.0);
         let m = n.matched(Pose3::identity(), vec![(ObjectId(1), ObjectId(7))], 1.5, &retry);
-        assert_eq!(m.state.wait, Wait { deadline: 6.5, attempts: 1 });
+        assert_eq!(m.state.wait, Wait { sent: 1.5, deadline: 6.5, attempts: 1 });
         let k = m.keyframes_requested(Pose3::identity(), [KeyframeId(4)].into(), 2.0, &retry);
         let a = k.aligned(Pose3::identity(), 3.0);
         assert_eq!((a.since, a.state.revision), (3.0, 3));
@@ -295,10 +302,16 @@ mod tests {
         let retry = RetryConfig { timeout_s: 1.0, backoff: 2.0, max_retries: 2 };
         let w = Wait::new(0.0, &retry);
         assert!(!w.expired(0.5) && w.expired(1.0));
-        let w2 = w.retry(1.0, &retry).unwrap();
-        assert_eq!(w2, Wait { deadline: 3.0, attempts: 2 });
-        let w3 = w2.retry(3.0, &retry).unwrap();
-        assert_eq!(w3, Wait { deadline: 7.0, attempts: 3 });
-        assert_eq!(w3.retry(7.0, &retry), None);
+        let w2 = w.retry(1.0, &retry, false).unwrap();
+        assert_eq!(w2, Wait { sent: 1.0, deadline: 3.0, attempts: 2 });
+        let w3 = w2.retry(3.0, &retry, false).unwrap();
+        assert_eq!(w3, Wait { sent: 3.0, deadline: 7.0, attempts: 3 });
+        assert_eq!(w3.retry(7.0, &retry, false), None);
+        // A neighbour heard since the last attempt: no back-off, but the same retry budget.
+        let w2 = w.retry(1.0, &retry, true).unwrap();
+        assert_eq!(w2, Wait { sent: 1.0, deadline: 2.0, attempts: 2 });
+        let w3 = w2.retry(2.0, &retry, true).unwrap();
+        assert_eq!(w3, Wait { sent: 2.0, deadline: 3.0, attempts: 3 });
+        assert_eq!(w3.retry(3.0, &retry, true), None);
     }
 }

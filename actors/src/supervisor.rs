@@ -105,6 +105,7 @@ pub fn start_robot_on(
         unavailable: matcher.clone().recipient(),
         descriptors: matcher.clone().recipient(),
         serve: tracker.clone().recipient(),
+        link: matcher.clone().recipient(),
     }));
     tracker.do_send(Connect(TrackerLinks {
         optimiser: optimiser.clone().recipient(),

@@ -25,10 +25,10 @@ pub trait Transport: Send {
     fn transmit(&self, from: RobotId, to: Destination, bytes: Vec<u8>, now: Stamp);
 }
 
-/// The radio's physics: whether and when a packet of `bytes` from `from` reaches `to`.
+/// The radio's physics: whether, when and how often a packet of `bytes` from `from` reaches `to`.
 pub trait RadioModel: Send {
-    /// Arrival time, or `None` if lost.
-    fn arrival(&mut self, from: RobotId, to: RobotId, bytes: usize, now: Stamp) -> Option<Stamp>;
+    /// Arrival times: none if lost, one normally, more if the medium duplicated the packet.
+    fn arrivals(&mut self, from: RobotId, to: RobotId, bytes: usize, now: Stamp) -> Vec<Stamp>;
 }
 
 /// Every packet arrives at once.
@@ -36,8 +36,8 @@ pub trait RadioModel: Send {
 pub struct PerfectLinks;
 
 impl RadioModel for PerfectLinks {
-    fn arrival(&mut self, _: RobotId, _: RobotId, _: usize, now: Stamp) -> Option<Stamp> {
-        Some(now)
+    fn arrivals(&mut self, _: RobotId, _: RobotId, _: usize, now: Stamp) -> Vec<Stamp> {
+        vec![now]
     }
 }
 
@@ -105,7 +105,7 @@ impl Transport for InProcessRadio {
         let targets: Vec<RobotId> =
             medium.endpoints.keys().copied().filter(|r| *r != from && to.includes(*r)).collect();
         for target in targets {
-            if let Some(at) = medium.model.arrival(from, target, bytes.len(), now) {
+            for at in medium.model.arrivals(from, target, bytes.len(), now) {
                 // Non-negative finite times order like their bit patterns.
                 let at = if at.is_finite() { at.max(now).max(0.0) } else { continue };
                 medium.sent += 1;

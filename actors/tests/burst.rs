@@ -32,8 +32,24 @@ struct LossyLinks {
 }
 
 impl RadioModel for LossyLinks {
-    fn arrival(&mut self, _: RobotId, _: RobotId, _: usize, now: Stamp) -> Option<Stamp> {
-        (!self.rng.random_bool(self.loss)).then_some(now + 0.02)
+    fn arrivals(&mut self, _: RobotId, _: RobotId, _: usize, now: Stamp) -> Vec<Stamp> {
+        (!self.rng.random_bool(self.loss)).then_some(now + 0.02).into_iter().collect()
+    }
+}
+
+/// Nothing crosses between `from` and `until` (a partition); otherwise 20 ms latency.
+struct PartitionedLinks {
+    from: Stamp,
+    until: Stamp,
+}
+
+impl RadioModel for PartitionedLinks {
+    fn arrivals(&mut self, _: RobotId, _: RobotId, _: usize, now: Stamp) -> Vec<Stamp> {
+        if (self.from..self.until).contains(&now) {
+            Vec::new()
+        } else {
+            vec![now + 0.02]
+        }
     }
 }
 
@@ -44,6 +60,7 @@ struct Heard {
     reported: BTreeMap<KeyframeId, RefusalReason>,
     /// Descriptor deliveries: (sender, keyframe ids).
     descriptors: Vec<(RobotId, Vec<KeyframeId>)>,
+    links: Vec<LinkChanged>,
 }
 
 struct Recorder(Arc<Mutex<Heard>>);
@@ -54,6 +71,12 @@ impl Handler<NeighbourKeyframe> for Recorder {
     type Result = ();
     fn handle(&mut self, msg: NeighbourKeyframe, _: &mut Context<Self>) {
         *self.0.lock().unwrap().served.entry(msg.id).or_default() += 1;
+    }
+}
+impl Handler<LinkChanged> for Recorder {
+    type Result = ();
+    fn handle(&mut self, msg: LinkChanged, _: &mut Context<Self>) {
+        self.0.lock().unwrap().links.push(msg);
     }
 }
 impl Handler<KeyframesUnavailable> for Recorder {
@@ -148,6 +171,7 @@ async fn burst(model: Box<dyn RadioModel>, config: CommsConfig, seconds: u32) ->
         unavailable: recorder.clone().recipient(),
         descriptors: recorder.clone().recipient(),
         serve,
+        link: recorder.clone().recipient(),
     };
     requester.do_send(Connect(links(recorder.clone().recipient())));
     server.do_send(Connect(links(map.recipient())));
@@ -201,6 +225,12 @@ async fn a_burst_over_perfect_links_is_bounded_served_once_and_the_rest_reported
     assert_eq!(o.heard.served.len() + o.heard.reported.len(), o.requested.len());
     assert_eq!(o.server.keyframes_sent_twice, 0);
     assert_eq!((o.requester.keyframes_given_up, o.requester.keyframes_refused_locally), (0, 0));
+    // The ledger accounts for every keyframe asked for.
+    let ledger = &o.requester.keyframe_ledger[&SERVER];
+    assert_eq!(ledger.wanted as usize, o.requested.len());
+    assert_eq!(ledger.received as usize, o.heard.served.len());
+    assert_eq!(ledger.refused as usize, o.heard.reported.len());
+    assert_eq!((ledger.given_up, ledger.pending), (0, 0));
     // Coalescing: far fewer requests than the 100 matches asked for.
     let requests = o.requester.sent.get(sgm_model::wire::MessageKind::KeyframeRequest).count;
     assert!(requests < 100, "{requests} KeyframeRequests");
@@ -223,6 +253,81 @@ async fn a_burst_over_a_lossy_radio_is_bounded_and_nothing_is_silently_dropped()
             assert_eq!(served, 0);
         }
     }
+    let ledger = &o.requester.keyframe_ledger[&SERVER];
+    assert_eq!(ledger.wanted as usize, o.requested.len(), "{ledger:?}");
+    assert_eq!(ledger.received as usize, o.heard.served.len(), "{ledger:?}");
+    assert_eq!(ledger.pending, 0, "{ledger:?}");
+    assert_eq!(ledger.received + ledger.refused + ledger.given_up, ledger.wanted, "{ledger:?}");
+    assert_eq!(o.requester.links_down, Vec::<RobotId>::new());
+}
+
+/// A partition from 0.5 s to 400 s, longer than every retry with back-off: the requester sees
+/// the link go down after `link_timeout_s`, stops retrying (nothing is given up), and once the
+/// partition heals and the server is heard again (its ObjectData refresh), asks afresh: every
+/// keyframe arrives.
+#[actix_rt::test]
+async fn a_partition_pauses_requests_and_the_heal_completes_them() {
+    let config = CommsConfig { max_keyframes_in_flight: 16, max_keyframes_waiting: 1000, ..CommsConfig::default() };
+    let radio = InProcessRadio::new(Box::new(PartitionedLinks { from: 0.5, until: 400.0 }));
+    let clock = Clock::starting_at(0.0);
+    let key = TeamKey::from_passphrase(&config.team_key).unwrap();
+    let start = |robot: RobotId| {
+        let comms = Comms::new(robot, config.clone(), key.clone(), clock.clone(), Box::new(radio.clone()), 0).start();
+        radio.attach(robot, comms.clone().recipient());
+        comms
+    };
+    let (requester, server) = (start(REQUESTER), start(SERVER));
+    let heard = Arc::new(Mutex::new(Heard::default()));
+    let recorder = Recorder(heard.clone()).start();
+    let map = Map { comms: server.clone() }.start();
+    let links = |serve: actix::Recipient<Serve>| CommsLinks {
+        objects: recorder.clone().recipient(),
+        object_clouds: recorder.clone().recipient(),
+        keyframes: recorder.clone().recipient(),
+        unavailable: recorder.clone().recipient(),
+        descriptors: recorder.clone().recipient(),
+        serve,
+        link: recorder.clone().recipient(),
+    };
+    requester.do_send(Connect(links(recorder.clone().recipient())));
+    server.do_send(Connect(links(map.recipient())));
+    // The server has a map: its ObjectData makes it heard, then keeps it heard.
+    let object = sgm_model::matching::GraphObject {
+        id: sgm_model::scene_graph::ObjectId(1),
+        label: sgm_model::scene_graph::LabelId(1),
+        centroid: Point3::new(1.0, 2.0, 0.0),
+        size: None,
+    };
+    server.do_send(LocalObjects { objects: vec![object], ..LocalObjects::default() });
+    let wanted: Vec<KeyframeId> = (0..40).map(KeyframeId).collect();
+    let mut links_down_during = Vec::new();
+    for step in 0..6000 {
+        let now = f64::from(step) * 0.1;
+        clock.advance_to(now);
+        if step == 3 {
+            requester.do_send(RequestKeyframes { robot: SERVER, keyframes: wanted.clone() });
+        }
+        for comms in [&requester, &server] {
+            comms.do_send(Tick { now });
+        }
+        settle().await;
+        radio.deliver_due(now);
+        settle().await;
+        if step == 3000 {
+            links_down_during = requester.send(GetCommsStatus).await.unwrap().links_down;
+        }
+    }
+    let status = requester.send(GetCommsStatus).await.unwrap();
+    let heard = std::mem::take(&mut *heard.lock().unwrap());
+    assert_eq!(links_down_during, vec![SERVER], "down while partitioned");
+    assert_eq!(status.links_down, Vec::<RobotId>::new(), "back after the heal");
+    assert_eq!(status.link_losses, 1);
+    assert_eq!(heard.links, vec![LinkChanged { robot: SERVER, up: false }, LinkChanged { robot: SERVER, up: true }]);
+    assert_eq!(status.keyframes_given_up, 0);
+    let ledger = &status.keyframe_ledger[&SERVER];
+    assert_eq!((ledger.wanted, ledger.received, ledger.refused, ledger.given_up, ledger.pending), (40, 40, 0, 0, 0));
+    assert_eq!(heard.served.len(), 40);
+    assert!(heard.served.values().all(|n| *n == 1));
 }
 
 /// The Scan Context baseline's path through Comms: descriptors shared between two broadcasts go
@@ -253,6 +358,7 @@ async fn descriptors_are_batched_broadcast_and_delivered() {
             unavailable: recorder.clone().recipient(),
             descriptors: recorder.clone().recipient(),
             serve: recorder.clone().recipient(),
+            link: recorder.clone().recipient(),
         }));
         robots.push(comms);
     }

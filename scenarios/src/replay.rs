@@ -213,7 +213,7 @@ pub async fn replay(
                     tracing::warn!("a bag has no ground truth: the radio's range limit is off");
                     spec.range_m = 0.0;
                 }
-                let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&spec, seed, shared.clone())));
+                let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&spec, seed, shared.clone(), &names)));
                 team.insert(Team::new(names.clone(), radio))
             }
         };

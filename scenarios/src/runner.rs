@@ -66,8 +66,8 @@ pub async fn run_recording(
     let paths: Vec<Vec<Point2<f64>>> = routes.iter().map(|r| r.points.clone()).collect();
     let world = generate(&scenario.world, &scenario.fusion.classes, &paths, seed);
     let shared = RadioShared::default();
-    let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&scenario.radio, seed, shared.clone())));
     let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
+    let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&scenario.radio, seed, shared.clone(), &names)));
     let mut team = Team::new(names.clone(), radio);
     let mut recorder = match bag_out {
         Some(dir) => Some(BagRecorder::new(dir, &scenario.ros, names).map_err(RunError::Input)?),

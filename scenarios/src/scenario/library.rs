@@ -6,6 +6,12 @@ const LIBRARY: &[(&str, &str)] = &[
     ("outdoor_two_robots", include_str!("../../library/outdoor_two_robots.toml")),
     ("indoor_three_robots", include_str!("../../library/indoor_three_robots.toml")),
     ("team_of_eight", include_str!("../../library/team_of_eight.toml")),
+    ("faults/clean", include_str!("../../library/faults/clean.toml")),
+    ("faults/loss_30", include_str!("../../library/faults/loss_30.toml")),
+    ("faults/loss_60", include_str!("../../library/faults/loss_60.toml")),
+    ("faults/duplicate_reorder", include_str!("../../library/faults/duplicate_reorder.toml")),
+    ("faults/partition", include_str!("../../library/faults/partition.toml")),
+    ("faults/late_join", include_str!("../../library/faults/late_join.toml")),
 ];
 
 /// The TOML text of a library scenario.

@@ -109,6 +109,22 @@ impl Scenario {
         check(within(r.loss, 0.0, 1.0), "radio.loss", r.loss, "0 ≤ x ≤ 1")?;
         check(within(r.range_m, 0.0, 1e6), "radio.range_m", r.range_m, "0 (unlimited) ≤ x ≤ 1e6 m")?;
         check(r.queue_bytes >= 1024, "radio.queue_bytes", r.queue_bytes, "≥ 1024")?;
+        check(within(r.duplicate, 0.0, 1.0), "radio.duplicate", r.duplicate, "0 ≤ x ≤ 1")?;
+        check(within(r.jitter_ms, 0.0, 60_000.0), "radio.jitter_ms", r.jitter_ms, "0 ≤ x ≤ 60000 ms")?;
+        for (k, p) in r.partitions.iter().enumerate() {
+            let key = |field: &str| format!("radio.partitions[{k}].{field}");
+            check(within(p.start_s, 0.0, 1e9), key("start_s"), p.start_s, "0 ≤ x")?;
+            check(p.end_s.is_finite() && p.end_s > p.start_s, key("end_s"), p.end_s, "finite, > start_s")?;
+            check(!p.robots.is_empty(), key("robots"), "[]", "at least one robot name")?;
+            for name in &p.robots {
+                check(
+                    (0..self.robots.len()).any(|j| self.robot_name(j) == *name),
+                    key("robots"),
+                    format!("{name:?}"),
+                    "names of robots of this scenario",
+                )?;
+            }
+        }
 
         check(!self.robots.is_empty(), "robots", "[]", "at least one [[robots]] table")?;
         check(self.robots.len() <= 64, "robots", self.robots.len(), "at most 64 robots")?;
