@@ -43,7 +43,7 @@ pub struct CommsLinks {
 }
 
 /// What Comms has seen, for status and reports.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CommsStatus {
     pub sent: TrafficAccount,
     pub received: TrafficAccount,
@@ -71,7 +71,7 @@ pub struct CommsStatus {
 /// What became of the keyframes wanted from one neighbour. Each id is counted once in
 /// `wanted`, and once in exactly one of the other fields:
 /// `wanted = received + refused + given_up + pending`.
-#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct KeyframeLedger {
     pub wanted: u64,
     pub received: u64,
@@ -86,6 +86,19 @@ pub struct KeyframeLedger {
 #[derive(Message)]
 #[rtype(result = "CommsStatus")]
 pub struct GetCommsStatus;
+
+/// What of Comms a snapshot keeps: the numbering that must never repeat, the replay windows
+/// (a message recorded before a crash is still refused after it), which keyframes each
+/// neighbour already gave us or was given, and the accounts.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CommsState {
+    pub sequence: u64,
+    pub revision: u32,
+    pub replay: BTreeMap<RobotId, ReplayWindow>,
+    pub keyframes_held: BTreeMap<RobotId, BTreeSet<KeyframeId>>,
+    pub keyframes_sent: BTreeMap<RobotId, BTreeSet<KeyframeId>>,
+    pub status: CommsStatus,
+}
 
 /// Keyframe requests to one neighbour.
 #[derive(Clone, Debug, Default)]
@@ -183,6 +196,31 @@ impl Comms {
         }
     }
 
+    pub fn freeze(&self) -> CommsState {
+        CommsState {
+            sequence: self.sequence,
+            revision: self.revision,
+            replay: self.replay.clone(),
+            keyframes_held: self.requests.iter().map(|(r, q)| (*r, q.held.clone())).collect(),
+            keyframes_sent: self.keyframes_sent.clone(),
+            status: self.status.clone(),
+        }
+    }
+
+    /// Continues from `state`: sequence numbers and revisions go on above the snapshot's (and
+    /// above `sequence_start`, whichever is higher).
+    pub fn thawed(mut self, state: CommsState) -> Self {
+        self.sequence = self.sequence.max(state.sequence);
+        self.revision = state.revision;
+        self.replay = state.replay;
+        for (robot, held) in state.keyframes_held {
+            self.requests.entry(robot).or_default().held = held;
+        }
+        self.keyframes_sent = state.keyframes_sent;
+        self.status = CommsStatus { links_down: Vec::new(), ..state.status };
+        self
+    }
+
     /// Without object data: the Scan Context baseline shares keyframe descriptors instead.
     pub fn without_object_data(mut self) -> Self {
         self.object_data = false;
@@ -261,8 +299,10 @@ impl Comms {
     fn heard(&mut self, from: RobotId, now: Stamp) {
         let first = self.last_heard.insert(from, now).is_none();
         if first {
-            self.status.neighbours.push(from);
-            self.status.neighbours.sort();
+            if !self.status.neighbours.contains(&from) {
+                self.status.neighbours.push(from);
+                self.status.neighbours.sort();
+            }
             self.repeat_pending = true;
         }
         if self.links_down.remove(&from) {
@@ -612,6 +652,13 @@ impl Handler<Tick> for Comms {
             self.flush_requests(msg.now);
             self.send_responses();
         });
+    }
+}
+
+impl Handler<Freeze<CommsState>> for Comms {
+    type Result = MessageResult<Freeze<CommsState>>;
+    fn handle(&mut self, _: Freeze<CommsState>, _: &mut Context<Self>) -> Self::Result {
+        MessageResult(self.freeze())
     }
 }
 

@@ -18,7 +18,7 @@ use sgm_model::wire::{TeamKey, WireLimits};
 use std::path::Path;
 
 /// Everything one robot needs; `[robot]`, `[fusion]`, `[tracker]`, `[matcher]`, `[optimiser]`,
-/// `[comms]`.
+/// `[comms]`, `[persistence]`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RobotConfig {
@@ -28,6 +28,31 @@ pub struct RobotConfig {
     pub matcher: MatcherSection,
     pub optimiser: OptimiserConfig,
     pub comms: CommsConfig,
+    pub persistence: PersistenceConfig,
+}
+
+/// Map snapshots on disk: the robot's scene graph, pose graph and neighbour knowledge, written
+/// atomically every `interval_s` (and at shutdown) to `directory/<robot name>.snapshot`, the
+/// previous good one kept as `.snapshot.prev`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PersistenceConfig {
+    /// Where snapshots go; "" turns them off. Default "" (in scenarios, `sgm run --out DIR`
+    /// uses DIR/snapshots).
+    pub directory: String,
+    /// Simulated or ROS time between two snapshots, s. Default 30.
+    pub interval_s: f64,
+    /// At start, continue from the robot's snapshot in `directory` if there is one (the
+    /// previous one if the latest is damaged). Default true.
+    pub resume: bool,
+    /// A snapshot whose content unpacks to more than this is refused, MiB. Default 4096.
+    pub max_snapshot_mib: u64,
+}
+
+impl Default for PersistenceConfig {
+    fn default() -> Self {
+        Self { directory: String::new(), interval_s: 30.0, resume: true, max_snapshot_mib: 4096 }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -528,6 +553,14 @@ impl RobotConfig {
             "comms.limits.max_envelope_bytes",
             c.limits.max_envelope_bytes,
             "≥ 1024",
+        )?;
+        let p = &self.persistence;
+        check(p.interval_s.is_finite() && p.interval_s >= 1.0, "persistence.interval_s", p.interval_s, "≥ 1 s")?;
+        check(
+            (1..=1 << 20).contains(&p.max_snapshot_mib),
+            "persistence.max_snapshot_mib",
+            p.max_snapshot_mib,
+            "1 – 1048576",
         )?;
         Ok(())
     }

@@ -26,13 +26,20 @@ macro_rules! stops_on_injected_failure {
     )*};
 }
 
-/// The [`messages::Connect`] handler of each listed actor and links type.
+/// The [`messages::Connect`] and [`messages::Halt`] handlers of each listed actor and links type.
 macro_rules! connects {
     ($($actor:ty => $links:ty),*) => {$(
         impl actix::Handler<crate::messages::Connect<$links>> for $actor {
             type Result = ();
             fn handle(&mut self, msg: crate::messages::Connect<$links>, _: &mut actix::Context<Self>) {
                 self.links = Some(msg.0);
+            }
+        }
+
+        impl actix::Handler<crate::messages::Halt> for $actor {
+            type Result = ();
+            fn handle(&mut self, _: crate::messages::Halt, _: &mut actix::Context<Self>) {
+                self.links = None;
             }
         }
     )*};
@@ -50,6 +57,7 @@ pub mod place_candidates;
 pub mod protocol;
 pub mod quiescence;
 pub mod sensor;
+pub mod snapshot;
 pub mod supervisor;
 pub mod tracker;
 pub mod transport;

@@ -53,6 +53,8 @@ pub struct NeighbourStatus {
     /// When it first reached `Aligned`.
     pub first_aligned: Option<f64>,
     pub keyframes_held: usize,
+    /// Revision of the neighbour's object data held (`None`: none received).
+    pub objects_revision: Option<u32>,
 }
 
 struct LocalKeyframeData {
@@ -89,6 +91,25 @@ struct NeighbourEntry {
     /// The last round was cut short by losses, not refuted: match again once
     /// `match_interval_s` has passed, even if no new object data comes.
     match_again: bool,
+}
+
+/// What of the Matcher a snapshot keeps, per neighbour: its protocol state (a request in flight
+/// is not kept: see [`Protocol::settled`]), its latest object data, every keyframe received
+/// (never asked for twice, also across a crash), and the refuted transforms. Local keyframes
+/// and objects are not kept here: the Tracker hands them over again after a thaw.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MatcherState {
+    pub neighbours: Vec<NeighbourMemory>,
+}
+
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NeighbourMemory {
+    pub robot: RobotId,
+    pub protocol: Option<Protocol>,
+    pub objects: Option<ObjectData>,
+    pub keyframes: Vec<NeighbourKeyframe>,
+    pub first_aligned: Option<f64>,
+    pub refuted: Vec<(Pose3, Stamp)>,
 }
 
 /// At most `n` of `ids`, spread evenly over them (deterministic).
@@ -164,6 +185,36 @@ impl Matcher {
             places: BTreeMap::new(),
             neighbours: BTreeMap::new(),
         }
+    }
+
+    pub fn freeze(&self) -> MatcherState {
+        let neighbours = self
+            .neighbours
+            .iter()
+            .map(|(robot, e)| NeighbourMemory {
+                robot: *robot,
+                protocol: e.protocol.clone(),
+                objects: e.objects.clone(),
+                keyframes: e.keyframes.values().cloned().collect(),
+                first_aligned: e.first_aligned,
+                refuted: e.refuted.clone(),
+            })
+            .collect();
+        MatcherState { neighbours }
+    }
+
+    pub fn thawed(mut self, state: MatcherState) -> Self {
+        let now = self.clock.now();
+        for memory in state.neighbours {
+            let entry = self.entry(memory.robot);
+            entry.protocol = memory.protocol.map(|p| p.settled(now)).or(entry.protocol.take());
+            entry.objects = memory.objects;
+            entry.keyframes = memory.keyframes.into_iter().map(|k| (k.id, k)).collect();
+            entry.first_aligned = memory.first_aligned;
+            entry.refuted = memory.refuted;
+            entry.match_again = true;
+        }
+        self
     }
 
     fn entry(&mut self, robot: RobotId) -> &mut NeighbourEntry {
@@ -661,6 +712,13 @@ impl Handler<Tick> for Matcher {
     }
 }
 
+impl Handler<Freeze<MatcherState>> for Matcher {
+    type Result = MessageResult<Freeze<MatcherState>>;
+    fn handle(&mut self, _: Freeze<MatcherState>, _: &mut Context<Self>) -> Self::Result {
+        MessageResult(self.freeze())
+    }
+}
+
 impl Handler<LinkChanged> for Matcher {
     type Result = ();
     fn handle(&mut self, msg: LinkChanged, ctx: &mut Context<Self>) {
@@ -703,6 +761,7 @@ impl Handler<GetNeighbours> for Matcher {
                     local_from_remote: e.protocol.as_ref().and_then(|p| p.local_from_remote().copied()),
                     first_aligned: e.first_aligned,
                     keyframes_held: e.keyframes.len(),
+                    objects_revision: e.objects.as_ref().map(|d| d.revision),
                 })
                 .collect(),
         )

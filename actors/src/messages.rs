@@ -97,7 +97,7 @@ pub struct NeighbourObjectClouds {
 }
 
 /// Comms → Matcher: a neighbour keyframe arrived (cloud decoded, body frame).
-#[derive(Message, Clone, Debug)]
+#[derive(Message, Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[rtype(result = "()")]
 pub struct NeighbourKeyframe {
     pub robot: RobotId,
@@ -215,3 +215,30 @@ pub enum InjectFailure {
     /// A handler panics (contained: the child restarts, the process and the map survive).
     Panic,
 }
+
+/// Supervisor → child: the robot is going down (a simulated crash, or shutdown). The child drops
+/// its links, so that the tree's actors stop once nothing addresses them.
+#[derive(Message, Clone, Copy, Debug, PartialEq, Eq)]
+#[rtype(result = "()")]
+pub struct Halt;
+
+/// → child: a copy of its state `S` for a snapshot (freeze). Sent along the pipeline (Tracker,
+/// Matcher, Optimiser, Comms) so that what one child passed downstream before it was frozen is
+/// in the next one's state when that is frozen.
+pub struct Freeze<S>(pub std::marker::PhantomData<S>);
+
+impl<S> Default for Freeze<S> {
+    fn default() -> Self {
+        Self(std::marker::PhantomData)
+    }
+}
+
+impl<S: 'static> Message for Freeze<S> {
+    type Result = S;
+}
+
+/// Supervisor → Tracker, after a thaw: hand the restored map to the Matcher (every keyframe's
+/// scan, the objects) and to Comms (the objects), as if it had just been built.
+#[derive(Message, Clone, Copy, Debug, PartialEq, Eq)]
+#[rtype(result = "()")]
+pub struct Republish;

@@ -36,6 +36,14 @@ pub struct Optimiser {
     pending: usize,
 }
 
+/// What of the Optimiser a snapshot keeps: the whole pose graph.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct OptimiserState {
+    pub graph: Graph3,
+    pub index: Vec<(KeyframeRef, usize)>,
+    pub pending: usize,
+}
+
 /// S with Sᵀ S = Ω, or `None` unless Ω is symmetric positive definite.
 fn sqrt_information(information: &Matrix6<f64>) -> Option<Matrix6<f64>> {
     information.cholesky().map(|c| c.l().transpose())
@@ -51,6 +59,33 @@ fn key_of(r: &KeyframeRef) -> u64 {
 impl Optimiser {
     pub fn new(robot: RobotId, config: OptimiserConfig) -> Self {
         Self { robot, config, links: None, graph: Graph3::default(), index: BTreeMap::new(), pending: 0 }
+    }
+
+    pub fn freeze(&self) -> OptimiserState {
+        OptimiserState {
+            graph: self.graph.clone(),
+            index: self.index.iter().map(|(r, i)| (*r, *i)).collect(),
+            pending: self.pending,
+        }
+    }
+
+    /// Continues from `state`. An index that does not fit the graph (a snapshot from another
+    /// build would have failed its checksum or decode first) leaves the optimiser empty.
+    pub fn thawed(mut self, state: OptimiserState) -> Self {
+        let n = state.graph.values.len();
+        let consistent = state.graph.keys.len() == n
+            && state.graph.fixed.len() == n
+            && state.index.iter().all(|(_, i)| *i < n)
+            && state.graph.betweens.iter().all(|b| b.from < n && b.to < n)
+            && state.graph.priors.iter().all(|p| p.variable < n);
+        if consistent {
+            self.graph = state.graph;
+            self.index = state.index.into_iter().collect();
+            self.pending = state.pending;
+        } else {
+            tracing::error!(robot = %self.robot, "snapshot pose graph is inconsistent: starting the optimiser empty");
+        }
+        self
     }
 
     fn variable(&mut self, r: KeyframeRef, value: Pose3) -> usize {
@@ -105,6 +140,13 @@ impl Actor for Optimiser {
 impl Supervised for Optimiser {
     fn restarting(&mut self, _: &mut Context<Self>) {
         tracing::warn!(robot = %self.robot, variables = self.graph.values.len(), "optimiser restarting with its graph");
+    }
+}
+
+impl Handler<Freeze<OptimiserState>> for Optimiser {
+    type Result = actix::MessageResult<Freeze<OptimiserState>>;
+    fn handle(&mut self, _: Freeze<OptimiserState>, _: &mut Context<Self>) -> Self::Result {
+        actix::MessageResult(self.freeze())
     }
 }
 

@@ -38,7 +38,7 @@ impl Default for RetryConfig {
 
 /// A pending request: when it was last sent, when that attempt expires, and how often it was
 /// sent.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Wait {
     pub sent: Stamp,
     pub deadline: Stamp,
@@ -69,7 +69,7 @@ impl Wait {
 }
 
 /// A neighbour in state `S`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Neighbour<S> {
     pub robot: RobotId,
     /// When the current state was entered.
@@ -77,15 +77,15 @@ pub struct Neighbour<S> {
     pub state: S,
 }
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Discovered;
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ObjectsReceived {
     pub revision: u32,
 }
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Matched {
     pub revision: u32,
     pub local_from_remote: Pose3,
@@ -95,7 +95,7 @@ pub struct Matched {
     pub wait: Wait,
 }
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct KeyframesRequested {
     pub revision: u32,
     pub local_from_remote: Pose3,
@@ -104,7 +104,7 @@ pub struct KeyframesRequested {
     pub wait: Wait,
 }
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Aligned {
     pub revision: u32,
     pub local_from_remote: Pose3,
@@ -205,7 +205,7 @@ impl Neighbour<Aligned> {
 }
 
 /// Any protocol state, for storage in an actor.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Protocol {
     Discovered(Neighbour<Discovered>),
     ObjectsReceived(Neighbour<ObjectsReceived>),
@@ -248,6 +248,16 @@ impl Protocol {
 
     pub fn is_aligned(&self) -> bool {
         matches!(self, Protocol::Aligned(_))
+    }
+
+    /// After a thaw: a request that was in flight died with the robot; a waiting state goes
+    /// back to waiting for a match (its objects are still held), any other stays.
+    pub fn settled(self, now: Stamp) -> Protocol {
+        match self {
+            Protocol::Matched(n) => n.gave_up(now).into(),
+            Protocol::KeyframesRequested(n) => n.gave_up(now).into(),
+            other => other,
+        }
     }
 
     /// Object data arrived with `revision`.

@@ -3,16 +3,19 @@
 //! restarts a child that stops (actix `Supervisor`). What survives a restart: everything — each
 //! child's state is its struct, which actix keeps across restarts; only the message being
 //! handled when the child failed is lost (the map, the pose graph, the neighbour protocol states,
-//! the request queues and the replay windows are not).
+//! the request queues and the replay windows are not). What survives the whole robot going down
+//! is its last snapshot ([`RobotHandle::freeze`], `crate::snapshot`), from which
+//! [`start_robot_restored`] continues.
 
 use crate::clock::Clock;
 use crate::comms::{Comms, CommsLinks};
 use crate::config::{Association, ConfigError, RobotConfig};
 use crate::fusion::Fusion;
 use crate::matcher::{Matcher, MatcherLinks};
-use crate::messages::{Connect, SensorFrame, Tick};
+use crate::messages::{Connect, Freeze, Halt, Republish, SensorFrame, Tick};
 use crate::optimiser::{Optimiser, OptimiserLinks};
 use crate::sensor::Sensor;
+use crate::snapshot::RobotSnapshot;
 use crate::tracker::{Tracker, TrackerLinks};
 use crate::transport::{InProcessRadio, Transport};
 use actix::{Actor, Addr, Context, Handler, Supervisor};
@@ -38,8 +41,32 @@ pub struct RobotHandle {
 pub struct RobotSupervisor {
     clock: Clock,
     sensor: Addr<Sensor>,
+    tracker: Addr<Tracker>,
     matcher: Addr<Matcher>,
+    optimiser: Addr<Optimiser>,
     comms: Addr<Comms>,
+}
+
+impl RobotHandle {
+    /// The robot's state, frozen child by child along the pipeline (Tracker, Matcher,
+    /// Optimiser, Comms: see [`Freeze`]).
+    pub async fn freeze(&self) -> Result<RobotSnapshot, actix::MailboxError> {
+        Ok(RobotSnapshot {
+            robot: self.robot,
+            name: self.name.clone(),
+            taken_at: self.clock.now(),
+            tracker: self.tracker.send(Freeze::default()).await?,
+            matcher: self.matcher.send(Freeze::default()).await?,
+            optimiser: self.optimiser.send(Freeze::default()).await?,
+            comms: self.comms.send(Freeze::default()).await?,
+        })
+    }
+
+    /// Takes the robot down: every child drops its links and the tree stops once the caller
+    /// drops this handle (and the transport forgets the robot).
+    pub fn halt(&self) {
+        self.supervisor.do_send(Halt);
+    }
 }
 
 impl Actor for RobotSupervisor {
@@ -59,6 +86,18 @@ pub fn start_robot_on(
     transport: Box<dyn Transport>,
     attach: impl FnOnce(RobotId, Addr<Comms>),
 ) -> Result<RobotHandle, ConfigError> {
+    start_robot_restored(config, clock, transport, attach, None)
+}
+
+/// As [`start_robot_on`], continuing from `snapshot` when there is one: each child starts from
+/// its part, and the Tracker hands the restored map to the Matcher and Comms.
+pub fn start_robot_restored(
+    config: &RobotConfig,
+    clock: Clock,
+    transport: Box<dyn Transport>,
+    attach: impl FnOnce(RobotId, Addr<Comms>),
+    snapshot: Option<RobotSnapshot>,
+) -> Result<RobotHandle, ConfigError> {
     config.validate()?;
     let robot = RobotId(config.robot.id);
     let key = config.comms.team_key()?;
@@ -74,8 +113,22 @@ pub fn start_robot_on(
     let comms_config = config.comms.clone();
     let comms_clock = clock.clone();
     let object_data = config.matcher.association != Association::ScanContext;
+    let restored = snapshot.is_some();
+    if let Some(s) = &snapshot {
+        tracing::info!(robot = %robot, taken_at = s.taken_at, keyframes = s.keyframe_count(),
+            objects = s.object_count(), "continuing from a snapshot");
+    }
+    let (tracker_state, matcher_state, optimiser_state, comms_state) = match snapshot {
+        Some(s) => (Some(s.tracker), Some(s.matcher), Some(s.optimiser), Some(s.comms)),
+        None => (None, None, None, None),
+    };
+    // `Supervisor::start` takes a closure it may call again: each state is taken once.
     let comms = Supervisor::start(move |_| {
         let comms = Comms::new(robot, comms_config, key, comms_clock, transport, sequence_start);
+        let comms = match comms_state {
+            Some(state) => comms.thawed(state),
+            None => comms,
+        };
         if object_data {
             comms
         } else {
@@ -86,12 +139,28 @@ pub fn start_robot_on(
     let tracker_config = (config.tracker.clone(), classes, config.optimiser.clone(), config.comms.cloud_resolution_m);
     let tracker = Supervisor::start(move |_| {
         let (t, classes, o, r) = tracker_config;
-        Tracker::new(robot, t, classes, &o, r)
+        let tracker = Tracker::new(robot, t, classes, &o, r);
+        match tracker_state {
+            Some(state) => tracker.thawed(state),
+            None => tracker,
+        }
     });
     let (matcher_config, retry, matcher_clock) = (config.matcher.clone(), config.comms.retry.clone(), clock.clone());
-    let matcher = Supervisor::start(move |_| Matcher::new(robot, matcher_config, retry, matcher_clock, labels.clone()));
+    let matcher = Supervisor::start(move |_| {
+        let matcher = Matcher::new(robot, matcher_config, retry, matcher_clock, labels.clone());
+        match matcher_state {
+            Some(state) => matcher.thawed(state),
+            None => matcher,
+        }
+    });
     let optimiser_config = config.optimiser.clone();
-    let optimiser = Supervisor::start(move |_| Optimiser::new(robot, optimiser_config));
+    let optimiser = Supervisor::start(move |_| {
+        let optimiser = Optimiser::new(robot, optimiser_config);
+        match optimiser_state {
+            Some(state) => optimiser.thawed(state),
+            None => optimiser,
+        }
+    });
     let (fusion_config, fusion_classes) = (config.fusion.clone(), tracker_config_classes);
     let tracker_in = tracker.clone().recipient();
     let fusion = Supervisor::start(move |_| Fusion::new(&fusion_config, fusion_classes, tracker_in));
@@ -125,11 +194,16 @@ pub fn start_robot_on(
         matcher: matcher.clone().recipient(),
     }));
     attach(robot, comms.clone());
+    if restored {
+        tracker.do_send(Republish);
+    }
 
     let supervisor = RobotSupervisor {
         clock: clock.clone(),
         sensor: sensor.clone(),
+        tracker: tracker.clone(),
         matcher: matcher.clone(),
+        optimiser: optimiser.clone(),
         comms: comms.clone(),
     }
     .start();
@@ -151,6 +225,17 @@ impl Handler<SensorFrame> for RobotSupervisor {
     type Result = ();
     fn handle(&mut self, frame: SensorFrame, _: &mut Context<Self>) {
         self.sensor.do_send(frame);
+    }
+}
+
+impl Handler<Halt> for RobotSupervisor {
+    type Result = ();
+    fn handle(&mut self, _: Halt, ctx: &mut Context<Self>) {
+        self.tracker.do_send(Halt);
+        self.matcher.do_send(Halt);
+        self.optimiser.do_send(Halt);
+        self.comms.do_send(Halt);
+        actix::ActorContext::stop(ctx);
     }
 }
 

@@ -66,6 +66,22 @@ pub struct MapObject {
     pub confirmed: bool,
 }
 
+/// What of the Tracker a snapshot keeps: the whole map and what continues it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrackerState {
+    pub graph: SceneGraph,
+    pub objects: ObjectTracker,
+    pub next_keyframe: u32,
+    pub last_odometry: Option<(KeyframeId, Pose3)>,
+    pub covariances: BTreeMap<KeyframeId, Matrix6<f64>>,
+    pub last_loop_attempt: Option<f64>,
+}
+
+/// A thawed robot numbers its next keyframe from the next multiple of this above the
+/// snapshot's: keyframes made between the snapshot and a crash may be known to neighbours, and
+/// their ids are never reused.
+pub const KEYFRAME_ID_EPOCH: u32 = 1 << 16;
+
 /// A keyframe's pose, points (body) and labels, borrowed from the map.
 type ScanRef<'a> = (&'a Pose3, &'a [Point3<f32>], &'a [sgm_model::scene_graph::LabelId]);
 
@@ -111,6 +127,30 @@ impl Tracker {
             covariances: BTreeMap::new(),
             last_loop_attempt: None,
         }
+    }
+
+    /// The state a snapshot keeps.
+    pub fn freeze(&self) -> TrackerState {
+        TrackerState {
+            graph: self.graph.clone(),
+            objects: self.objects.clone(),
+            next_keyframe: self.next_keyframe,
+            last_odometry: self.last_odometry,
+            covariances: self.covariances.clone(),
+            last_loop_attempt: self.last_loop_attempt,
+        }
+    }
+
+    /// Continues from `state` (see [`KEYFRAME_ID_EPOCH`]).
+    pub fn thawed(mut self, state: TrackerState) -> Self {
+        let epoch = state.next_keyframe.div_ceil(KEYFRAME_ID_EPOCH).saturating_add(1);
+        self.next_keyframe = epoch.saturating_mul(KEYFRAME_ID_EPOCH);
+        self.graph = state.graph;
+        self.objects = state.objects;
+        self.last_odometry = state.last_odometry;
+        self.covariances = state.covariances;
+        self.last_loop_attempt = state.last_loop_attempt;
+        self
     }
 
     fn local_objects(&self) -> LocalObjects {
@@ -310,6 +350,32 @@ impl Handler<Serve> for Tracker {
                     }
                 }
             }
+        });
+    }
+}
+
+impl Handler<Freeze<TrackerState>> for Tracker {
+    type Result = MessageResult<Freeze<TrackerState>>;
+    fn handle(&mut self, _: Freeze<TrackerState>, _: &mut Context<Self>) -> Self::Result {
+        MessageResult(self.freeze())
+    }
+}
+
+impl Handler<Republish> for Tracker {
+    type Result = ();
+    fn handle(&mut self, _: Republish, ctx: &mut Context<Self>) {
+        contained(ctx, "tracker", || {
+            let Some(links) = &self.links else { return };
+            for keyframe in self.graph.keyframes() {
+                let Some(scan) = self.graph.semantic_scan(keyframe.id) else { continue };
+                links.matcher_keyframes.do_send(LocalKeyframe {
+                    id: keyframe.id,
+                    world_from_body: keyframe.world_from_body,
+                    points_in_body: scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect(),
+                    labels: scan.labels.iter().map(|l| (*l != UNLABELLED).then_some(*l)).collect(),
+                });
+            }
+            self.publish_objects();
         });
     }
 }

@@ -71,6 +71,12 @@ impl InProcessRadio {
         self.medium().endpoints.insert(robot, endpoint);
     }
 
+    /// Forgets the robot's receiving end (it went down): packets for it are dropped on arrival
+    /// until it attaches again.
+    pub fn detach(&self, robot: RobotId) {
+        self.medium().endpoints.remove(&robot);
+    }
+
     /// Hands every packet due by `now` to its destination; returns how many.
     pub fn deliver_due(&self, now: Stamp) -> usize {
         let mut medium = self.medium();

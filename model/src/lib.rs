@@ -9,6 +9,7 @@
 //! - [`scene_graph`]: keyframe, object and semantic layers with their cross-layer links (§IV-A).
 //! - [`matching`]: object-graph matching and transform estimation (§IV-B, §IV-C, eqs. 5–8).
 //! - [`eval`]: metrics and the paper's synthetic matching protocol (§V-A).
+//! - [`snapshot`]: the versioned, checksummed frame of map snapshots on disk.
 
 pub mod eval;
 pub mod geometry;
@@ -17,4 +18,5 @@ pub mod optim;
 pub mod pcd;
 pub mod perception;
 pub mod scene_graph;
+pub mod snapshot;
 pub mod wire;

@@ -276,6 +276,8 @@ pub async fn replay(
         observations,
         radio: shared.stats(),
         world_objects: Vec::new(),
+        restarts: Vec::new(),
+        final_keyframes: maps.iter().map(|m| m.keyframes().map(|k| k.id).collect()).collect(),
     };
     let timing = Timing::measure(wall, sim_s, decoding);
     Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing }, bags: bag_stats })

@@ -3,6 +3,10 @@
 //! segmentation, odometry); the team runs until quiet; every robot ticks; the radio delivers
 //! what is due; the team runs until quiet again. Nothing reads the wall clock except the
 //! timing kept apart in [`Timing`], so the same scenario and seed give the same run.
+//!
+//! A robot with `crash_s` goes down then (its vehicle and odometry drive on, unheard), and at
+//! `restart_s` comes back from its latest snapshot: the run keeps snapshots whenever a robot
+//! crashes or `persistence.directory` is set.
 
 use crate::bag_out::{BagRecorder, RecordedFrame};
 use crate::report::{RobotTruth, RunRecord, TruthTrack};
@@ -69,6 +73,10 @@ pub async fn run_recording(
     let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
     let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&scenario.radio, seed, shared.clone(), &names)));
     let mut team = Team::new(names.clone(), radio);
+    let snapshots = SnapshotDir::for_run(scenario)?;
+    if let Some(dir) = &snapshots {
+        team.keep_snapshots(dir.path(), &scenario.persistence)?;
+    }
     let mut recorder = match bag_out {
         Some(dir) => Some(BagRecorder::new(dir, &scenario.ros, names).map_err(RunError::Input)?),
         None => None,
@@ -109,6 +117,14 @@ pub async fn run_recording(
             let id = RobotId(k as u16 + 1);
             shared.set_position(id, truth.translation.vector.into());
             let odometry = robot.odometry.step(&truth, &mut robot.rng);
+            let spec = &scenario.robots[k];
+            let crashed = spec.crash_s.is_some_and(|c| t >= c);
+            if crashed && spec.restart_s.is_none_or(|r| t < r) {
+                if team.is_running(k) {
+                    team.crash(k, t).await?;
+                }
+                continue;
+            }
             let frame = robot.lidar.scan(&world, &truth, &mut robot.rng);
             let wrong = mislabels(&frame, scenario.camera.mislabel_rate, &world.matchable_labels, &mut robot.rng);
             let (labels, recorded_labels) = if scenario.camera.enabled {
@@ -144,6 +160,7 @@ pub async fn run_recording(
         }
         simulation += sim_started.elapsed();
         team.settle(t).await;
+        team.snapshot_due(t).await?;
         if step % report_every == 0 || step == steps {
             observations.push(team.observe(t).await?);
         }
@@ -177,8 +194,47 @@ pub async fn run_recording(
         observations,
         radio: shared.stats(),
         world_objects: world.objects.iter().map(|o| (o.label, o.centre)).collect(),
+        restarts: team.restarts().to_vec(),
+        final_keyframes: maps.iter().map(|m| m.keyframes().map(|k| k.id).collect()).collect(),
     };
+    drop(snapshots);
     Ok(RunOutcome { record, world, maps, timing })
+}
+
+/// Where a run keeps its snapshots: `persistence.directory`, or (when a robot crashes and none
+/// is set) a directory of its own in the system's temporary directory, removed at the end.
+struct SnapshotDir {
+    path: std::path::PathBuf,
+    temporary: bool,
+}
+
+impl SnapshotDir {
+    fn for_run(scenario: &Scenario) -> Result<Option<Self>, RunError> {
+        let configured = &scenario.persistence.directory;
+        if !configured.is_empty() {
+            return Ok(Some(Self { path: configured.into(), temporary: false }));
+        }
+        if !scenario.has_crashes() {
+            return Ok(None);
+        }
+        let name: String =
+            scenario.scenario.name.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect();
+        let path = std::env::temp_dir().join(format!("sgm-snapshots-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&path).map_err(|e| RunError::Input(format!("{}: {e}", path.display())))?;
+        Ok(Some(Self { path, temporary: true }))
+    }
+
+    fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for SnapshotDir {
+    fn drop(&mut self) {
+        if self.temporary {
+            let _ = std::fs::remove_dir_all(&self.path);
+        }
+    }
 }
 
 /// Half-size of a return's splat in the label image: half the scan pattern's spacing in pixels.

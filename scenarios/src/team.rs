@@ -2,18 +2,25 @@
 //! and the bag replay. One step at time t: the caller hands out the frames of t
 //! ([`Team::frame`]); then [`Team::settle`] lets the team run until quiet, ticks every robot,
 //! delivers what the radio has due, and lets the team run until quiet again.
+//!
+//! With snapshots kept ([`Team::keep_snapshots`]), each robot's state is frozen and written to
+//! disk every `persistence.interval_s`; [`Team::crash`] takes a robot down with everything it
+//! held, and its next frame starts it again from its latest snapshot on disk.
 
 use crate::report::Observation;
 use sgm_actors::clock::Clock;
 use sgm_actors::comms::GetCommsStatus;
-use sgm_actors::config::RobotConfig;
+use sgm_actors::config::{PersistenceConfig, RobotConfig};
 use sgm_actors::matcher::GetNeighbours;
 use sgm_actors::messages::{SensorFrame, Tick};
 use sgm_actors::quiescence::until_quiet;
-use sgm_actors::supervisor::{start_robot, RobotHandle};
+use sgm_actors::snapshot::SnapshotStore;
+use sgm_actors::supervisor::{start_robot_restored, RobotHandle};
 use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
 use sgm_actors::transport::InProcessRadio;
-use sgm_model::scene_graph::{SceneGraph, Stamp};
+use sgm_model::scene_graph::{KeyframeId, SceneGraph, Stamp};
+use std::collections::BTreeSet;
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// Wall-clock facts of a run: kept out of the report so that the report is deterministic.
@@ -62,18 +69,118 @@ struct Member {
     name: String,
     clock: Clock,
     handle: Option<RobotHandle>,
+    store: Option<SnapshotStore>,
+    last_snapshot: Option<Stamp>,
+    /// Down after a crash: the next start continues from the snapshot.
+    crashed: Option<Crash>,
+}
+
+/// A crash not yet followed by a restart.
+#[derive(Clone, Debug)]
+struct Crash {
+    at: Stamp,
+    keyframes: usize,
+}
+
+/// One crash and restart of a robot, and what its snapshot carried over.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Restart {
+    pub robot: String,
+    pub crashed_at: Stamp,
+    pub restarted_at: Stamp,
+    /// When the snapshot it continued from was taken (`None`: there was none, it started empty).
+    pub snapshot_taken_at: Option<Stamp>,
+    /// Keyframes in the map when it crashed.
+    pub keyframes_at_crash: usize,
+    /// Keyframes in the snapshot (the rest, made after it, died with the robot).
+    pub keyframes_in_snapshot: usize,
+    pub objects_in_snapshot: usize,
+    /// The snapshot's keyframe ids, to check that the final map still holds every one.
+    #[serde(skip)]
+    pub snapshot_keyframes: BTreeSet<KeyframeId>,
 }
 
 pub struct Team {
     pub radio: InProcessRadio,
     members: Vec<Member>,
+    snapshot_interval_s: f64,
+    restarts: Vec<Restart>,
+    /// Snapshots written, and their bytes in all.
+    pub snapshots_written: (u64, u64),
 }
 
 impl Team {
     pub fn new(names: Vec<String>, radio: InProcessRadio) -> Self {
-        let members =
-            names.into_iter().map(|name| Member { name, clock: Clock::starting_at(0.0), handle: None }).collect();
-        Self { radio, members }
+        let members = names
+            .into_iter()
+            .map(|name| Member {
+                name,
+                clock: Clock::starting_at(0.0),
+                handle: None,
+                store: None,
+                last_snapshot: None,
+                crashed: None,
+            })
+            .collect();
+        Self { radio, members, snapshot_interval_s: f64::INFINITY, restarts: Vec::new(), snapshots_written: (0, 0) }
+    }
+
+    /// Every robot writes a snapshot into `directory` every `persistence.interval_s`. Stale
+    /// snapshots of these robots already there are removed: a run never resumes from another.
+    pub fn keep_snapshots(&mut self, directory: &Path, persistence: &PersistenceConfig) -> Result<(), RunError> {
+        let max_bytes = persistence.max_snapshot_mib.saturating_mul(1 << 20);
+        for member in &mut self.members {
+            let store = SnapshotStore::new(directory, &member.name, max_bytes);
+            for stale in [store.current(), store.previous()] {
+                if stale.exists() {
+                    std::fs::remove_file(&stale).map_err(|e| RunError::Input(format!("{}: {e}", stale.display())))?;
+                }
+            }
+            member.store = Some(store);
+        }
+        self.snapshot_interval_s = persistence.interval_s;
+        Ok(())
+    }
+
+    /// Writes the snapshot of every running robot whose interval has passed at `t`.
+    pub async fn snapshot_due(&mut self, t: Stamp) -> Result<(), RunError> {
+        for member in &mut self.members {
+            let (Some(handle), Some(store)) = (&member.handle, &member.store) else { continue };
+            if member.last_snapshot.is_some_and(|last| t - last < self.snapshot_interval_s) {
+                continue;
+            }
+            let snapshot = handle.freeze().await.map_err(mailbox)?;
+            let bytes = store
+                .save(&snapshot)
+                .map_err(|e| RunError::Robot { robot: member.name.clone(), message: e.to_string() })?;
+            member.last_snapshot = Some(t);
+            self.snapshots_written.0 += 1;
+            self.snapshots_written.1 += bytes;
+        }
+        Ok(())
+    }
+
+    /// Takes robot `k` down at `t`: its actors halt and its radio goes deaf; what it held and
+    /// had not written to a snapshot is gone.
+    pub async fn crash(&mut self, k: usize, t: Stamp) -> Result<(), RunError> {
+        let Some(member) = self.members.get_mut(k) else { return Ok(()) };
+        let Some(handle) = member.handle.take() else { return Ok(()) };
+        let keyframes = handle.tracker.send(GetMapSummary).await.map_err(mailbox)?.keyframes.len();
+        tracing::info!(robot = %member.name, at = t, keyframes, "crash");
+        self.radio.detach(handle.robot);
+        handle.halt();
+        member.crashed = Some(Crash { at: t, keyframes });
+        Ok(())
+    }
+
+    /// Whether robot `k` is running.
+    pub fn is_running(&self, k: usize) -> bool {
+        self.members.get(k).is_some_and(|m| m.handle.is_some())
+    }
+
+    /// Crashes and restarts so far.
+    pub fn restarts(&self) -> &[Restart] {
+        &self.restarts
     }
 
     pub fn len(&self) -> usize {
@@ -100,8 +207,37 @@ impl Team {
     ) -> Result<(), RunError> {
         let Some(member) = self.members.get_mut(k) else { return Ok(()) };
         if member.handle.is_none() {
-            let handle = start_robot(&config(), member.clock.clone(), &self.radio)
-                .map_err(|e| RunError::Robot { robot: member.name.clone(), message: e.to_string() })?;
+            let failed = |message: String| RunError::Robot { robot: member.name.clone(), message };
+            // After a crash: the latest whole snapshot on disk, if any.
+            let snapshot = match (&member.crashed, &member.store) {
+                (Some(_), Some(store)) => store.load().map_err(|e| failed(e.to_string()))?.map(|loaded| {
+                    for skipped in &loaded.skipped {
+                        tracing::warn!(robot = %member.name, "snapshot skipped: {skipped}");
+                    }
+                    loaded.snapshot
+                }),
+                _ => None,
+            };
+            if let Some(crash) = member.crashed.take() {
+                self.restarts.push(Restart {
+                    robot: member.name.clone(),
+                    crashed_at: crash.at,
+                    restarted_at: frame.stamp,
+                    snapshot_taken_at: snapshot.as_ref().map(|s| s.taken_at),
+                    keyframes_at_crash: crash.keyframes,
+                    keyframes_in_snapshot: snapshot.as_ref().map_or(0, |s| s.keyframe_count()),
+                    objects_in_snapshot: snapshot.as_ref().map_or(0, |s| s.object_count()),
+                    snapshot_keyframes: snapshot
+                        .as_ref()
+                        .map(|s| s.tracker.graph.keyframes().map(|kf| kf.id).collect())
+                        .unwrap_or_default(),
+                });
+            }
+            let radio = self.radio.clone();
+            let attach = |robot, comms: actix::Addr<sgm_actors::comms::Comms>| radio.attach(robot, comms.recipient());
+            let handle =
+                start_robot_restored(&config(), member.clock.clone(), Box::new(self.radio.clone()), attach, snapshot)
+                    .map_err(|e| failed(e.to_string()))?;
             member.handle = Some(handle);
         }
         if let Some(handle) = &member.handle {

@@ -11,7 +11,7 @@ use super::manifold::Manifold;
 use nalgebra::{SMatrix, SVector};
 
 /// Relative-pose measurement `measured` = x_from⁻¹ · x_to.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Between<G, const D: usize> {
     pub from: usize,
     pub to: usize,
@@ -21,7 +21,7 @@ pub struct Between<G, const D: usize> {
 }
 
 /// Absolute-pose measurement.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Prior<G, const D: usize> {
     pub variable: usize,
     pub mean: G,

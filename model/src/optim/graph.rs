@@ -5,7 +5,7 @@ use super::manifold::Manifold;
 use nalgebra::{Isometry2, Isometry3, SMatrix};
 
 /// Poses with their external keys, and the factors over them.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PoseGraph<G, const D: usize> {
     /// External key of each variable (g2o vertex id; multi-robot keys carry the robot letter
     /// in the top byte).

@@ -106,6 +106,8 @@ pub struct Report {
     pub radio: RadioStats,
     pub world_objects: usize,
     pub series: Vec<SeriesPoint>,
+    /// What every robot holds of every other, and what survived each crash.
+    pub ledger: super::ledger::Ledger,
 }
 
 fn row(stats: &sgm_model::wire::TrafficStats) -> MessageRow {
@@ -365,5 +367,6 @@ pub fn compute(record: &RunRecord) -> Report {
         radio: record.radio.clone(),
         world_objects: record.world_objects.len(),
         series,
+        ledger: super::ledger::compute(record, &last),
     }
 }

@@ -12,6 +12,55 @@ fn kib(bytes: f64) -> String {
     format!("{:.2}", bytes / 1024.0)
 }
 
+/// The ledger: nothing lost, or exactly what was.
+fn accounting(s: &mut String, ledger: &super::ledger::Ledger) {
+    let _ =
+        writeln!(s, "## Accounting\n\n| robot | keyframes | objects | ObjectData revision sent |\n|---|---|---|---|");
+    for r in &ledger.robots {
+        let _ = writeln!(s, "| {} | {} | {} | {} |", r.name, r.keyframes, r.objects, r.object_data_revision);
+    }
+    let _ = writeln!(
+        s,
+        "\n| local ← remote | ObjectData held | current | keyframes wanted | received | refused | given up | pending |\n|---|---|---|---|---|---|---|---|"
+    );
+    for p in &ledger.pairs {
+        let _ = writeln!(
+            s,
+            "| {} ← {} | {} | {} | {} | {} | {} | {} | {} |",
+            p.local,
+            p.remote,
+            p.object_data_revision.map_or("—".into(), |r| r.to_string()),
+            if p.object_data_current { "yes" } else { "no" },
+            p.keyframes_wanted,
+            p.keyframes_received,
+            p.keyframes_refused,
+            p.keyframes_given_up,
+            p.keyframes_pending
+        );
+    }
+    if !ledger.restarts.is_empty() {
+        let _ = writeln!(
+            s,
+            "\n| robot | crashed (s) | restarted (s) | snapshot of (s) | keyframes at crash | in snapshot | snapshot keyframes in the final map | objects in snapshot |\n|---|---|---|---|---|---|---|---|"
+        );
+        for r in &ledger.restarts {
+            let _ = writeln!(
+                s,
+                "| {} | {:.1} | {:.1} | {} | {} | {} | {} | {} |",
+                r.robot,
+                r.crashed_at_s,
+                r.restarted_at_s,
+                r.snapshot_taken_at_s.map_or("—".into(), |t| format!("{t:.1}")),
+                r.keyframes_at_crash,
+                r.keyframes_in_snapshot,
+                r.snapshot_keyframes_kept,
+                r.objects_in_snapshot
+            );
+        }
+    }
+    let _ = writeln!(s);
+}
+
 pub fn render(report: &Report, timing: &Timing) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Run report: {}\n", report.scenario);
@@ -73,9 +122,11 @@ pub fn render(report: &Report, timing: &Timing) -> String {
     let r = &report.radio;
     let _ = writeln!(
         s,
-        "Radio: {} packets delivered, {} lost, {} out of range, {} dropped on a full queue.\n",
-        r.delivered, r.lost, r.out_of_range, r.queue_full
+        "Radio: {} packets delivered ({} of them twice), {} lost, {} out of range, {} cut by a partition, \
+         {} dropped on a full queue.\n",
+        r.delivered, r.duplicated, r.lost, r.out_of_range, r.partitioned, r.queue_full
     );
+    accounting(&mut s, &report.ledger);
     let _ = writeln!(
         s,
         "Files: `report.json` (these figures, deterministic), `timing.json` (wall and per-actor time), \

@@ -3,6 +3,7 @@
 //! `report.md`, TUM trajectories, PNG plots and the merged semantic map.
 
 mod figures;
+pub mod ledger;
 mod map_cloud;
 mod markdown;
 pub mod plots;
@@ -51,6 +52,10 @@ pub struct RunRecord {
     pub radio: RadioStats,
     /// The world's objects: (class id, centre).
     pub world_objects: Vec<(u16, nalgebra::Point3<f64>)>,
+    /// Crashes and restarts from snapshots.
+    pub restarts: Vec<crate::team::Restart>,
+    /// Each robot's keyframe ids at the end (to show that no restored keyframe was lost).
+    pub final_keyframes: Vec<std::collections::BTreeSet<sgm_model::scene_graph::KeyframeId>>,
 }
 
 #[derive(Debug, thiserror::Error)]

@@ -12,6 +12,7 @@ const LIBRARY: &[(&str, &str)] = &[
     ("faults/duplicate_reorder", include_str!("../../library/faults/duplicate_reorder.toml")),
     ("faults/partition", include_str!("../../library/faults/partition.toml")),
     ("faults/late_join", include_str!("../../library/faults/late_join.toml")),
+    ("faults/crash_restart", include_str!("../../library/faults/crash_restart.toml")),
 ];
 
 /// The TOML text of a library scenario.

@@ -10,7 +10,8 @@ mod validate;
 
 use serde::{Deserialize, Serialize};
 use sgm_actors::config::{
-    environment, CommsConfig, FusionConfig, MatcherSection, OptimiserConfig, RobotConfig, RobotSection, TrackerSection,
+    environment, CommsConfig, FusionConfig, MatcherSection, OptimiserConfig, PersistenceConfig, RobotConfig,
+    RobotSection, TrackerSection,
 };
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -37,12 +38,15 @@ pub struct Scenario {
     pub radio: RadioSpec,
     pub robots: Vec<RobotSpec>,
     /// The robot configuration every robot shares (`[fusion]`, `[tracker]`, `[matcher]`,
-    /// `[optimiser]`, `[comms]`, as in a robot configuration file).
+    /// `[optimiser]`, `[comms]`, `[persistence]`, as in a robot configuration file).
     pub fusion: FusionConfig,
     pub tracker: TrackerSection,
     pub matcher: MatcherSection,
     pub optimiser: OptimiserConfig,
     pub comms: CommsConfig,
+    /// Map snapshots. In a scenario a robot resumes from its snapshot only after a crash
+    /// (`robots[k].crash_s`), never at the start of a run.
+    pub persistence: PersistenceConfig,
     /// Topics and frames of the bags `sgm run --bag-out` writes and `sgm replay` reads.
     pub ros: sgm_bridge::config::RosConfig,
 }
@@ -63,6 +67,7 @@ impl Default for Scenario {
             matcher: robot.matcher,
             optimiser: robot.optimiser,
             comms: robot.comms,
+            persistence: robot.persistence,
             ros: sgm_bridge::config::RosConfig::default(),
         }
     }
@@ -320,6 +325,12 @@ pub struct RobotSpec {
     pub sensor_height_m: f64,
     /// The robot is switched on at this time, s. Default 0.
     pub start_s: f64,
+    /// SGM on this robot crashes at this time, s: its actors and everything they held are
+    /// gone (the vehicle and its odometry drive on). Default none.
+    pub crash_s: Option<f64>,
+    /// …and restarts at this time from its latest snapshot, s (needs `crash_s`). Default none:
+    /// it stays down.
+    pub restart_s: Option<f64>,
 }
 
 impl Default for RobotSpec {
@@ -331,6 +342,8 @@ impl Default for RobotSpec {
             speed_mps: 1.5,
             sensor_height_m: 0.8,
             start_s: 0.0,
+            crash_s: None,
+            restart_s: None,
         }
     }
 }
@@ -385,7 +398,13 @@ impl Scenario {
             matcher: self.matcher.clone(),
             optimiser: self.optimiser.clone(),
             comms: self.comms.clone(),
+            persistence: self.persistence.clone(),
         }
+    }
+
+    /// Whether any robot crashes (the run then keeps snapshots).
+    pub fn has_crashes(&self) -> bool {
+        self.robots.iter().any(|r| r.crash_s.is_some())
     }
 
     pub fn robot_name(&self, k: usize) -> String {

@@ -168,6 +168,23 @@ impl Scenario {
                 robot.start_s,
                 "0 ≤ x < scenario.duration_s",
             )?;
+            if let Some(crash) = robot.crash_s {
+                check(
+                    within(crash, robot.start_s, s.duration_s),
+                    key("crash_s"),
+                    crash,
+                    "start_s ≤ x ≤ scenario.duration_s",
+                )?;
+            }
+            if let Some(restart) = robot.restart_s {
+                let crash = robot.crash_s.unwrap_or(f64::INFINITY);
+                check(
+                    restart.is_finite() && restart > crash && restart <= s.duration_s,
+                    key("restart_s"),
+                    restart,
+                    "crash_s < x ≤ scenario.duration_s (and crash_s set)",
+                )?;
+            }
             let name = self.robot_name(k);
             check(
                 (0..k).all(|j| self.robot_name(j) != name),
