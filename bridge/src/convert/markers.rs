@@ -176,6 +176,7 @@ mod tests {
                 local_from_remote: Some(Pose3::translation(5.0, 0.0, 0.0)),
                 first_aligned: Some(1.0),
                 keyframes_held: 0,
+                objects_revision: None,
             },
             NeighbourStatus {
                 robot: RobotId(3),
@@ -183,6 +184,7 @@ mod tests {
                 local_from_remote: None,
                 first_aligned: None,
                 keyframes_held: 0,
+                objects_revision: None,
             },
         ];
         let tf = neighbour_transforms(&header, &neighbours, |r| format!("robot{}/odom", r.0));
