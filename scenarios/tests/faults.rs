@@ -1,0 +1,69 @@
+//! Fault scenarios of `library/faults/` end to end: the team converges (every robot aligned
+//! with every other), and the report's ledger shows that nothing was lost — every robot holds
+//! every other's latest ObjectData, no keyframe request is left pending, and a robot that
+//! crashed and came back from its snapshot still holds every keyframe of that snapshot. The
+//! other fault scenarios (30 % and 60 % loss, duplication and reordering) run in
+//! `sgm bench faults`; they take longer than the test budget allows.
+
+use sgm_scenarios::report::{compute, Report};
+use sgm_scenarios::runner::run;
+use sgm_scenarios::scenario::Scenario;
+
+fn run_fault(name: &str) -> Report {
+    let scenario = Scenario::load_with_env(&format!("faults/{name}"), "SGM_FAULTS_TEST").unwrap();
+    let outcome = actix_rt::System::new().block_on(run(&scenario, None)).unwrap();
+    compute(&outcome.record)
+}
+
+fn assert_converged_and_nothing_lost(report: &Report) {
+    let robots = report.robots.len();
+    assert_eq!(report.alignments.len(), robots * (robots - 1));
+    for a in &report.alignments {
+        assert_eq!(a.state, "Aligned", "{} ← {}", a.local, a.remote);
+        assert!(a.translation_error_m.unwrap() < 0.5, "{} ← {}: {:?}", a.local, a.remote, a.translation_error_m);
+    }
+    assert_eq!(report.ledger.pairs.len(), robots * (robots - 1));
+    for p in &report.ledger.pairs {
+        assert!(
+            p.object_data_current,
+            "{} ← {}: ObjectData {:?} is not the latest",
+            p.local, p.remote, p.object_data_revision
+        );
+        assert_eq!(p.keyframes_pending, 0, "{} ← {}", p.local, p.remote);
+        assert_eq!(
+            p.keyframes_received + p.keyframes_refused + p.keyframes_given_up,
+            p.keyframes_wanted,
+            "{} ← {}",
+            p.local,
+            p.remote
+        );
+    }
+    assert!(report.team_ate_rmse_m.unwrap() < 0.3, "{:?}", report.team_ate_rmse_m);
+}
+
+#[test]
+fn a_partition_heals_and_the_team_converges() {
+    let report = run_fault("partition");
+    assert!(report.radio.partitioned > 0);
+    assert_converged_and_nothing_lost(&report);
+    // charlie could not align before the partition healed at 80 s.
+    for a in report.alignments.iter().filter(|a| a.local == "charlie" || a.remote == "charlie") {
+        assert!(a.first_aligned_s.unwrap() >= 80.0, "{} ← {} at {:?}", a.local, a.remote, a.first_aligned_s);
+    }
+}
+
+#[test]
+fn a_robot_restarts_from_its_snapshot_with_nothing_lost() {
+    let report = run_fault("crash_restart");
+    assert_converged_and_nothing_lost(&report);
+    let [restart] = &report.ledger.restarts[..] else { panic!("{:?}", report.ledger.restarts) };
+    assert_eq!((restart.robot.as_str(), restart.crashed_at_s, restart.restarted_at_s), ("bravo", 75.0, 95.0));
+    // Snapshots every 20 s: the last before the crash.
+    let taken = restart.snapshot_taken_at_s.unwrap();
+    assert!((55.0..75.0).contains(&taken), "{taken}");
+    assert!(restart.keyframes_in_snapshot > 0 && restart.keyframes_in_snapshot <= restart.keyframes_at_crash);
+    assert_eq!(restart.snapshot_keyframes_kept, restart.keyframes_in_snapshot, "a restored keyframe was lost");
+    assert!(restart.objects_in_snapshot > 0);
+    let bravo = report.robots.iter().find(|r| r.name == "bravo").unwrap();
+    assert!(bravo.keyframes > restart.keyframes_in_snapshot, "bravo went on mapping after the restart");
+}
