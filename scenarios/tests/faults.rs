@@ -2,8 +2,8 @@
 //! with every other), and the report's ledger shows that nothing was lost — every robot holds
 //! every other's latest ObjectData, no keyframe request is left pending, and a robot that
 //! crashed and came back from its snapshot still holds every keyframe of that snapshot. The
-//! other fault scenarios (30 % and 60 % loss, duplication and reordering) run in
-//! `sgm bench faults`; they take longer than the test budget allows.
+//! other fault scenarios (30 % and 60 % loss, duplication and reordering, late join) are run
+//! with `sgm run faults/NAME`; their figures are in the book's scenario chapter.
 
 use sgm_scenarios::report::{compute, Report};
 use sgm_scenarios::runner::run;
