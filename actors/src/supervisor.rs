@@ -86,17 +86,20 @@ pub fn start_robot_on(
     transport: Box<dyn Transport>,
     attach: impl FnOnce(RobotId, Addr<Comms>),
 ) -> Result<RobotHandle, ConfigError> {
-    start_robot_restored(config, clock, transport, attach, None)
+    start_robot_restored(config, clock, transport, attach, None, 0)
 }
 
 /// As [`start_robot_on`], continuing from `snapshot` when there is one: each child starts from
-/// its part, and the Tracker hands the restored map to the Matcher and Comms.
+/// its part, and the Tracker hands the restored map to the Matcher and Comms. Sequence numbers
+/// start above `sequence_floor`, the clock in microseconds and the snapshot's, whichever is
+/// highest (a node whose clock restarts at 0 passes the time it was started).
 pub fn start_robot_restored(
     config: &RobotConfig,
     clock: Clock,
     transport: Box<dyn Transport>,
     attach: impl FnOnce(RobotId, Addr<Comms>),
     snapshot: Option<RobotSnapshot>,
+    sequence_floor: u64,
 ) -> Result<RobotHandle, ConfigError> {
     config.validate()?;
     let robot = RobotId(config.robot.id);
@@ -109,7 +112,7 @@ pub fn start_robot_restored(
     let labels = label_similarity(&classes, &config.matcher.matching)?;
 
     // Sequence numbers start at the clock in microseconds: a restarted robot never reuses one.
-    let sequence_start = (clock.now().max(0.0) * 1e6) as u64;
+    let sequence_start = ((clock.now().max(0.0) * 1e6) as u64).max(sequence_floor);
     let comms_config = config.comms.clone();
     let comms_clock = clock.clone();
     let object_data = config.matcher.association != Association::ScanContext;

@@ -23,7 +23,8 @@ use sgm_actors::comms::GetCommsStatus;
 use sgm_actors::config::{ConfigError, RobotConfig};
 use sgm_actors::matcher::GetNeighbours;
 use sgm_actors::messages::Tick;
-use sgm_actors::supervisor::{start_robot_on, RobotHandle};
+use sgm_actors::snapshot::SnapshotStore;
+use sgm_actors::supervisor::{start_robot_restored, RobotHandle};
 use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
 use sgm_actors::transport::Delivered;
 use sgm_model::perception::classes::ClassTable;
@@ -68,6 +69,8 @@ pub enum NodeError {
     Ros(InputError),
     #[error("ROS: {0}")]
     Ros1(String),
+    #[error("[persistence]: {0}")]
+    Snapshot(sgm_actors::snapshot::StoreError),
 }
 
 fn ros_error(e: impl std::fmt::Display) -> NodeError {
@@ -161,10 +164,42 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
         let counts = Arc::new(TransportCounts::default());
         let transport =
             RosTransport::start(&ros, sgm_model::scene_graph::RobotId(id), counts.clone()).map_err(ros_error)?;
+        // Snapshots: resume from the latest whole one; if the latest and the previous are both
+        // unusable, refuse to start (and overwrite nothing) with the reason for each.
+        let persistence = &config.robot.persistence;
+        let store = (!persistence.directory.is_empty()).then(|| {
+            SnapshotStore::new(
+                &persistence.directory,
+                &robot_name,
+                persistence.max_snapshot_mib.saturating_mul(1 << 20),
+            )
+        });
+        let snapshot = match (&store, persistence.resume) {
+            (Some(store), true) => store.load().map_err(NodeError::Snapshot)?.map(|loaded| {
+                for skipped in &loaded.skipped {
+                    tracing::warn!(robot = %robot_name, "snapshot skipped: {skipped}");
+                }
+                tracing::info!(robot = %robot_name, path = %loaded.path.display(), "resuming");
+                loaded.snapshot
+            }),
+            _ => None,
+        };
+        // The clock follows sensor stamps from 0; sequence numbers must still never repeat
+        // across restarts: they start above the time the node started, in microseconds (read
+        // once here, never in a handler).
+        let started_us = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX));
         let mut comms_addr = None;
-        let handle = start_robot_on(&config.robot, Clock::starting_at(0.0), Box::new(transport), |_, comms| {
-            comms_addr = Some(comms)
-        })
+        let attach = |_, comms| comms_addr = Some(comms);
+        let handle = start_robot_restored(
+            &config.robot,
+            Clock::starting_at(0.0),
+            Box::new(transport),
+            attach,
+            snapshot,
+            started_us,
+        )
         .map_err(NodeError::Config)?;
         let Some(comms) = comms_addr else { return Err(ros_error("the robot's Comms did not start")) };
 
@@ -212,9 +247,16 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
         let tick = Duration::from_millis(100);
         let publish_every = Duration::from_secs_f64(ros.publish_interval_s);
         let mut seq = 0u32;
+        let mut last_snapshot = handle.clock.now();
         while rosrust::is_ok() {
             actix_rt::time::sleep(tick).await;
             handle.supervisor.do_send(Tick { now: handle.clock.now() });
+            if let Some(store) = &store {
+                if handle.clock.now() - last_snapshot >= persistence.interval_s {
+                    last_snapshot = handle.clock.now();
+                    save_snapshot(&handle, store).await;
+                }
+            }
             since_publish += tick;
             if since_publish < publish_every {
                 continue;
@@ -268,8 +310,27 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
             let _ = publishers.status.send(std_msgs::String { data: status.to_string() });
         }
         drop((team_in, deliver, points, labels, camera_info, odometry));
+        // Shutdown (SIGINT, rosnode kill): one last snapshot.
+        if let Some(store) = &store {
+            save_snapshot(&handle, store).await;
+        }
         Ok(())
     })
+}
+
+/// Freezes the robot and writes its snapshot; a failure is logged and the robot runs on (the
+/// previous snapshot stays in place).
+async fn save_snapshot(handle: &RobotHandle, store: &SnapshotStore) {
+    let saved = match handle.freeze().await {
+        Ok(snapshot) => store.save(&snapshot).map_err(|e| e.to_string()),
+        Err(e) => Err(e.to_string()),
+    };
+    match saved {
+        Ok(bytes) => {
+            tracing::debug!(robot = %handle.name, bytes, path = %store.current().display(), "snapshot written")
+        }
+        Err(e) => tracing::warn!(robot = %handle.name, "snapshot not written: {e}"),
+    }
 }
 
 struct Publishers {

@@ -235,9 +235,15 @@ impl Team {
             }
             let radio = self.radio.clone();
             let attach = |robot, comms: actix::Addr<sgm_actors::comms::Comms>| radio.attach(robot, comms.recipient());
-            let handle =
-                start_robot_restored(&config(), member.clock.clone(), Box::new(self.radio.clone()), attach, snapshot)
-                    .map_err(|e| failed(e.to_string()))?;
+            let handle = start_robot_restored(
+                &config(),
+                member.clock.clone(),
+                Box::new(self.radio.clone()),
+                attach,
+                snapshot,
+                0,
+            )
+            .map_err(|e| failed(e.to_string()))?;
             member.handle = Some(handle);
         }
         if let Some(handle) = &member.handle {
