@@ -149,14 +149,22 @@ struct Outcome {
     server: CommsStatus,
 }
 
-/// 100 requests of 6 keyframes each, one every 10 ms, then `seconds` of ticks every 100 ms.
-async fn burst(model: Box<dyn RadioModel>, config: CommsConfig, seconds: u32) -> Outcome {
+/// A requester and a server (its map: [`Map`]) over `model`; what the requester's Comms hands
+/// over is recorded in `heard`.
+struct Pair {
+    radio: InProcessRadio,
+    clock: Clock,
+    requester: Addr<Comms>,
+    server: Addr<Comms>,
+    heard: Arc<Mutex<Heard>>,
+}
+
+fn pair(model: Box<dyn RadioModel>, config: &CommsConfig) -> Pair {
     let radio = InProcessRadio::new(model);
     let clock = Clock::starting_at(0.0);
     let key = TeamKey::from_passphrase(&config.team_key).unwrap();
     let start = |robot: RobotId| {
-        let (config, key, clock, transport) = (config.clone(), key.clone(), clock.clone(), radio.clone());
-        let comms = Comms::new(robot, config, key, clock, Box::new(transport), 0).start();
+        let comms = Comms::new(robot, config.clone(), key.clone(), clock.clone(), Box::new(radio.clone()), 0).start();
         radio.attach(robot, comms.clone().recipient());
         comms
     };
@@ -175,6 +183,12 @@ async fn burst(model: Box<dyn RadioModel>, config: CommsConfig, seconds: u32) ->
     };
     requester.do_send(Connect(links(recorder.clone().recipient())));
     server.do_send(Connect(links(map.recipient())));
+    Pair { radio, clock, requester, server, heard }
+}
+
+/// 100 requests of 6 keyframes each, one every 10 ms, then `seconds` of ticks every 100 ms.
+async fn burst(model: Box<dyn RadioModel>, config: CommsConfig, seconds: u32) -> Outcome {
+    let Pair { radio, clock, requester, server, heard } = pair(model, &config);
 
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let mut requested = BTreeSet::new();
@@ -268,29 +282,8 @@ async fn a_burst_over_a_lossy_radio_is_bounded_and_nothing_is_silently_dropped()
 #[actix_rt::test]
 async fn a_partition_pauses_requests_and_the_heal_completes_them() {
     let config = CommsConfig { max_keyframes_in_flight: 16, max_keyframes_waiting: 1000, ..CommsConfig::default() };
-    let radio = InProcessRadio::new(Box::new(PartitionedLinks { from: 0.5, until: 400.0 }));
-    let clock = Clock::starting_at(0.0);
-    let key = TeamKey::from_passphrase(&config.team_key).unwrap();
-    let start = |robot: RobotId| {
-        let comms = Comms::new(robot, config.clone(), key.clone(), clock.clone(), Box::new(radio.clone()), 0).start();
-        radio.attach(robot, comms.clone().recipient());
-        comms
-    };
-    let (requester, server) = (start(REQUESTER), start(SERVER));
-    let heard = Arc::new(Mutex::new(Heard::default()));
-    let recorder = Recorder(heard.clone()).start();
-    let map = Map { comms: server.clone() }.start();
-    let links = |serve: actix::Recipient<Serve>| CommsLinks {
-        objects: recorder.clone().recipient(),
-        object_clouds: recorder.clone().recipient(),
-        keyframes: recorder.clone().recipient(),
-        unavailable: recorder.clone().recipient(),
-        descriptors: recorder.clone().recipient(),
-        serve,
-        link: recorder.clone().recipient(),
-    };
-    requester.do_send(Connect(links(recorder.clone().recipient())));
-    server.do_send(Connect(links(map.recipient())));
+    let Pair { radio, clock, requester, server, heard } =
+        pair(Box::new(PartitionedLinks { from: 0.5, until: 400.0 }), &config);
     // The server has a map: its ObjectData makes it heard, then keeps it heard.
     let object = sgm_model::matching::GraphObject {
         id: sgm_model::scene_graph::ObjectId(1),
