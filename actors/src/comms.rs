@@ -655,13 +655,6 @@ impl Handler<Tick> for Comms {
     }
 }
 
-impl Handler<Freeze<CommsState>> for Comms {
-    type Result = MessageResult<Freeze<CommsState>>;
-    fn handle(&mut self, _: Freeze<CommsState>, _: &mut Context<Self>) -> Self::Result {
-        MessageResult(self.freeze())
-    }
-}
-
 impl Handler<GetCommsStatus> for Comms {
     type Result = MessageResult<GetCommsStatus>;
     fn handle(&mut self, _: GetCommsStatus, _: &mut Context<Self>) -> Self::Result {
@@ -672,4 +665,5 @@ impl Handler<GetCommsStatus> for Comms {
 }
 
 connects!(Comms => CommsLinks);
+freezes!(Comms => CommsState);
 stops_on_injected_failure!(Comms => "comms");

@@ -45,6 +45,19 @@ macro_rules! connects {
     )*};
 }
 
+/// The [`messages::Freeze`] handler of each listed actor and its state type: the actor's
+/// `freeze()`.
+macro_rules! freezes {
+    ($($actor:ty => $state:ty),*) => {$(
+        impl actix::Handler<crate::messages::Freeze<$state>> for $actor {
+            type Result = actix::MessageResult<crate::messages::Freeze<$state>>;
+            fn handle(&mut self, _: crate::messages::Freeze<$state>, _: &mut actix::Context<Self>) -> Self::Result {
+                actix::MessageResult(self.freeze())
+            }
+        }
+    )*};
+}
+
 pub mod clock;
 pub mod comms;
 pub mod config;

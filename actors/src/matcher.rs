@@ -17,7 +17,7 @@ use crate::config::{Association, MatcherSection};
 use crate::containment::contained;
 use crate::messages::*;
 use crate::place_candidates::{PlaceCandidate, PlaceCandidates};
-use crate::protocol::{Neighbour, Protocol, RetryConfig, Wait};
+use crate::protocol::{Matched, Neighbour, Protocol, RetryConfig, Wait};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use nalgebra::Point3;
 use sgm_model::geometry::{pose_error, Pose3};
@@ -302,6 +302,22 @@ impl Matcher {
         tracing::info!(robot = %self.robot, neighbour = %robot, matches = remote_ids.len(), "object graphs matched");
         if let Some(links) = &self.links {
             links.request_clouds.do_send(RequestObjectClouds { robot, objects: remote_ids });
+        }
+    }
+
+    /// Matches by the configured association (objects, or Scan Context descriptors).
+    fn try_associate(&mut self, robot: RobotId) {
+        match self.config.association {
+            Association::ScanContext => self.try_match_places(robot),
+            _ => self.try_match(robot),
+        }
+    }
+
+    /// Sends the object-cloud request of a match again.
+    fn ask_clouds_again(&self, robot: RobotId, matched: &Neighbour<Matched>) {
+        if let Some(links) = &self.links {
+            let objects = matched.state.pairs.iter().map(|p| p.1).collect();
+            links.request_clouds.do_send(RequestObjectClouds { robot, objects });
         }
     }
 
@@ -688,11 +704,8 @@ impl Handler<Tick> for Matcher {
                 match n.state.wait.retry(msg.now, &self.retry, !entry.link_down) {
                     Some(next) => {
                         n.state.wait = next;
-                        let objects = n.state.pairs.iter().map(|p| p.1).collect();
-                        entry.protocol = Some(n.into());
-                        if let Some(links) = &self.links {
-                            links.request_clouds.do_send(RequestObjectClouds { robot, objects });
-                        }
+                        entry.protocol = Some(n.clone().into());
+                        self.ask_clouds_again(robot, &n);
                     }
                     None => {
                         entry.protocol = Some(n.gave_up(msg.now).into());
@@ -703,19 +716,9 @@ impl Handler<Tick> for Matcher {
             // Rounds cut short by losses: try again (the neighbour may have stopped changing).
             let again: Vec<RobotId> = self.neighbours.iter().filter(|(_, e)| e.match_again).map(|(r, _)| *r).collect();
             for robot in again {
-                match self.config.association {
-                    Association::ScanContext => self.try_match_places(robot),
-                    _ => self.try_match(robot),
-                }
+                self.try_associate(robot);
             }
         });
-    }
-}
-
-impl Handler<Freeze<MatcherState>> for Matcher {
-    type Result = MessageResult<Freeze<MatcherState>>;
-    fn handle(&mut self, _: Freeze<MatcherState>, _: &mut Context<Self>) -> Self::Result {
-        MessageResult(self.freeze())
     }
 }
 
@@ -735,16 +738,10 @@ impl Handler<LinkChanged> for Matcher {
             entry.last_attempt = None;
             if let Some(Protocol::Matched(mut n)) = entry.protocol.clone() {
                 n.state.wait = Wait::new(now, &retry);
-                let objects = n.state.pairs.iter().map(|p| p.1).collect();
-                entry.protocol = Some(n.into());
-                if let Some(links) = &self.links {
-                    links.request_clouds.do_send(RequestObjectClouds { robot: msg.robot, objects });
-                }
+                entry.protocol = Some(n.clone().into());
+                self.ask_clouds_again(msg.robot, &n);
             }
-            match self.config.association {
-                Association::ScanContext => self.try_match_places(msg.robot),
-                _ => self.try_match(msg.robot),
-            }
+            self.try_associate(msg.robot);
         });
     }
 }
@@ -769,4 +766,5 @@ impl Handler<GetNeighbours> for Matcher {
 }
 
 connects!(Matcher => MatcherLinks);
+freezes!(Matcher => MatcherState);
 stops_on_injected_failure!(Matcher => "matcher");

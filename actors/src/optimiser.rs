@@ -143,13 +143,6 @@ impl Supervised for Optimiser {
     }
 }
 
-impl Handler<Freeze<OptimiserState>> for Optimiser {
-    type Result = actix::MessageResult<Freeze<OptimiserState>>;
-    fn handle(&mut self, _: Freeze<OptimiserState>, _: &mut Context<Self>) -> Self::Result {
-        actix::MessageResult(self.freeze())
-    }
-}
-
 impl Handler<NewKeyframe> for Optimiser {
     type Result = ();
     fn handle(&mut self, msg: NewKeyframe, ctx: &mut Context<Self>) {
@@ -205,4 +198,5 @@ impl Handler<InterRobotConstraints> for Optimiser {
 }
 
 connects!(Optimiser => OptimiserLinks);
+freezes!(Optimiser => OptimiserState);
 stops_on_injected_failure!(Optimiser => "optimiser");

@@ -354,13 +354,6 @@ impl Handler<Serve> for Tracker {
     }
 }
 
-impl Handler<Freeze<TrackerState>> for Tracker {
-    type Result = MessageResult<Freeze<TrackerState>>;
-    fn handle(&mut self, _: Freeze<TrackerState>, _: &mut Context<Self>) -> Self::Result {
-        MessageResult(self.freeze())
-    }
-}
-
 impl Handler<Republish> for Tracker {
     type Result = ();
     fn handle(&mut self, _: Republish, ctx: &mut Context<Self>) {
@@ -409,4 +402,5 @@ impl Handler<GetMapSummary> for Tracker {
 }
 
 connects!(Tracker => TrackerLinks);
+freezes!(Tracker => TrackerState);
 stops_on_injected_failure!(Tracker => "tracker");

@@ -13,8 +13,9 @@
 //! ```
 //!
 //! Decoding checks, in order: the magic, the version, the kind, the length against the bytes
-//! present (a truncated file is named as such), the hash, the uncompressed size against the
-//! caller's bound (before allocating), then decodes. It never panics on any input.
+//! present (a truncated file is named as such), the hash ([`verify`] stops here), the
+//! uncompressed size against the caller's bound (before allocating), then decodes. It never
+//! panics on any input.
 
 use serde::de::DeserializeOwned;
 use serde::Serialize;
@@ -74,8 +75,9 @@ fn u32_at(bytes: &[u8], at: usize) -> u32 {
     u32::from_le_bytes(b)
 }
 
-/// Opens a snapshot of `kind` whose payload unpacks to at most `max_bytes`.
-pub fn decode<T: DeserializeOwned>(bytes: &[u8], kind: u32, max_bytes: u64) -> Result<T, SnapshotError> {
+/// Checks the frame of a snapshot of `kind` — magic, version, kind, length, checksum — without
+/// unpacking it; returns the payload. Enough to know a file is whole.
+pub fn verify(bytes: &[u8], kind: u32) -> Result<&[u8], SnapshotError> {
     if bytes.len() < MAGIC.len() || bytes[..MAGIC.len()] != MAGIC {
         return Err(SnapshotError::NotASnapshot);
     }
@@ -104,6 +106,12 @@ pub fn decode<T: DeserializeOwned>(bytes: &[u8], kind: u32, max_bytes: u64) -> R
     if blake3::hash(payload).as_bytes() != &bytes[24..56] {
         return Err(SnapshotError::Checksum);
     }
+    Ok(payload)
+}
+
+/// Opens a snapshot of `kind` whose payload unpacks to at most `max_bytes`.
+pub fn decode<T: DeserializeOwned>(bytes: &[u8], kind: u32, max_bytes: u64) -> Result<T, SnapshotError> {
+    let payload = verify(bytes, kind)?;
     if payload.len() < 4 {
         return Err(SnapshotError::Compression("no size prefix".into()));
     }
