@@ -253,11 +253,15 @@ pub struct OptimiserConfig {
     /// Optimise after this many new keyframes (1: every keyframe), and at once on a loop closure
     /// or new inter-robot constraints. Default 10.
     pub every_keyframes: usize,
+    /// Reject wrong loop closures and inter-robot factors: graduated non-convexity with
+    /// truncated least squares over them (odometry and priors are trusted), decided again at
+    /// every solve. false: plain least squares. Default true.
+    pub reject_outliers: bool,
 }
 
 impl Default for OptimiserConfig {
     fn default() -> Self {
-        Self { odometry_sigmas: [0.01, 0.01, 0.01, 0.05, 0.05, 0.05], every_keyframes: 10 }
+        Self { odometry_sigmas: [0.01, 0.01, 0.01, 0.05, 0.05, 0.05], every_keyframes: 10, reject_outliers: true }
     }
 }
 

@@ -407,7 +407,8 @@ impl Matcher {
         for cloud in &msg.clouds {
             let Some(local_id) = remote_of.get(&cloud.id) else { continue };
             observed_in.insert(cloud.id, cloud.keyframes.clone());
-            if let Ok(points) = cloud_codec::decode_at_most(&cloud.cloud, 200_000) {
+            // The envelope held the clouds' declared points within `comms.limits.max_cloud_points`.
+            if let Ok(points) = cloud_codec::decode(&cloud.cloud) {
                 source.extend(points);
             }
             if let Some(object) = self.local.objects.iter().find(|o| o.id == *local_id) {

@@ -3,6 +3,13 @@
 //! covariances (expressed in our world through `local_from_remote`), and inter-robot factors
 //! from ICP — solved by Levenberg–Marquardt on faer (`model::optim`). Publishes optimised poses
 //! and marginal covariances to the Tracker and Matcher.
+//!
+//! A wrong loop closure or inter-robot factor (a false match that passed every check) would
+//! bend the whole trajectory toward it. With `reject_outliers`, each solve is GNC-TLS over those
+//! factors (`robust::optimize_gnc_incremental`): the previous decision is kept while it still
+//! holds — one solve — and made again from scratch when it does not. Rejected factors stay in
+//! the graph with weight 0 (a later solve may take them back) and add no information to the
+//! marginals.
 
 use crate::config::OptimiserConfig;
 use crate::containment::contained;
@@ -12,9 +19,10 @@ use nalgebra::Matrix6;
 use sgm_model::geometry::Pose3;
 use sgm_model::optim::factors::{Between, Prior};
 use sgm_model::optim::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
-use sgm_model::optim::marginals::marginal_covariances;
-use sgm_model::optim::solver::{optimize, LmParams, Structure};
-use sgm_model::scene_graph::{KeyframeEdge, KeyframeId, KeyframeRef, RobotId};
+use sgm_model::optim::marginals::marginal_covariances_with;
+use sgm_model::optim::robust::optimize_gnc_incremental;
+use sgm_model::optim::solver::{optimize, LmParams, SolveError, Structure};
+use sgm_model::scene_graph::{KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, RobotId};
 use std::collections::BTreeMap;
 
 /// Where optimised poses go.
@@ -34,15 +42,39 @@ pub struct Optimiser {
     graph: Graph3,
     index: BTreeMap<KeyframeRef, usize>,
     pending: usize,
+    /// Per between factor of `graph`: whether robust estimation may reject it (not odometry).
+    candidates: Vec<bool>,
+    /// The between factors the last solve rejected.
+    rejected: Vec<usize>,
 }
 
-/// What of the Optimiser a snapshot keeps: the whole pose graph.
+/// What of the Optimiser a snapshot keeps: the whole pose graph and its outlier decisions.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct OptimiserState {
     pub graph: Graph3,
     pub index: Vec<(KeyframeRef, usize)>,
     pub pending: usize,
+    pub candidates: Vec<bool>,
+    pub rejected: Vec<usize>,
 }
+
+/// The Optimiser's pose graph at a glance.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct OptimiserStatus {
+    pub variables: usize,
+    pub between_factors: usize,
+    /// Loop closures and inter-robot factors.
+    pub candidate_factors: usize,
+    /// Of those, rejected by the last solve.
+    pub rejected_factors: usize,
+    /// Rejected inter-robot factors: (neighbour, local keyframe, neighbour keyframe).
+    pub rejected_inter_robot: Vec<(RobotId, KeyframeId, KeyframeId)>,
+}
+
+/// Runner / operator → Optimiser: what the pose graph holds.
+#[derive(actix::Message)]
+#[rtype(result = "OptimiserStatus")]
+pub struct GetOptimiserStatus;
 
 /// S with Sᵀ S = Ω, or `None` unless Ω is symmetric positive definite.
 fn sqrt_information(information: &Matrix6<f64>) -> Option<Matrix6<f64>> {
@@ -58,7 +90,16 @@ fn key_of(r: &KeyframeRef) -> u64 {
 
 impl Optimiser {
     pub fn new(robot: RobotId, config: OptimiserConfig) -> Self {
-        Self { robot, config, links: None, graph: Graph3::default(), index: BTreeMap::new(), pending: 0 }
+        Self {
+            robot,
+            config,
+            links: None,
+            graph: Graph3::default(),
+            index: BTreeMap::new(),
+            pending: 0,
+            candidates: Vec::new(),
+            rejected: Vec::new(),
+        }
     }
 
     pub fn freeze(&self) -> OptimiserState {
@@ -66,6 +107,8 @@ impl Optimiser {
             graph: self.graph.clone(),
             index: self.index.iter().map(|(r, i)| (*r, *i)).collect(),
             pending: self.pending,
+            candidates: self.candidates.clone(),
+            rejected: self.rejected.clone(),
         }
     }
 
@@ -77,11 +120,15 @@ impl Optimiser {
             && state.graph.fixed.len() == n
             && state.index.iter().all(|(_, i)| *i < n)
             && state.graph.betweens.iter().all(|b| b.from < n && b.to < n)
-            && state.graph.priors.iter().all(|p| p.variable < n);
+            && state.graph.priors.iter().all(|p| p.variable < n)
+            && state.candidates.len() == state.graph.betweens.len()
+            && state.rejected.iter().all(|k| *k < state.candidates.len());
         if consistent {
             self.graph = state.graph;
             self.index = state.index.into_iter().collect();
             self.pending = state.pending;
+            self.candidates = state.candidates;
+            self.rejected = state.rejected;
         } else {
             tracing::error!(robot = %self.robot, "snapshot pose graph is inconsistent: starting the optimiser empty");
         }
@@ -107,13 +154,36 @@ impl Optimiser {
         };
         let Some(s) = sqrt_information(&edge.information) else { return };
         self.graph.betweens.push(Between { from, to, measured: edge.from_from_to, sqrt_information: s });
+        self.candidates.push(edge.kind != KeyframeEdgeKind::Odometry);
+    }
+
+    /// Solves the graph; returns the between factors rejected as outliers.
+    fn solve(&mut self) -> Result<Vec<usize>, SolveError> {
+        let params = LmParams::default();
+        if self.config.reject_outliers {
+            optimize_gnc_incremental(&mut self.graph, &params, &self.candidates, &self.rejected).map(|(_, r)| r)
+        } else {
+            optimize(&mut self.graph, &params).map(|_| Vec::new())
+        }
     }
 
     fn solve_and_publish(&mut self) {
-        if let Err(e) = optimize(&mut self.graph, &LmParams::default()) {
-            tracing::warn!(robot = %self.robot, "pose graph not optimised: {e}");
-            return;
+        let rejected = match self.solve() {
+            Ok(rejected) => rejected,
+            Err(e) => {
+                tracing::warn!(robot = %self.robot, "pose graph not optimised: {e}");
+                return;
+            }
+        };
+        if rejected != self.rejected {
+            tracing::info!(robot = %self.robot, rejected = rejected.len(), candidates = self.candidates.iter().filter(|c| **c).count(), "outlier factors");
         }
+        self.rejected = rejected;
+        let mut weights = vec![1.0; self.graph.betweens.len()];
+        for &k in &self.rejected {
+            weights[k] = 0.0;
+        }
+        let weighted = |k: usize, s: f64| (weights[k] * 0.5 * s, weights[k]);
         let local: Vec<(KeyframeId, usize)> = self
             .index
             .iter()
@@ -122,7 +192,10 @@ impl Optimiser {
         let poses: Vec<(KeyframeId, Pose3)> = local.iter().map(|(k, i)| (*k, self.graph.values[*i])).collect();
         let latest: Vec<(KeyframeId, usize)> = local.iter().rev().take(MARGINALS).copied().collect();
         let covariances = Structure::new(&self.graph)
-            .and_then(|s| marginal_covariances(&self.graph, &s, &latest.iter().map(|(_, i)| *i).collect::<Vec<_>>()))
+            .and_then(|s| {
+                let variables: Vec<usize> = latest.iter().map(|(_, i)| *i).collect();
+                marginal_covariances_with(&self.graph, &s, &variables, &weighted)
+            })
             .map(|c| latest.iter().map(|(k, _)| *k).zip(c).collect())
             .unwrap_or_default();
         if let Some(links) = &self.links {
@@ -157,7 +230,7 @@ impl Handler<NewKeyframe> for Optimiser {
             }
             self.pending += 1;
             // A loop closure's correction is worth a solve at once.
-            let has_loop = msg.edges.iter().any(|e| e.kind == sgm_model::scene_graph::KeyframeEdgeKind::Loop);
+            let has_loop = msg.edges.iter().any(|e| e.kind == KeyframeEdgeKind::Loop);
             if has_loop || self.pending >= self.config.every_keyframes {
                 self.pending = 0;
                 self.solve_and_publish();
@@ -184,7 +257,7 @@ impl Handler<InterRobotConstraints> for Optimiser {
             }
             for (local, remote, measured, information) in &msg.factors {
                 let edge = KeyframeEdge {
-                    kind: sgm_model::scene_graph::KeyframeEdgeKind::InterRobot,
+                    kind: KeyframeEdgeKind::InterRobot,
                     from: *local,
                     to: KeyframeRef::Remote { robot: msg.robot, keyframe: *remote },
                     from_from_to: *measured,
@@ -194,6 +267,41 @@ impl Handler<InterRobotConstraints> for Optimiser {
             }
             self.solve_and_publish();
         });
+    }
+}
+
+impl Handler<GetOptimiserStatus> for Optimiser {
+    type Result = actix::MessageResult<GetOptimiserStatus>;
+    fn handle(&mut self, _: GetOptimiserStatus, _: &mut Context<Self>) -> Self::Result {
+        let remote: BTreeMap<usize, (RobotId, KeyframeId)> = self
+            .index
+            .iter()
+            .filter_map(|(r, i)| match r {
+                KeyframeRef::Remote { robot, keyframe } => Some((*i, (*robot, *keyframe))),
+                KeyframeRef::Local(_) => None,
+            })
+            .collect();
+        let local: BTreeMap<usize, KeyframeId> = self
+            .index
+            .iter()
+            .filter_map(|(r, i)| if let KeyframeRef::Local(k) = r { Some((*i, *k)) } else { None })
+            .collect();
+        let rejected_inter_robot = self
+            .rejected
+            .iter()
+            .filter_map(|k| self.graph.betweens.get(*k))
+            .filter_map(|b| {
+                let (robot, theirs) = remote.get(&b.to)?;
+                Some((*robot, *local.get(&b.from)?, *theirs))
+            })
+            .collect();
+        actix::MessageResult(OptimiserStatus {
+            variables: self.graph.values.len(),
+            between_factors: self.graph.betweens.len(),
+            candidate_factors: self.candidates.iter().filter(|c| **c).count(),
+            rejected_factors: self.rejected.len(),
+            rejected_inter_robot,
+        })
     }
 }
 

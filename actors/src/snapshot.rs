@@ -192,7 +192,13 @@ mod tests {
                 last_loop_attempt: None,
             },
             matcher: MatcherState::default(),
-            optimiser: OptimiserState { graph: Graph3::default(), index: Vec::new(), pending: 0 },
+            optimiser: OptimiserState {
+                graph: Graph3::default(),
+                index: Vec::new(),
+                pending: 0,
+                candidates: Vec::new(),
+                rejected: Vec::new(),
+            },
             comms: CommsState { sequence: 99, ..CommsState::default() },
         }
     }

@@ -21,8 +21,9 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 
 pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
-/// Version 1: the layout above.
-pub const FORMAT_VERSION: u32 = 1;
+/// Version 1: the layout above. Version 2: the same frame; the robot snapshot's optimiser state
+/// also keeps its outlier decisions (a version-1 file is refused by name, not misread).
+pub const FORMAT_VERSION: u32 = 2;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).
@@ -163,8 +164,8 @@ mod tests {
         flipped[last] ^= 1;
         assert_eq!(decode(&flipped), Err(SnapshotError::Checksum));
         let mut newer = bytes.clone();
-        newer[8] = 2;
-        assert_eq!(decode(&newer), Err(SnapshotError::Version { found: 2 }));
+        newer[8..12].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
+        assert_eq!(decode(&newer), Err(SnapshotError::Version { found: FORMAT_VERSION + 1 }));
         assert_eq!(
             super::decode::<BTreeMap<u32, Vec<f64>>>(&bytes, 8, 1 << 20),
             Err(SnapshotError::Kind { found: 7, expected: 8 })

@@ -7,7 +7,7 @@ use rand_chacha::ChaCha8Rng;
 use sgm_model::optim::factors::Between;
 use sgm_model::optim::g2o::{read_g2o, write_g2o, G2oGraph};
 use sgm_model::optim::graph::{Graph2, GTSAM_PRIOR_SIGMAS_2D};
-use sgm_model::optim::robust::{optimize_robust, RobustKernel};
+use sgm_model::optim::robust::{optimize_gnc_incremental, optimize_robust, RobustKernel};
 use sgm_model::optim::solver::{optimize, LmParams};
 
 fn pose(x: f64, y: f64, th: f64) -> Isometry2<f64> {
@@ -330,4 +330,37 @@ mod marginals_and_incremental {
             .fold(0.0, f64::max);
         assert!(worst < 1e-4, "{worst}");
     }
+}
+
+#[test]
+fn incremental_gnc_decides_as_batch_gnc_and_keeps_a_decision_that_still_holds() {
+    let (dirty, bad) = spiral_with_outliers(52, 3);
+    let candidates: Vec<bool> =
+        dirty.betweens.iter().map(|f| dirty.keys[f.from].abs_diff(dirty.keys[f.to]) != 1).collect();
+    let mut batch = dirty.clone();
+    let (_, batch_rejected) = optimize_robust(&mut batch, &LmParams::default(), RobustKernel::Gnc).unwrap();
+    // No previous decision: least squares fails the check, so full GNC runs — the batch answer.
+    let mut incremental = dirty.clone();
+    let (_, rejected) = optimize_gnc_incremental(&mut incremental, &LmParams::default(), &candidates, &[]).unwrap();
+    assert_eq!(rejected, batch_rejected);
+    assert!(bad.iter().all(|k| rejected.contains(k)), "an outlier was kept");
+    // The decision still holds at the solution: one least-squares solve keeps it and moves nothing.
+    let before = incremental.values.clone();
+    let (summary, again) =
+        optimize_gnc_incremental(&mut incremental, &LmParams::default(), &candidates, &rejected).unwrap();
+    assert_eq!(again, rejected);
+    assert!(summary.iterations <= 2, "{} linearisations", summary.iterations);
+    let moved = before
+        .iter()
+        .zip(&incremental.values)
+        .map(|(a, b)| (a.inverse() * b).translation.vector.norm())
+        .fold(0.0, f64::max);
+    assert!(moved < 1e-3, "{moved}");
+    // A stale decision (an inlier left out) is made again from scratch.
+    let inlier = (0..candidates.len()).find(|k| candidates[*k] && !rejected.contains(k)).unwrap();
+    let mut stale = rejected.clone();
+    stale.push(inlier);
+    let (_, redone) = optimize_gnc_incremental(&mut incremental, &LmParams::default(), &candidates, &stale).unwrap();
+    assert!(!redone.contains(&inlier));
+    assert!(bad.iter().all(|k| redone.contains(k)));
 }

@@ -278,6 +278,8 @@ pub async fn replay(
         world_objects: Vec::new(),
         restarts: Vec::new(),
         final_keyframes: maps.iter().map(|m| m.keyframes().map(|k| k.id).collect()).collect(),
+        false_factors: Vec::new(),
+        optimisers: team.optimiser_statuses().await?,
     };
     let timing = Timing::measure(wall, sim_s, decoding);
     Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing }, bags: bag_stats })

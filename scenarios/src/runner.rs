@@ -12,6 +12,7 @@ use crate::bag_out::{BagRecorder, RecordedFrame};
 use crate::report::{RobotTruth, RunRecord, TruthTrack};
 use crate::scenario::Scenario;
 use crate::sim::camera::{camera_from_body, camera_model, mislabels, noisy_labels, render};
+use crate::sim::false_factors::FalseFactors;
 use crate::sim::lidar::Lidar;
 use crate::sim::odometry::Odometry;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
@@ -73,6 +74,8 @@ pub async fn run_recording(
     let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
     let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&scenario.radio, seed, shared.clone(), &names)));
     let mut team = Team::new(names.clone(), radio);
+    let mut false_factors =
+        FalseFactors::new(&scenario.false_factors, seed, |name| names.iter().position(|n| n == name));
     let snapshots = SnapshotDir::for_run(scenario)?;
     if let Some(dir) = &snapshots {
         team.keep_snapshots(dir.path(), &scenario.persistence)?;
@@ -160,6 +163,13 @@ pub async fn run_recording(
         }
         simulation += sim_started.elapsed();
         team.settle(t).await;
+        if false_factors.due(t) {
+            let observation = team.observe(t).await?;
+            for (k, message) in false_factors.make(t, &observation, |k, s| robots.get(k)?.route.pose_at(s)) {
+                team.inject(k, message);
+            }
+            team.settle(t).await;
+        }
         team.snapshot_due(t).await?;
         if step % report_every == 0 || step == steps {
             observations.push(team.observe(t).await?);
@@ -173,6 +183,7 @@ pub async fn run_recording(
     }
 
     let maps = team.maps().await?;
+    let optimisers = team.optimiser_statuses().await?;
     let truths = robots
         .iter()
         .map(|robot| RobotTruth {
@@ -196,6 +207,8 @@ pub async fn run_recording(
         world_objects: world.objects.iter().map(|o| (o.label, o.centre)).collect(),
         restarts: team.restarts().to_vec(),
         final_keyframes: maps.iter().map(|m| m.keyframes().map(|k| k.id).collect()).collect(),
+        false_factors: false_factors.injected,
+        optimisers,
     };
     drop(snapshots);
     Ok(RunOutcome { record, world, maps, timing })

@@ -12,7 +12,8 @@ use sgm_actors::clock::Clock;
 use sgm_actors::comms::GetCommsStatus;
 use sgm_actors::config::{PersistenceConfig, RobotConfig};
 use sgm_actors::matcher::GetNeighbours;
-use sgm_actors::messages::{SensorFrame, Tick};
+use sgm_actors::messages::{InterRobotConstraints, SensorFrame, Tick};
+use sgm_actors::optimiser::{GetOptimiserStatus, OptimiserStatus};
 use sgm_actors::quiescence::until_quiet;
 use sgm_actors::snapshot::SnapshotStore;
 use sgm_actors::supervisor::{start_robot_restored, RobotHandle};
@@ -278,6 +279,26 @@ impl Team {
             observation.maps.push(Some((map, neighbours, comms)));
         }
         Ok(observation)
+    }
+
+    /// Hands robot `k`'s Optimiser inter-robot constraints that did not come from its Matcher
+    /// (fault injection).
+    pub fn inject(&self, k: usize, message: InterRobotConstraints) {
+        if let Some(handle) = self.members.get(k).and_then(|m| m.handle.as_ref()) {
+            handle.optimiser.do_send(message);
+        }
+    }
+
+    /// Each robot's pose graph at a glance (`None`: not running).
+    pub async fn optimiser_statuses(&self) -> Result<Vec<Option<OptimiserStatus>>, RunError> {
+        let mut out = Vec::new();
+        for member in &self.members {
+            out.push(match &member.handle {
+                Some(handle) => Some(handle.optimiser.send(GetOptimiserStatus).await.map_err(mailbox)?),
+                None => None,
+            });
+        }
+        Ok(out)
     }
 
     /// Each robot's final map (empty if it never started).

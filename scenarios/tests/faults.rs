@@ -1,7 +1,8 @@
 //! Fault scenarios of `library/faults/` end to end: the team converges (every robot aligned
 //! with every other), and the report's ledger shows that nothing was lost — every robot holds
 //! every other's latest ObjectData, no keyframe request is left pending, and a robot that
-//! crashed and came back from its snapshot still holds every keyframe of that snapshot. The
+//! crashed and came back from its snapshot still holds every keyframe of that snapshot; and
+//! the back end rejects every false inter-robot factor injected and the team ATE holds. The
 //! other fault scenarios (30 % and 60 % loss, duplication and reordering, late join) are run
 //! with `sgm run faults/NAME`; their figures are in the book's scenario chapter.
 
@@ -66,4 +67,25 @@ fn a_robot_restarts_from_its_snapshot_with_nothing_lost() {
     assert!(restart.objects_in_snapshot > 0);
     let bravo = report.robots.iter().find(|r| r.name == "bravo").unwrap();
     assert!(bravo.keyframes > restart.keyframes_in_snapshot, "bravo went on mapping after the restart");
+}
+
+#[test]
+fn false_inter_robot_factors_are_rejected_and_team_ate_holds() {
+    let clean = run_fault("clean");
+    let load = || Scenario::load_with_env("faults/false_factors", "SGM_FAULTS_TEST").unwrap();
+    let attacked = compute(&actix_rt::System::new().block_on(run(&load(), None)).unwrap().record);
+    let mut plain = load();
+    plain.optimiser.reject_outliers = false;
+    let plain = compute(&actix_rt::System::new().block_on(run(&plain, None)).unwrap().record);
+
+    assert_eq!(clean.back_end.rejected_factors, 0, "a correct factor was rejected: {:?}", clean.back_end);
+    let b = &attacked.back_end;
+    assert_eq!((b.false_factors_injected, b.false_factors_rejected), (15, 15), "{b:?}");
+    assert!(b.rejected_factors <= b.false_factors_rejected + 2, "{b:?}");
+    let (clean_ate, attacked_ate, plain_ate) =
+        (clean.team_ate_rmse_m.unwrap(), attacked.team_ate_rmse_m.unwrap(), plain.team_ate_rmse_m.unwrap());
+    assert!(attacked_ate <= 1.1 * clean_ate, "team ATE {attacked_ate} m against {clean_ate} m clean");
+    // The factors are harmful: least squares without outlier rejection is far off.
+    assert!(plain_ate > 5.0 * clean_ate, "least squares reached {plain_ate} m against {clean_ate} m clean");
+    assert_eq!(plain.back_end.false_factors_rejected, 0);
 }

@@ -11,7 +11,7 @@ use serde_json::Value;
 use sgm_actors::config::RobotConfig;
 use sgm_bridge::config::RosConfig;
 use sgm_bridge::node::NodeConfig;
-use sgm_scenarios::scenario::{RobotSpec, Scenario};
+use sgm_scenarios::scenario::{FalseFactorSpec, RobotSpec, Scenario};
 use std::collections::BTreeMap;
 
 const CONFIGURATION: &str = include_str!("../../book/src/configuration.md");
@@ -122,6 +122,7 @@ fn book_scenario_reference() {
         flatten(section, &scenario[section], &mut defaults);
     }
     flatten("robots[]", &serde_json::to_value(RobotSpec::default()).unwrap(), &mut defaults);
+    flatten("false_factors[]", &serde_json::to_value(FalseFactorSpec::default()).unwrap(), &mut defaults);
     assert!(defaults.len() > 30, "{} keys", defaults.len());
     let reference = SCENARIOS.split("## Scenario file reference").nth(1).unwrap_or("");
     check_reference("scenarios.md", &rows(reference), &defaults);

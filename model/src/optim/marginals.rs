@@ -7,7 +7,7 @@
 
 use super::graph::PoseGraph;
 use super::manifold::Manifold;
-use super::solver::{assemble, least_squares, SolveError, Structure};
+use super::solver::{assemble, least_squares, Kernel, SolveError, Structure};
 use faer::linalg::solvers::SolveCore;
 use faer::sparse::linalg::solvers::Llt;
 use faer::sparse::SparseColMatRef;
@@ -21,8 +21,19 @@ pub fn marginal_covariances<G: Manifold<D>, const D: usize>(
     structure: &Structure<D>,
     variables: &[usize],
 ) -> Result<Vec<SMatrix<f64, D, D>>, SolveError> {
+    marginal_covariances_with(graph, structure, variables, &least_squares)
+}
+
+/// As [`marginal_covariances`], each between factor's information scaled by its kernel weight
+/// (a factor that robust estimation rejected, weight 0, adds none).
+pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
+    graph: &PoseGraph<G, D>,
+    structure: &Structure<D>,
+    variables: &[usize],
+    kernel: Kernel,
+) -> Result<Vec<SMatrix<f64, D, D>>, SolveError> {
     let (mut h, mut g) = (Vec::new(), Vec::new());
-    assemble(graph, &graph.values, structure, &least_squares, &mut h, &mut g);
+    assemble(graph, &graph.values, structure, kernel, &mut h, &mut g);
     let matrix = SparseColMatRef::new(structure.symbolic_matrix().as_ref(), &h);
     let llt = Llt::try_new_with_symbolic(structure.symbolic_llt().clone(), matrix, Side::Upper)
         .map_err(|_| SolveError::Singular)?;

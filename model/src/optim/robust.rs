@@ -83,8 +83,58 @@ pub fn optimize_robust<G: Manifold<D>, const D: usize>(
             let cauchy = move |_: usize, s: f64| (0.5 * k2 * (s / k2).ln_1p(), 1.0 / (1.0 + s / k2));
             Ok((optimize_with(graph, params, &structure, &cauchy)?, Vec::new()))
         }
-        RobustKernel::Gnc => gnc_tls(graph, params, &structure, k2),
+        RobustKernel::Gnc => {
+            let candidates: Vec<bool> = (0..graph.betweens.len()).map(|k| is_loop_closure(graph, k)).collect();
+            gnc_tls(graph, params, &structure, k2, &candidates)
+        }
     }
+}
+
+/// Squared whitened residual of every between factor at the graph's values.
+fn squared_residuals<G: Manifold<D>, const D: usize>(graph: &PoseGraph<G, D>) -> Vec<f64> {
+    graph.betweens.iter().map(|f| f.whitened_error(&graph.values[f.from], &graph.values[f.to]).norm_squared()).collect()
+}
+
+/// GNC-TLS for a graph that grows and is solved again and again (a robot's Optimiser).
+/// `candidates[k]`: between factor k may be rejected (loop closures, inter-robot factors);
+/// `previous`: the candidates the last solve rejected.
+///
+/// First, least squares with `previous` left out, warm-started from the current values. If then
+/// every kept candidate is an inlier (s ≤ c̄²) and every left-out one still an outlier
+/// (s > c̄²), the binary weights are a fixed point of GNC's update at any μ, i.e. the TLS
+/// decision stands, and that solve is the answer: one solve, the usual case. Otherwise the
+/// values go back to where they were and full GNC runs from them. (Also requiring every new
+/// factor's innovation to be an inlier before the solve was tried: on `faults/clean` it sent a
+/// correct drift-correcting loop closure to GNC, which rejected it, and caught no more false
+/// factors on `faults/false_factors`.)
+pub fn optimize_gnc_incremental<G: Manifold<D>, const D: usize>(
+    graph: &mut PoseGraph<G, D>,
+    params: &LmParams,
+    candidates: &[bool],
+    previous: &[usize],
+) -> Result<(Summary, Vec<usize>), SolveError> {
+    let structure = Structure::new(graph)?;
+    let c2 = chi2_99(D);
+    let candidate = |k: usize| candidates.get(k).copied().unwrap_or(false);
+    let mut weights = vec![1.0; graph.betweens.len()];
+    for &k in previous.iter().filter(|k| candidate(**k)) {
+        weights[k] = 0.0;
+    }
+    let start = graph.values.clone();
+    let weighted = |k: usize, s: f64| (weights[k] * 0.5 * s, weights[k]);
+    let summary = optimize_with(graph, params, &structure, &weighted)?;
+    let stands = squared_residuals(graph)
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| candidate(*k))
+        .all(|(k, s)| (weights[k] == 1.0) == (*s <= c2));
+    if stands {
+        let rejected = (0..weights.len()).filter(|k| weights[*k] == 0.0).collect();
+        return Ok((summary, rejected));
+    }
+    graph.values = start;
+    let mask: Vec<bool> = (0..graph.betweens.len()).map(candidate).collect();
+    gnc_tls(graph, params, &structure, c2, &mask)
 }
 
 fn gnc_tls<G: Manifold<D>, const D: usize>(
@@ -92,8 +142,8 @@ fn gnc_tls<G: Manifold<D>, const D: usize>(
     params: &LmParams,
     structure: &Structure<D>,
     c2: f64,
+    candidates: &[bool],
 ) -> Result<(Summary, Vec<usize>), SolveError> {
-    let candidates: Vec<bool> = (0..graph.betweens.len()).map(|k| is_loop_closure(graph, k)).collect();
     let tls = |weights: &[f64]| {
         let w = weights.to_vec();
         move |k: usize, s: f64| (w[k] * 0.5 * s, w[k])
@@ -101,15 +151,9 @@ fn gnc_tls<G: Manifold<D>, const D: usize>(
     let initial_error = cost_at(graph, &graph.values, &super::solver::least_squares);
     let initial_values = graph.values.clone();
     let mut weights = vec![1.0; graph.betweens.len()];
-    let squared = |graph: &PoseGraph<G, D>| -> Vec<f64> {
-        graph
-            .betweens
-            .iter()
-            .map(|f| f.whitened_error(&graph.values[f.from], &graph.values[f.to]).norm_squared())
-            .collect()
-    };
     // μ₀ from the largest candidate residual at the initial values (as GTSAM's GncOptimizer).
-    let max_s = squared(graph).iter().zip(&candidates).filter(|(_, c)| **c).map(|(s, _)| *s).fold(0.0, f64::max);
+    let max_s =
+        squared_residuals(graph).iter().zip(candidates).filter(|(_, c)| **c).map(|(s, _)| *s).fold(0.0, f64::max);
     let mut iterations = optimize_with(graph, params, structure, &tls(&weights))?.iterations;
     let mut converged = true;
     if max_s > c2 {
@@ -118,7 +162,7 @@ fn gnc_tls<G: Manifold<D>, const D: usize>(
         let c = c2.sqrt();
         for _ in 0..GNC_MAX_STEPS {
             // Weights from the current estimate ...
-            for (k, s) in squared(graph).iter().enumerate() {
+            for (k, s) in squared_residuals(graph).iter().enumerate() {
                 if !candidates[k] {
                     continue;
                 }

@@ -144,6 +144,20 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<Point3<f64>>, CodecError> {
     decode_at_most(bytes, MAX_POINTS)
 }
 
+/// The point count a cloud's header declares, read without decompressing anything (0 for an
+/// empty stream, which stands for "no stored points"); `None` when the header is unreadable.
+/// [`decode_at_most`] refuses a stream whose content does not match it.
+pub fn declared_points(bytes: &[u8]) -> Option<u64> {
+    if bytes.is_empty() {
+        return Some(0);
+    }
+    let mut at = 9;
+    for _ in 0..3 {
+        get_i64(bytes, &mut at)?;
+    }
+    get_u64(bytes, &mut at)
+}
+
 /// Decodes a cloud of at most `max_points` points (checked before anything is allocated or
 /// decompressed: a radio payload cannot make us allocate more).
 pub fn decode_at_most(bytes: &[u8], max_points: usize) -> Result<Vec<Point3<f64>>, CodecError> {

@@ -7,9 +7,15 @@
 //!
 //! [`open`] checks, in this order and before any allocation that depends on the content: total
 //! size within [`WireLimits::max_envelope_bytes`], the MAC, the protocol version, the postcard
-//! decoding (no trailing bytes), then per-message limits (objects per message, ids per request).
+//! decoding (no trailing bytes), then per-message limits (objects per message, ids per request,
+//! keyframes per object cloud, points declared by the clouds of one message, descriptor cells
+//! that fill their shape). While decoding, a list's declared length reserves at most 1 MiB
+//! (serde's cautious size hint) and the list grows only by elements actually read, and a byte
+//! string is taken from the input only if it is all there: what postcard allocates is bounded
+//! by the envelope's size bound.
 //! Replay rejection needs per-sender state: [`super::ReplayWindow`], applied by the receiver.
 
+use super::cloud_codec::declared_points;
 use super::messages::{Message, MessageKind};
 use super::team_key::TeamKey;
 use crate::scene_graph::RobotId;
@@ -135,10 +141,54 @@ fn check_limits(message: &Message, limits: &WireLimits) -> Result<(), WireError>
     if count > max {
         return Err(WireError::Limit { kind, what, count, max });
     }
-    if let Message::ObjectData(m) = message {
-        if m.resolution_mm == 0 {
+    // Inside the message: lists within its parts, and the clouds' declared point counts (the
+    // decoder allocates by them; it refuses a stream that does not hold what it declares).
+    let points = |cloud: &[u8]| declared_points(cloud).ok_or(WireError::Malformed(format!("{kind:?}: cloud header")));
+    let cloud_limit = |total: u64| {
+        if total > limits.max_cloud_points as u64 {
+            return Err(WireError::Limit {
+                kind,
+                what: "cloud points",
+                count: total as usize,
+                max: limits.max_cloud_points,
+            });
+        }
+        Ok(())
+    };
+    match message {
+        Message::ObjectData(m) if m.resolution_mm == 0 => {
             return Err(WireError::Malformed("ObjectData resolution of 0 mm".into()));
         }
+        Message::ObjectCloudResponse(m) => {
+            let mut total = 0u64;
+            for object in &m.objects {
+                if object.keyframes.len() > limits.max_ids {
+                    return Err(WireError::Limit {
+                        kind,
+                        what: "keyframes of an object",
+                        count: object.keyframes.len(),
+                        max: limits.max_ids,
+                    });
+                }
+                total = total.saturating_add(points(&object.cloud)?);
+            }
+            cloud_limit(total)?;
+        }
+        Message::KeyframeResponse(m) => cloud_limit(points(&m.cloud)?)?,
+        Message::KeyframeDescriptors(m) => {
+            if let Some(d) =
+                m.descriptors.iter().find(|d| d.cells.len() != usize::from(d.rings) * usize::from(d.sectors))
+            {
+                return Err(WireError::Malformed(format!(
+                    "descriptor of keyframe {}: {} cells for {} × {}",
+                    d.keyframe.0,
+                    d.cells.len(),
+                    d.rings,
+                    d.sectors
+                )));
+            }
+        }
+        _ => {}
     }
     Ok(())
 }
@@ -226,5 +276,63 @@ mod tests {
         // Too many objects for the receiver.
         let few = WireLimits { max_objects: 3, ..limits };
         assert!(matches!(open(&bytes, &key(), &few), Err(WireError::Limit { count: 5, max: 3, .. })));
+    }
+
+    fn envelope_of(message: Message) -> Envelope {
+        Envelope { version: PROTOCOL_VERSION, from: RobotId(2), to: Destination::Broadcast, sequence: 9, message }
+    }
+
+    #[test]
+    fn refuses_oversized_parts_inside_a_message() {
+        use crate::wire::cloud_codec::encode;
+        use crate::wire::messages::{KeyframeDescriptors, ObjectCloud, ObjectCloudResponse, WireDescriptor};
+        let strict = WireLimits { max_ids: 8, max_cloud_points: 150, ..WireLimits::default() };
+        let cloud =
+            |n: usize| encode(&(0..n).map(|k| Point3::new(k as f64, 0.0, 0.0)).collect::<Vec<_>>(), 0.1).unwrap().bytes;
+        let response = |keyframes: usize, clouds: &[usize]| {
+            envelope_of(Message::ObjectCloudResponse(ObjectCloudResponse {
+                objects: clouds
+                    .iter()
+                    .enumerate()
+                    .map(|(k, n)| ObjectCloud {
+                        id: ObjectId(k as u32),
+                        keyframes: (0..keyframes as u32).map(KeyframeId).collect(),
+                        cloud: cloud(*n),
+                    })
+                    .collect(),
+            }))
+        };
+        // Sealed as a foreign sender with the team key would, without the sender's own checks.
+        let open_strict = |e: &Envelope| {
+            let mut bytes = postcard::to_stdvec(e).unwrap();
+            bytes.extend_from_slice(&key().mac(&bytes));
+            open(&bytes, &key(), &strict)
+        };
+        // Within the limits: 8 keyframes per object, 100 + 50 points in all.
+        assert!(open_strict(&response(8, &[100, 50])).is_ok());
+        let e = open_strict(&response(9, &[10])).unwrap_err();
+        assert!(matches!(e, WireError::Limit { what: "keyframes of an object", count: 9, max: 8, .. }), "{e}");
+        // Each cloud is within the limit, together they are not.
+        let e = open_strict(&response(1, &[100, 51])).unwrap_err();
+        assert!(matches!(e, WireError::Limit { what: "cloud points", count: 151, max: 150, .. }), "{e}");
+        // A cloud header that cannot be read.
+        let mut bad = response(1, &[10]);
+        if let Message::ObjectCloudResponse(r) = &mut bad.message {
+            r.objects[0].cloud.truncate(12);
+        }
+        assert!(matches!(open_strict(&bad), Err(WireError::Malformed(_))));
+        // A descriptor whose cells do not fill rings × sectors.
+        let descriptor = WireDescriptor {
+            keyframe: KeyframeId(4),
+            world_from_body: (&crate::geometry::Pose3::identity()).into(),
+            rings: 20,
+            sectors: 60,
+            cells: vec![0; 1199],
+        };
+        let e = open_strict(&envelope_of(Message::KeyframeDescriptors(KeyframeDescriptors {
+            descriptors: vec![descriptor],
+        })))
+        .unwrap_err();
+        assert!(e.to_string().contains("1199 cells for 20 × 60"), "{e}");
     }
 }

@@ -108,6 +108,8 @@ pub struct Report {
     pub series: Vec<SeriesPoint>,
     /// What every robot holds of every other, and what survived each crash.
     pub ledger: super::ledger::Ledger,
+    /// Outliers the back end rejected, and the false factors among them.
+    pub back_end: super::back_end::BackEndReport,
 }
 
 fn row(stats: &sgm_model::wire::TrafficStats) -> MessageRow {
@@ -368,5 +370,6 @@ pub fn compute(record: &RunRecord) -> Report {
         world_objects: record.world_objects.len(),
         series,
         ledger: super::ledger::compute(record, &last),
+        back_end: super::back_end::compute(record),
     }
 }

@@ -126,6 +126,20 @@ pub fn render(report: &Report, timing: &Timing) -> String {
          {} dropped on a full queue.\n",
         r.delivered, r.duplicated, r.lost, r.out_of_range, r.partitioned, r.queue_full
     );
+    let b = &report.back_end;
+    let _ = write!(
+        s,
+        "Back end: {} loop closures and inter-robot factors, {} rejected as outliers.",
+        b.candidate_factors, b.rejected_factors
+    );
+    if b.false_factors_injected > 0 {
+        let _ = write!(
+            s,
+            " {} false factors injected, {} of them rejected.",
+            b.false_factors_injected, b.false_factors_rejected
+        );
+    }
+    let _ = writeln!(s, "\n");
     accounting(&mut s, &report.ledger);
     let _ = writeln!(
         s,

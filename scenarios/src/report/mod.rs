@@ -2,6 +2,7 @@
 //! deterministic: nothing in it depends on the machine's speed) and written as `report.json`,
 //! `report.md`, TUM trajectories, PNG plots and the merged semantic map.
 
+pub mod back_end;
 mod figures;
 pub mod ledger;
 mod map_cloud;
@@ -56,6 +57,10 @@ pub struct RunRecord {
     pub restarts: Vec<crate::team::Restart>,
     /// Each robot's keyframe ids at the end (to show that no restored keyframe was lost).
     pub final_keyframes: Vec<std::collections::BTreeSet<sgm_model::scene_graph::KeyframeId>>,
+    /// False inter-robot factors injected (`[[false_factors]]`).
+    pub false_factors: Vec<crate::sim::false_factors::InjectedFactor>,
+    /// Each robot's pose graph at the end (`None`: not running).
+    pub optimisers: Vec<Option<sgm_actors::optimiser::OptimiserStatus>>,
 }
 
 #[derive(Debug, thiserror::Error)]

@@ -13,6 +13,7 @@ const LIBRARY: &[(&str, &str)] = &[
     ("faults/partition", include_str!("../../library/faults/partition.toml")),
     ("faults/late_join", include_str!("../../library/faults/late_join.toml")),
     ("faults/crash_restart", include_str!("../../library/faults/crash_restart.toml")),
+    ("faults/false_factors", include_str!("../../library/faults/false_factors.toml")),
 ];
 
 /// The TOML text of a library scenario.

@@ -49,6 +49,8 @@ pub struct Scenario {
     pub persistence: PersistenceConfig,
     /// Topics and frames of the bags `sgm run --bag-out` writes and `sgm replay` reads.
     pub ros: sgm_bridge::config::RosConfig,
+    /// Wrong inter-robot factors injected into robots' Optimisers (`sim::false_factors`).
+    pub false_factors: Vec<FalseFactorSpec>,
 }
 
 impl Default for Scenario {
@@ -69,6 +71,7 @@ impl Default for Scenario {
             comms: robot.comms,
             persistence: robot.persistence,
             ros: sgm_bridge::config::RosConfig::default(),
+            false_factors: Vec::new(),
         }
     }
 }
@@ -297,6 +300,39 @@ pub struct PartitionSpec {
     pub end_s: f64,
     /// The robots (names) on one side; every other robot is on the other.
     pub robots: Vec<String>,
+}
+
+/// `count` false inter-robot factors handed to `robot`'s Optimiser at `at_s` (or as soon after
+/// as it has aligned `neighbour`), each tying one of its keyframes to one of `neighbour`'s with
+/// a measurement `translation_m` and `rotation_deg` wrong.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FalseFactorSpec {
+    /// The robot (name) whose Optimiser receives them.
+    pub robot: String,
+    /// The neighbour (name) whose keyframes they claim to tie to.
+    pub neighbour: String,
+    /// When, s.
+    pub at_s: f64,
+    /// How many (≥ 1).
+    pub count: usize,
+    /// Translation error of each, m. Default 5.
+    pub translation_m: f64,
+    /// Rotation error of each, degrees. Default 30.
+    pub rotation_deg: f64,
+}
+
+impl Default for FalseFactorSpec {
+    fn default() -> Self {
+        Self {
+            robot: String::new(),
+            neighbour: String::new(),
+            at_s: 0.0,
+            count: 0,
+            translation_m: 5.0,
+            rotation_deg: 30.0,
+        }
+    }
 }
 
 /// A generated route: random waypoints in a rectangle.

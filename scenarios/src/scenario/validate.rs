@@ -126,6 +126,22 @@ impl Scenario {
             }
         }
 
+        let is_robot = |name: &str| (0..self.robots.len()).any(|j| self.robot_name(j) == name);
+        for (k, f) in self.false_factors.iter().enumerate() {
+            let key = |field: &str| format!("false_factors[{k}].{field}");
+            check(is_robot(&f.robot), key("robot"), format!("{:?}", f.robot), "a robot of this scenario")?;
+            check(
+                is_robot(&f.neighbour) && f.neighbour != f.robot,
+                key("neighbour"),
+                format!("{:?}", f.neighbour),
+                "another robot of this scenario",
+            )?;
+            check(within(f.at_s, 0.0, s.duration_s), key("at_s"), f.at_s, "0 ≤ x ≤ scenario.duration_s")?;
+            check((1..=10_000).contains(&f.count), key("count"), f.count, "1 ≤ x ≤ 10000")?;
+            check(within(f.translation_m, 0.0, 1e4), key("translation_m"), f.translation_m, "0 ≤ x ≤ 1e4 m")?;
+            check(within(f.rotation_deg, 0.0, 180.0), key("rotation_deg"), f.rotation_deg, "0 ≤ x ≤ 180°")?;
+        }
+
         check(!self.robots.is_empty(), "robots", "[]", "at least one [[robots]] table")?;
         check(self.robots.len() <= 64, "robots", self.robots.len(), "at most 64 robots")?;
         for (k, robot) in self.robots.iter().enumerate() {

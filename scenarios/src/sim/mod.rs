@@ -2,6 +2,7 @@
 //! drifting odometry and the radio — everything a robot would get from hardware.
 
 pub mod camera;
+pub mod false_factors;
 pub mod lidar;
 pub mod odometry;
 pub mod radio;
