@@ -31,7 +31,13 @@ pub struct RosConfig {
     pub max_cloud_points: usize,
     /// Label images with more pixels are refused. Default 16 777 216 (4096²).
     pub max_image_pixels: usize,
+    /// Any received message longer than this is refused before it is decoded, bytes
+    /// (`bounded`). Default 134 217 728 (128 MiB).
+    pub max_message_bytes: usize,
 }
+
+/// Default of `ros.max_message_bytes`: 2 000 000 points of 64 bytes fit.
+pub const DEFAULT_MAX_MESSAGE_BYTES: usize = 128 << 20;
 
 impl Default for RosConfig {
     fn default() -> Self {
@@ -47,6 +53,7 @@ impl Default for RosConfig {
             map_voxel_m: 0.25,
             max_cloud_points: 2_000_000,
             max_image_pixels: 4096 * 4096,
+            max_message_bytes: DEFAULT_MAX_MESSAGE_BYTES,
         }
     }
 }
@@ -188,6 +195,12 @@ impl RosConfig {
         positive(self.map_voxel_m, "map_voxel_m")?;
         if self.queue_size == 0 || self.max_cloud_points == 0 || self.max_image_pixels == 0 {
             return Err(InputError::invalid("ros.queue_size, max_cloud_points and max_image_pixels must be ≥ 1"));
+        }
+        if self.max_message_bytes < 1024 {
+            return Err(InputError::invalid(format!(
+                "ros.max_message_bytes = {}: ≥ 1024 expected",
+                self.max_message_bytes
+            )));
         }
         let t = &self.topics;
         for (key, name) in [

@@ -3,6 +3,7 @@
 //! writing, and the rosrust node with its inter-robot transport.
 
 pub mod bag;
+pub mod bounded;
 pub mod config;
 pub mod convert;
 pub mod error;

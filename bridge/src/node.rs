@@ -8,6 +8,7 @@
 //! the same whether its sensors are live or a bag played at any rate. Handlers never read the
 //! wall clock; only the tick and publish loop waits on it.
 
+use crate::bounded::{Bounded, Layout};
 use crate::config::RosConfig;
 use crate::convert::cloud::cloud_msg;
 use crate::convert::markers::{keyframe_path, map_markers, neighbour_transforms};
@@ -139,7 +140,7 @@ impl SensorSide {
 }
 
 /// Subscribes `topic` (counted as `name`): each message is checked by `check` and received.
-fn subscribe<M: rosrust::Message>(
+fn subscribe<M: rosrust::Message + Layout>(
     topic: &str,
     queue: usize,
     side: &Arc<SensorSide>,
@@ -147,7 +148,8 @@ fn subscribe<M: rosrust::Message>(
     check: fn(&Inputs, &M) -> Result<Payload, InputError>,
 ) -> Result<rosrust::Subscriber, NodeError> {
     let side = side.clone();
-    rosrust::subscribe(topic, queue, move |m: M| side.receive(name, check(&side.inputs, &m))).map_err(ros_error)
+    rosrust::subscribe(topic, queue, move |m: Bounded<M>| side.receive(name, check(&side.inputs, &m.0)))
+        .map_err(ros_error)
 }
 
 /// Runs robot `config` as a ROS node until ROS shuts down (SIGINT, `rosnode kill`).
@@ -156,6 +158,7 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
     let id = config.robot.robot.id;
     rosrust::try_init(&format!("sgm_{robot_name}")).map_err(ros_error)?;
     let ros = config.ros.clone();
+    crate::bounded::set_max_message_bytes(ros.max_message_bytes);
     let classes = ClassTable::new(config.robot.fusion.classes.clone())
         .map_err(|e| NodeError::Ros(InputError::invalid(format!("fusion.classes: {e}"))))?;
     let camera_from_body = ros.camera_from_body().map_err(NodeError::Ros)?;
@@ -206,7 +209,8 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
         // Inter-robot traffic in: the team topic (others' broadcasts) and our Deliver service.
         let team_in = {
             let (comms, counts) = (comms.clone(), counts.clone());
-            rosrust::subscribe(&ros.topics.team, ros.queue_size.max(64), move |m: sgm_msgs::Envelope| {
+            rosrust::subscribe(&ros.topics.team, ros.queue_size.max(64), move |m: Bounded<sgm_msgs::Envelope>| {
+                let m = m.0;
                 if m.from_robot != id {
                     counts.received.fetch_add(1, Ordering::Relaxed);
                     comms.do_send(Delivered { bytes: m.data });
