@@ -60,13 +60,16 @@ struct Nodes {
 }
 
 impl Nodes {
-    fn start(master: SocketAddr, dir: &Path) -> Self {
-        let children = ROBOTS
+    /// Starts `robots`, each keeping its snapshots in `dir/snapshots` (and resuming from one
+    /// there); `run` tells the log files of successive starts apart.
+    fn start(master: SocketAddr, dir: &Path, robots: &[&str], run: u32) -> Self {
+        let children = robots
             .iter()
             .map(|robot| {
-                let log = dir.join(format!("{robot}.log"));
+                let log = dir.join(format!("{robot}.{run}.log"));
                 let child = Command::new(env!("CARGO_BIN_EXE_sgm"))
                     .args(["ros", "--robot", robot, "--scenario", "quickstart", &format!("__ns:=/{robot}")])
+                    .env("SGM__PERSISTENCE__DIRECTORY", dir.join("snapshots"))
                     .env("ROS_MASTER_URI", format!("http://{master}"))
                     .env("ROS_IP", "127.0.0.1")
                     .env("ROS_HOME", dir)
@@ -289,7 +292,7 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
     std::env::set_var("ROS_MASTER_URI", format!("http://{master}"));
     std::env::set_var("ROS_IP", "127.0.0.1");
     rosrust::try_init("sgm_node_test").expect("rosrust node");
-    let mut nodes = Nodes::start(master, dir.path());
+    let mut nodes = Nodes::start(master, dir.path(), &ROBOTS, 1);
 
     let mut feeds: BTreeMap<String, Feed> = BTreeMap::new();
     for (_, topic, _) in &messages {
@@ -406,5 +409,21 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
     }
     assert_eq!(log.matches("message refused").count(), 6, "{log}");
 
+    // Shut down (each writes its snapshot on SIGINT) and start alpha again: it resumes with
+    // its map and its alignment, before any new sensor input.
+    let before = statuses.of("alpha").unwrap();
     nodes.interrupt();
+    let snapshot = dir.path().join("snapshots/alpha.snapshot");
+    assert!(snapshot.is_file(), "no snapshot at {}", snapshot.display());
+    drop(statuses);
+    let mut again = Nodes::start(master, dir.path(), &["alpha"], 2);
+    let statuses = Statuses::subscribe(); // only what the new alpha publishes
+    let resumed = statuses.wait_for("alpha", 60, "the resumed status", |_| true);
+    assert!(again.running("alpha"));
+    assert!(again.log("alpha").contains("resuming"), "{}", again.log("alpha"));
+    for key in ["keyframes", "objects"] {
+        assert_eq!(resumed[key], before[key], "{key}: {resumed} after {before}");
+    }
+    assert!(Statuses::aligned(&resumed), "alpha forgot its alignment: {resumed}");
+    again.interrupt();
 }
