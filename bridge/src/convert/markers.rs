@@ -108,9 +108,12 @@ pub fn neighbour_transforms(
         .iter()
         .filter_map(|n| {
             let local_from_remote = n.local_from_remote?;
-            Some(geometry_msgs::TransformStamped {
+            let child_frame_id = frame_of(n.robot);
+            // A world frame without `{robot}` or `{id}` names every robot's world alike: a
+            // transform from it to itself would be a loop in the tf tree, so none is sent.
+            (child_frame_id != header.frame_id).then(|| geometry_msgs::TransformStamped {
                 header: header.clone(),
-                child_frame_id: frame_of(n.robot),
+                child_frame_id,
                 transform: transform_msg(&local_from_remote),
             })
         })
@@ -193,5 +196,23 @@ mod tests {
             (tf.transforms[0].child_frame_id.as_str(), tf.transforms[0].transform.translation.x),
             ("robot2/odom", 5.0)
         );
+    }
+
+    #[test]
+    fn no_transform_from_a_frame_to_itself() {
+        let header = std_msgs::Header { frame_id: "odom".into(), ..Default::default() };
+        let neighbour = |robot| NeighbourStatus {
+            robot: RobotId(robot),
+            state: "Aligned",
+            local_from_remote: Some(sgm_model::geometry::Pose3::identity()),
+            first_aligned: Some(1.0),
+            keyframes_held: 3,
+            objects_revision: Some(1),
+        };
+        let neighbours = [neighbour(2), neighbour(3)];
+        // The template lacks `{robot}`: every robot's world is "odom".
+        assert!(neighbour_transforms(&header, &neighbours, |_| "odom".into()).transforms.is_empty());
+        let named = neighbour_transforms(&header, &neighbours, |r| format!("robot_{}/odom", r.0));
+        assert_eq!(named.transforms.len(), 2);
     }
 }

@@ -1,0 +1,33 @@
+//! Inputs the wire fuzz target stopped on (`fuzz/regressions/wire_envelope/`), run again
+//! through what the target checks. The one kept so far is an authenticated KeyframeResponse
+//! whose covariance holds NaNs: it opens (the wire layer does not judge numbers), survives
+//! re-encoding byte for byte (the target's first version compared values, and NaN ≠ NaN), and
+//! its covariance does not unpack — Comms refuses the keyframe as malformed.
+
+use sgm_model::wire::messages::unpack_covariance;
+use sgm_model::wire::{open, Message, TeamKey, WireLimits};
+use std::path::Path;
+
+#[test]
+fn wire_fuzz_regressions_open_consistently() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions/wire_envelope");
+    let key = TeamKey::from_bytes([7; 32]);
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let mut sealed = std::fs::read(&path).unwrap();
+        let mac = key.mac(&sealed);
+        sealed.extend_from_slice(&mac);
+        let Ok(envelope) = open(&sealed, &key, &WireLimits::default()) else { continue };
+        seen += 1;
+        let again = postcard::to_stdvec(&envelope).unwrap();
+        let back: sgm_model::wire::Envelope = postcard::from_bytes(&again).unwrap();
+        assert_eq!(postcard::to_stdvec(&back).unwrap(), again, "{}", path.display());
+        if let Message::KeyframeResponse(r) = &envelope.message {
+            if r.covariance.iter().any(|v| !v.is_finite()) {
+                assert!(unpack_covariance(&r.covariance).is_none(), "{}", path.display());
+            }
+        }
+    }
+    assert!(seen >= 1, "the NaN-covariance response opens");
+}
