@@ -31,3 +31,25 @@ fn wire_fuzz_regressions_open_consistently() {
     }
     assert!(seen >= 1, "the NaN-covariance response opens");
 }
+
+/// Inputs the cloud codec target stopped on (`fuzz/regressions/cloud_codec/`). The one kept so
+/// far declares a resolution of 1.8 × 10³⁰⁷ m: each cell index times it was infinite, and the
+/// decoder returned infinite points. It is now refused.
+#[test]
+fn cloud_fuzz_regressions_never_decode_to_non_finite_points() {
+    use sgm_model::wire::cloud_codec::{declared_points, decode_at_most};
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions/cloud_codec");
+    let mut refused = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let bytes = std::fs::read(&path).unwrap();
+        match decode_at_most(&bytes, 100_000) {
+            Ok(points) => {
+                assert_eq!(Some(points.len() as u64), declared_points(&bytes), "{}", path.display());
+                assert!(points.iter().all(|p| p.coords.iter().all(|v| v.is_finite())), "{}", path.display());
+            }
+            Err(_) => refused += 1,
+        }
+    }
+    assert!(refused >= 1, "the infinite-coordinates cloud is refused");
+}

@@ -115,7 +115,8 @@ pub fn optimize_gnc_incremental<G: Manifold<D>, const D: usize>(
 ) -> Result<(Summary, Vec<usize>), SolveError> {
     let structure = Structure::new(graph)?;
     let c2 = chi2_99(D);
-    let candidate = |k: usize| candidates.get(k).copied().unwrap_or(false);
+    let n = graph.betweens.len();
+    let candidate = |k: usize| k < n && candidates.get(k).copied().unwrap_or(false);
     let mut weights = vec![1.0; graph.betweens.len()];
     for &k in previous.iter().filter(|k| candidate(**k)) {
         weights[k] = 0.0;

@@ -197,11 +197,16 @@ pub fn decode_at_most(bytes: &[u8], max_points: usize) -> Result<Vec<Point3<f64>
         let delta = get_u64(&stream, &mut k).ok_or(CodecError::Corrupt("delta stream"))?;
         m = m.checked_add(delta).ok_or(CodecError::Corrupt("delta overflow"))?;
         let q = unmorton(m);
-        points.push(Point3::new(
+        let p = Point3::new(
             (q[0] as i64 + min[0]) as f64 * r,
             (q[1] as i64 + min[1]) as f64 * r,
             (q[2] as i64 + min[2]) as f64 * r,
-        ));
+        );
+        // A huge resolution times a cell index overflows to infinity (found by fuzzing).
+        if !p.coords.iter().all(|v| v.is_finite()) {
+            return Err(CodecError::Corrupt("coordinates beyond the finite range"));
+        }
+        points.push(p);
     }
     if k != stream.len() {
         return Err(CodecError::Corrupt("trailing bytes"));
