@@ -53,3 +53,20 @@ fn cloud_fuzz_regressions_never_decode_to_non_finite_points() {
     }
     assert!(refused >= 1, "the infinite-coordinates cloud is refused");
 }
+
+/// Inputs the PCD target stopped on (`fuzz/regressions/pcd/`): a COUNT of 1 999 999 998 made
+/// the reader reserve a column per value (48 GB) before reading any; and, made by hand after
+/// it, a 125-byte binary_compressed file declaring 200 million points, whose LZF output
+/// (2.4 GB) was reserved before decompressing. Both are now refused by their headers.
+#[test]
+fn pcd_fuzz_regressions_are_refused_before_allocating() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions/pcd");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let e = sgm_model::pcd::read_pcd(&std::fs::read(&path).unwrap()).unwrap_err().to_string();
+        assert!(e.contains("at most"), "{}: {e}", path.display());
+        seen += 1;
+    }
+    assert_eq!(seen, 2);
+}

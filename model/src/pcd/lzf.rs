@@ -18,10 +18,19 @@ pub enum LzfError {
     TooLong(usize),
     #[error("output is {got} bytes, the header declared {expected}")]
     WrongLength { got: usize, expected: usize },
+    #[error("{input} compressed bytes cannot hold {expected} bytes (at most {MAX_EXPANSION}× each)")]
+    Expansion { input: usize, expected: usize },
 }
+
+/// Most output bytes per input byte: a 3-byte back reference yields at most 7 + 255 + 2 = 264.
+pub const MAX_EXPANSION: usize = 88;
 
 /// Decompresses `input` into exactly `expected_len` bytes.
 pub fn decompress(input: &[u8], expected_len: usize) -> Result<Vec<u8>, LzfError> {
+    // Checked before allocating: a short file cannot make us reserve a declared gigabyte.
+    if expected_len > input.len().saturating_mul(MAX_EXPANSION) {
+        return Err(LzfError::Expansion { input: input.len(), expected: expected_len });
+    }
     let mut out = Vec::with_capacity(expected_len);
     let mut ip = 0;
     while ip < input.len() {

@@ -61,6 +61,9 @@ pub enum PcdError {
 
 /// Largest number of points read (bounds memory).
 pub const MAX_POINTS: usize = 200_000_000;
+/// Most values per point, all fields' COUNTs together (PCL's largest descriptor, SHOT with
+/// colour, has 1 344).
+pub const MAX_VALUES_PER_POINT: usize = 4096;
 
 fn header_error(line: usize, message: impl Into<String>) -> PcdError {
     PcdError::Header { line, message: message.into() }
@@ -204,6 +207,13 @@ fn parse_header(bytes: &[u8]) -> Result<Header, PcdError> {
                             kinds.len(),
                             counts.len()
                         ),
+                    ));
+                }
+                let values: usize = counts.iter().fold(0usize, |a, c| a.saturating_add(*c));
+                if values > MAX_VALUES_PER_POINT {
+                    return Err(header_error(
+                        line,
+                        format!("COUNT totals {values} values per point, at most {MAX_VALUES_PER_POINT} accepted"),
                     ));
                 }
                 let mut fields = Vec::with_capacity(names.len());
