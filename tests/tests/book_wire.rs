@@ -28,7 +28,6 @@ use std::collections::BTreeSet;
 
 const WIRE: &str = include_str!("../../book/src/wire.md");
 const COMMS_SOURCE: &str = include_str!("../../actors/src/comms.rs");
-const MATCHER_SOURCE: &str = include_str!("../../actors/src/matcher.rs");
 const ROS_TRANSPORT_SOURCE: &str = include_str!("../../bridge/src/transport.rs");
 
 /// The key of the chapter's examples: bytes 0x00, 0x01, …, 0x1f.
@@ -318,9 +317,6 @@ fn code_value(name: &str) -> Option<f64> {
         "SIZE_STEP_M" => SIZE_STEP_M,
         // An f32: its shortest decimal form, as written.
         "DESCRIPTOR_HEIGHT_STEP_M" => DESCRIPTOR_HEIGHT_STEP_M.to_string().parse().ok()?,
-        "Matcher::on_object_clouds" => {
-            number_after(MATCHER_SOURCE, "decode_at_most(&cloud.cloud, ", "actors/src/matcher.rs")
-        }
         "Comms::receive" => {
             number_after(COMMS_SOURCE, "self.config.limits.max_ids * ", "actors/src/comms.rs") * limits.max_ids as f64
         }
@@ -336,7 +332,7 @@ fn code_value(name: &str) -> Option<f64> {
     })
 }
 
-const LIMIT_NAMES: [&str; 24] = [
+const LIMIT_NAMES: [&str; 23] = [
     "PROTOCOL_VERSION",
     "MAC_BYTES",
     "WireLimits::max_envelope_bytes",
@@ -351,7 +347,6 @@ const LIMIT_NAMES: [&str; 24] = [
     "TeamKey::from_passphrase",
     "SIZE_STEP_M",
     "DESCRIPTOR_HEIGHT_STEP_M",
-    "Matcher::on_object_clouds",
     "Comms::receive",
     "SEND_QUEUE",
     "CommsConfig::max_keyframes_in_flight",
