@@ -20,7 +20,7 @@ use sgm_model::geometry::Pose3;
 use sgm_model::optim::factors::{Between, Prior};
 use sgm_model::optim::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
 use sgm_model::optim::marginals::marginal_covariances_with;
-use sgm_model::optim::robust::optimize_gnc_incremental;
+use sgm_model::optim::robust::{optimize_gnc_incremental, rejection_weights, weighted};
 use sgm_model::optim::solver::{optimize, LmParams, SolveError, Structure};
 use sgm_model::scene_graph::{KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, RobotId};
 use std::collections::BTreeMap;
@@ -179,11 +179,7 @@ impl Optimiser {
             tracing::info!(robot = %self.robot, rejected = rejected.len(), candidates = self.candidates.iter().filter(|c| **c).count(), "outlier factors");
         }
         self.rejected = rejected;
-        let mut weights = vec![1.0; self.graph.betweens.len()];
-        for &k in &self.rejected {
-            weights[k] = 0.0;
-        }
-        let weighted = |k: usize, s: f64| (weights[k] * 0.5 * s, weights[k]);
+        let weights = rejection_weights(self.graph.betweens.len(), &self.rejected);
         let local: Vec<(KeyframeId, usize)> = self
             .index
             .iter()
@@ -194,7 +190,7 @@ impl Optimiser {
         let covariances = Structure::new(&self.graph)
             .and_then(|s| {
                 let variables: Vec<usize> = latest.iter().map(|(_, i)| *i).collect();
-                marginal_covariances_with(&self.graph, &s, &variables, &weighted)
+                marginal_covariances_with(&self.graph, &s, &variables, &weighted(&weights))
             })
             .map(|c| latest.iter().map(|(k, _)| *k).zip(c).collect())
             .unwrap_or_default();
@@ -273,26 +269,14 @@ impl Handler<InterRobotConstraints> for Optimiser {
 impl Handler<GetOptimiserStatus> for Optimiser {
     type Result = actix::MessageResult<GetOptimiserStatus>;
     fn handle(&mut self, _: GetOptimiserStatus, _: &mut Context<Self>) -> Self::Result {
-        let remote: BTreeMap<usize, (RobotId, KeyframeId)> = self
-            .index
-            .iter()
-            .filter_map(|(r, i)| match r {
-                KeyframeRef::Remote { robot, keyframe } => Some((*i, (*robot, *keyframe))),
-                KeyframeRef::Local(_) => None,
-            })
-            .collect();
-        let local: BTreeMap<usize, KeyframeId> = self
-            .index
-            .iter()
-            .filter_map(|(r, i)| if let KeyframeRef::Local(k) = r { Some((*i, *k)) } else { None })
-            .collect();
+        let keyframe_of: BTreeMap<usize, KeyframeRef> = self.index.iter().map(|(r, i)| (*i, *r)).collect();
         let rejected_inter_robot = self
             .rejected
             .iter()
             .filter_map(|k| self.graph.betweens.get(*k))
-            .filter_map(|b| {
-                let (robot, theirs) = remote.get(&b.to)?;
-                Some((*robot, *local.get(&b.from)?, *theirs))
+            .filter_map(|b| match (keyframe_of.get(&b.from)?, keyframe_of.get(&b.to)?) {
+                (KeyframeRef::Local(ours), KeyframeRef::Remote { robot, keyframe }) => Some((*robot, *ours, *keyframe)),
+                _ => None,
             })
             .collect();
         actix::MessageResult(OptimiserStatus {

@@ -56,10 +56,15 @@ pub enum SnapshotError {
 /// Frames `value` as a snapshot of `kind`.
 pub fn encode<T: Serialize>(kind: u32, value: &T) -> Result<Vec<u8>, SnapshotError> {
     let plain = postcard::to_allocvec(value).map_err(|e| SnapshotError::Encode(e.to_string()))?;
+    frame(kind, &plain)
+}
+
+/// Frames an already encoded payload `plain` (postcard bytes) as a snapshot of `kind`.
+pub fn frame(kind: u32, plain: &[u8]) -> Result<Vec<u8>, SnapshotError> {
     if u32::try_from(plain.len()).is_err() {
         return Err(SnapshotError::Encode(format!("{} bytes: more than 4 GiB", plain.len())));
     }
-    let payload = lz4_flex::compress_prepend_size(&plain);
+    let payload = lz4_flex::compress_prepend_size(plain);
     let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
     out.extend_from_slice(&MAGIC);
     out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());

@@ -6,16 +6,28 @@
 
 use sgm_model::wire::messages::unpack_covariance;
 use sgm_model::wire::{open, Message, TeamKey, WireLimits};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// Each input kept in `fuzz/regressions/TARGET/`, with its path.
+fn regressions(target: &str) -> Vec<(PathBuf, Vec<u8>)> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions").join(target);
+    let mut inputs: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|entry| {
+            let path = entry.unwrap().path();
+            let bytes = std::fs::read(&path).unwrap();
+            (path, bytes)
+        })
+        .collect();
+    inputs.sort();
+    inputs
+}
 
 #[test]
 fn wire_fuzz_regressions_open_consistently() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions/wire_envelope");
     let key = TeamKey::from_bytes([7; 32]);
     let mut seen = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let path = entry.unwrap().path();
-        let mut sealed = std::fs::read(&path).unwrap();
+    for (path, mut sealed) in regressions("wire_envelope") {
         let mac = key.mac(&sealed);
         sealed.extend_from_slice(&mac);
         let Ok(envelope) = open(&sealed, &key, &WireLimits::default()) else { continue };
@@ -38,11 +50,8 @@ fn wire_fuzz_regressions_open_consistently() {
 #[test]
 fn cloud_fuzz_regressions_never_decode_to_non_finite_points() {
     use sgm_model::wire::cloud_codec::{declared_points, decode_at_most};
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions/cloud_codec");
     let mut refused = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let path = entry.unwrap().path();
-        let bytes = std::fs::read(&path).unwrap();
+    for (path, bytes) in regressions("cloud_codec") {
         match decode_at_most(&bytes, 100_000) {
             Ok(points) => {
                 assert_eq!(Some(points.len() as u64), declared_points(&bytes), "{}", path.display());
@@ -60,11 +69,9 @@ fn cloud_fuzz_regressions_never_decode_to_non_finite_points() {
 /// (2.4 GB) was reserved before decompressing. Both are now refused by their headers.
 #[test]
 fn pcd_fuzz_regressions_are_refused_before_allocating() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions/pcd");
     let mut seen = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let path = entry.unwrap().path();
-        let e = sgm_model::pcd::read_pcd(&std::fs::read(&path).unwrap()).unwrap_err().to_string();
+    for (path, bytes) in regressions("pcd") {
+        let e = sgm_model::pcd::read_pcd(&bytes).unwrap_err().to_string();
         assert!(e.contains("at most"), "{}: {e}", path.display());
         seen += 1;
     }

@@ -90,6 +90,22 @@ pub fn optimize_robust<G: Manifold<D>, const D: usize>(
     }
 }
 
+/// Binary TLS weights of `factors` between factors: 0 for the `rejected` (indices beyond the
+/// graph are ignored), 1 for the rest.
+pub fn rejection_weights(factors: usize, rejected: &[usize]) -> Vec<f64> {
+    let mut weights = vec![1.0; factors];
+    for &k in rejected.iter().filter(|k| **k < factors) {
+        weights[k] = 0.0;
+    }
+    weights
+}
+
+/// The kernel that scales each between factor's least-squares cost by its weight:
+/// ρ_k(s) = w_k s / 2, IRLS weight w_k.
+pub fn weighted(weights: &[f64]) -> impl Fn(usize, f64) -> (f64, f64) + '_ {
+    move |k, s| (weights[k] * 0.5 * s, weights[k])
+}
+
 /// Squared whitened residual of every between factor at the graph's values.
 fn squared_residuals<G: Manifold<D>, const D: usize>(graph: &PoseGraph<G, D>) -> Vec<f64> {
     graph.betweens.iter().map(|f| f.whitened_error(&graph.values[f.from], &graph.values[f.to]).norm_squared()).collect()
@@ -117,13 +133,10 @@ pub fn optimize_gnc_incremental<G: Manifold<D>, const D: usize>(
     let c2 = chi2_99(D);
     let n = graph.betweens.len();
     let candidate = |k: usize| k < n && candidates.get(k).copied().unwrap_or(false);
-    let mut weights = vec![1.0; graph.betweens.len()];
-    for &k in previous.iter().filter(|k| candidate(**k)) {
-        weights[k] = 0.0;
-    }
+    let left_out: Vec<usize> = previous.iter().copied().filter(|k| candidate(*k)).collect();
+    let weights = rejection_weights(n, &left_out);
     let start = graph.values.clone();
-    let weighted = |k: usize, s: f64| (weights[k] * 0.5 * s, weights[k]);
-    let summary = optimize_with(graph, params, &structure, &weighted)?;
+    let summary = optimize_with(graph, params, &structure, &weighted(&weights))?;
     let stands = squared_residuals(graph)
         .iter()
         .enumerate()
@@ -145,17 +158,13 @@ fn gnc_tls<G: Manifold<D>, const D: usize>(
     c2: f64,
     candidates: &[bool],
 ) -> Result<(Summary, Vec<usize>), SolveError> {
-    let tls = |weights: &[f64]| {
-        let w = weights.to_vec();
-        move |k: usize, s: f64| (w[k] * 0.5 * s, w[k])
-    };
     let initial_error = cost_at(graph, &graph.values, &super::solver::least_squares);
     let initial_values = graph.values.clone();
     let mut weights = vec![1.0; graph.betweens.len()];
     // μ₀ from the largest candidate residual at the initial values (as GTSAM's GncOptimizer).
     let max_s =
         squared_residuals(graph).iter().zip(candidates).filter(|(_, c)| **c).map(|(s, _)| *s).fold(0.0, f64::max);
-    let mut iterations = optimize_with(graph, params, structure, &tls(&weights))?.iterations;
+    let mut iterations = optimize_with(graph, params, structure, &weighted(&weights))?.iterations;
     let mut converged = true;
     if max_s > c2 {
         let mut mu = c2 / (2.0 * max_s - c2).max(1e-12);
@@ -178,7 +187,7 @@ fn gnc_tls<G: Manifold<D>, const D: usize>(
             // ... and the weighted problem solved again from the initial values, so that an
             // early, distorted estimate cannot trap the later ones.
             graph.values.clone_from(&initial_values);
-            iterations += optimize_with(graph, params, structure, &tls(&weights))?.iterations;
+            iterations += optimize_with(graph, params, structure, &weighted(&weights))?.iterations;
             if weights.iter().all(|w| *w == 0.0 || *w == 1.0) {
                 converged = true;
                 break;
@@ -188,6 +197,6 @@ fn gnc_tls<G: Manifold<D>, const D: usize>(
     }
     let rejected: Vec<usize> = weights.iter().enumerate().filter(|(_, w)| **w < 0.5).map(|(k, _)| k).collect();
     // Least-squares error of the factors kept (weights are binary at convergence).
-    let final_error = cost_at(graph, &graph.values, &tls(&weights));
+    let final_error = cost_at(graph, &graph.values, &weighted(&weights));
     Ok((Summary { initial_error, final_error, iterations, converged }, rejected))
 }

@@ -151,11 +151,19 @@ pub fn declared_points(bytes: &[u8]) -> Option<u64> {
     if bytes.is_empty() {
         return Some(0);
     }
+    origin_and_count(bytes).ok().map(|(_, n, _)| n)
+}
+
+/// The header's origin cell and point count (after the version byte and the resolution), and
+/// where the packed stream starts.
+fn origin_and_count(bytes: &[u8]) -> Result<([i64; 3], u64, usize), CodecError> {
     let mut at = 9;
-    for _ in 0..3 {
-        get_i64(bytes, &mut at)?;
+    let mut min = [0i64; 3];
+    for v in &mut min {
+        *v = get_i64(bytes, &mut at).ok_or(CodecError::Corrupt("origin"))?;
     }
-    get_u64(bytes, &mut at)
+    let n = get_u64(bytes, &mut at).ok_or(CodecError::Corrupt("count"))?;
+    Ok((min, n, at))
 }
 
 /// Decodes a cloud of at most `max_points` points (checked before anything is allocated or
@@ -171,12 +179,8 @@ pub fn decode_at_most(bytes: &[u8], max_points: usize) -> Result<Vec<Point3<f64>
     if !r.is_finite() || r <= 0.0 {
         return Err(CodecError::Resolution(r));
     }
-    let mut at = 9;
-    let mut min = [0i64; 3];
-    for v in &mut min {
-        *v = get_i64(bytes, &mut at).ok_or(CodecError::Corrupt("origin"))?;
-    }
-    let n = get_u64(bytes, &mut at).ok_or(CodecError::Corrupt("count"))? as usize;
+    let (min, n, at) = origin_and_count(bytes)?;
+    let n = n as usize;
     if n > max_points.min(MAX_POINTS) {
         return Err(CodecError::Corrupt("more points than the limit"));
     }

@@ -104,6 +104,7 @@ impl Scenario {
         }
 
         let r = &self.radio;
+        let is_robot = |name: &str| (0..self.robots.len()).any(|j| self.robot_name(j) == name);
         check(within(r.bandwidth_kbps, 1.0, 1e7), "radio.bandwidth_kbps", r.bandwidth_kbps, "1 ≤ x ≤ 1e7 kbit/s")?;
         check(within(r.latency_ms, 0.0, 60_000.0), "radio.latency_ms", r.latency_ms, "0 ≤ x ≤ 60000 ms")?;
         check(within(r.loss, 0.0, 1.0), "radio.loss", r.loss, "0 ≤ x ≤ 1")?;
@@ -117,16 +118,10 @@ impl Scenario {
             check(p.end_s.is_finite() && p.end_s > p.start_s, key("end_s"), p.end_s, "finite, > start_s")?;
             check(!p.robots.is_empty(), key("robots"), "[]", "at least one robot name")?;
             for name in &p.robots {
-                check(
-                    (0..self.robots.len()).any(|j| self.robot_name(j) == *name),
-                    key("robots"),
-                    format!("{name:?}"),
-                    "names of robots of this scenario",
-                )?;
+                check(is_robot(name), key("robots"), format!("{name:?}"), "names of robots of this scenario")?;
             }
         }
 
-        let is_robot = |name: &str| (0..self.robots.len()).any(|j| self.robot_name(j) == name);
         for (k, f) in self.false_factors.iter().enumerate() {
             let key = |field: &str| format!("false_factors[{k}].{field}");
             check(is_robot(&f.robot), key("robot"), format!("{:?}", f.robot), "a robot of this scenario")?;
