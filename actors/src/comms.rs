@@ -106,6 +106,7 @@ struct KeyframeRequests {
     /// Wanted, not yet asked for (coalescing).
     wanted: BTreeSet<KeyframeId>,
     in_flight: BTreeMap<KeyframeId, Wait>,
+    /// Received and still held by the Matcher (it reports those it lets go).
     held: BTreeSet<KeyframeId>,
     /// Answered "not here" (or undecodable), and not wanted since.
     refused: BTreeSet<KeyframeId>,
@@ -618,6 +619,19 @@ impl Handler<RequestKeyframes> for Comms {
     type Result = ();
     fn handle(&mut self, msg: RequestKeyframes, ctx: &mut Context<Self>) {
         contained(ctx, "comms", || self.want_keyframes(msg));
+    }
+}
+
+impl Handler<KeyframesReleased> for Comms {
+    type Result = ();
+    fn handle(&mut self, msg: KeyframesReleased, ctx: &mut Context<Self>) {
+        contained(ctx, "comms", || {
+            if let Some(q) = self.requests.get_mut(&msg.robot) {
+                for id in &msg.keyframes {
+                    q.held.remove(id);
+                }
+            }
+        });
     }
 }
 

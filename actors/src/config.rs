@@ -14,6 +14,7 @@ use sgm_model::perception::label_vote::LabelVote;
 use sgm_model::perception::loop_closure::LoopClosureConfig;
 use sgm_model::perception::structure_check::StructureCheck;
 use sgm_model::perception::tracker::TrackerConfig;
+use sgm_model::scene_graph::CloudStoreConfig;
 use sgm_model::wire::{TeamKey, WireLimits};
 use std::path::Path;
 
@@ -137,6 +138,8 @@ pub struct TrackerSection {
     pub keyframes: KeyframeConfig,
     pub tracking: TrackerConfig,
     pub loop_closure: LoopClosureConfig,
+    /// How much of the semantic layer the map holds (old scans compacted, then evicted).
+    pub cloud_store: CloudStoreConfig,
 }
 
 /// Inter-robot association.
@@ -222,6 +225,10 @@ pub struct MatcherSection {
     /// Registrations that must count before an alignment is accepted; fewer refute the object
     /// match (the neighbour goes back to waiting for object data). Default 2.
     pub min_keyframe_factors: usize,
+    /// Neighbour keyframes (clouds) held per neighbour between rounds, at most: kept so that a
+    /// round after a refutation need not ask for them again; the lowest ids outside the current
+    /// round go first, and all go once the neighbour is aligned. Default 64.
+    pub max_held_keyframes: usize,
 }
 
 impl Default for MatcherSection {
@@ -240,6 +247,7 @@ impl Default for MatcherSection {
             structure_check: StructureCheck::default(),
             min_structure_agreement: 0.3,
             min_keyframe_factors: 2,
+            max_held_keyframes: 64,
         }
     }
 }
@@ -452,6 +460,21 @@ impl RobotConfig {
             l.min_interval_s,
             "finite and ≥ 0",
         )?;
+        let c = &self.tracker.cloud_store;
+        check(non_negative(c.budget_mb), "tracker.cloud_store.budget_mb", c.budget_mb, "finite and ≥ 0")?;
+        check(positive(c.object_voxel_m), "tracker.cloud_store.object_voxel_m", c.object_voxel_m, "finite and > 0")?;
+        check(
+            positive(c.structure_voxel_m),
+            "tracker.cloud_store.structure_voxel_m",
+            c.structure_voxel_m,
+            "finite and > 0",
+        )?;
+        check(
+            non_negative(c.redundant_within_m),
+            "tracker.cloud_store.redundant_within_m",
+            c.redundant_within_m,
+            "finite and ≥ 0",
+        )?;
         let m = &self.matcher;
         check(m.min_matched_objects >= 3, "matcher.min_matched_objects", m.min_matched_objects, "≥ 3")?;
         check(
@@ -505,6 +528,12 @@ impl RobotConfig {
             "matcher.max_keyframes_per_alignment",
             m.max_keyframes_per_alignment,
             "≥ matcher.min_keyframe_factors",
+        )?;
+        check(
+            m.max_held_keyframes >= m.max_keyframes_per_alignment,
+            "matcher.max_held_keyframes",
+            m.max_held_keyframes,
+            "≥ matcher.max_keyframes_per_alignment",
         )?;
         let sc = &m.structure_check;
         for (key, v) in [

@@ -24,18 +24,20 @@ use sgm_model::geometry::{pose_error, Pose3};
 use sgm_model::matching::scan_context::{Place, ScanContext};
 use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
 use sgm_model::perception::icp::{register, IcpConfig};
-use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS, UNLABELLED};
+use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS};
 use sgm_model::perception::structure_check::structure_agreement;
-use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId, Stamp};
+use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, SemanticScan, Stamp};
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{ObjectData, RefusalReason};
 use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
 
 /// Where the Matcher sends what it produces.
 #[derive(Clone)]
 pub struct MatcherLinks {
     pub request_clouds: Recipient<RequestObjectClouds>,
     pub request_keyframes: Recipient<RequestKeyframes>,
+    pub release_keyframes: Recipient<KeyframesReleased>,
     pub share_descriptors: Recipient<ShareDescriptor>,
     pub optimiser: Recipient<InterRobotConstraints>,
 }
@@ -57,10 +59,10 @@ pub struct NeighbourStatus {
     pub objects_revision: Option<u32>,
 }
 
+/// A local keyframe: its latest pose and the map's scan (shared, not copied).
 struct LocalKeyframeData {
     world_from_body: Pose3,
-    points: Vec<Point3<f32>>,
-    labels: Vec<LabelId>,
+    scan: Arc<SemanticScan>,
 }
 
 struct NeighbourEntry {
@@ -119,6 +121,21 @@ fn evenly(ids: BTreeSet<KeyframeId>, n: usize) -> BTreeSet<KeyframeId> {
     }
     let all: Vec<KeyframeId> = ids.into_iter().collect();
     (0..n).map(|i| all[i * all.len() / n]).collect()
+}
+
+/// Drops held neighbour keyframes outside `round`, lowest ids first, until at most `cap` are
+/// held; the ids dropped.
+fn hold_at_most(
+    held: &mut BTreeMap<KeyframeId, NeighbourKeyframe>,
+    round: &BTreeSet<KeyframeId>,
+    cap: usize,
+) -> Vec<KeyframeId> {
+    let excess = held.len().saturating_sub(cap);
+    let victims: Vec<KeyframeId> = held.keys().filter(|k| !round.contains(k)).take(excess).copied().collect();
+    for k in &victims {
+        held.remove(k);
+    }
+    victims
 }
 
 /// The pose with the smallest summed distance to the others (translation in m plus rotation in
@@ -236,14 +253,21 @@ impl Matcher {
         })
     }
 
+    /// Tells Comms that these neighbour keyframes are no longer held.
+    fn release(&self, robot: RobotId, keyframes: Vec<KeyframeId>) {
+        if let (Some(links), false) = (&self.links, keyframes.is_empty()) {
+            links.release_keyframes.do_send(KeyframesReleased { robot, keyframes });
+        }
+    }
+
     fn local_object_cloud(&self, object: &GraphObject) -> Vec<Point3<f64>> {
         let observed = self.local.observed_in.get(&object.id).cloned().unwrap_or_default();
         let scans = observed
             .iter()
             .rev()
-            .take(MAX_VIEWS)
             .filter_map(|k| self.keyframes.get(k))
-            .map(|k| (&k.world_from_body, &k.points[..], &k.labels[..]));
+            .take(MAX_VIEWS)
+            .map(|k| (&k.world_from_body, &k.scan.points_in_body[..], &k.scan.labels[..]));
         object_cloud(scans, object.label, &object.centroid, &object.size.unwrap_or_default(), 0.3, 0.1)
     }
 
@@ -377,7 +401,7 @@ impl Matcher {
     fn coarse_to_fine(&self, entry: &NeighbourEntry, pair: &PlaceCandidate, fine: &IcpConfig) -> Option<Pose3> {
         let local = self.keyframes.get(&pair.local)?;
         let remote = entry.keyframes.get(&pair.remote)?;
-        let target: Vec<Point3<f64>> = local.points.iter().map(|p| p.cast::<f64>()).collect();
+        let target: Vec<Point3<f64>> = local.scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
         let initial = yaw_turn(-pair.yaw);
         let coarse = IcpConfig {
             max_correspondence_distance_m: self.config.scan_context.coarse_correspondence_m,
@@ -493,8 +517,9 @@ impl Matcher {
                 da.total_cmp(&db)
             });
             let Some((local_id, local)) = nearest else { continue };
-            let target =
-                targets.entry(local_id).or_insert_with(|| local.points.iter().map(|p| p.cast::<f64>()).collect());
+            let target = targets
+                .entry(local_id)
+                .or_insert_with(|| local.scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect());
             let initial = local.world_from_body.inverse() * in_local;
             let Ok(result) = register(&kf.points_in_body, target, &initial, &keyframe_icp) else { continue };
             if !result.converged {
@@ -535,6 +560,10 @@ impl Matcher {
             entry.protocol = Some(n.aligned(local_from_remote, now).into());
             entry.first_aligned.get_or_insert(now);
         }
+        // Aligned is final: no later round reads the neighbour's clouds.
+        let released: Vec<KeyframeId> = std::mem::take(&mut entry.keyframes).into_keys().collect();
+        entry.round.clear();
+        self.release(robot, released);
         tracing::info!(robot = %self.robot, neighbour = %robot, factors = factors.len(), "aligned");
         if let (Some(links), false) = (&self.links, factors.is_empty()) {
             links.optimiser.do_send(InterRobotConstraints { robot, local_from_remote, neighbour_keyframes, factors });
@@ -577,11 +606,11 @@ impl Handler<LocalKeyframe> for Matcher {
     type Result = ();
     fn handle(&mut self, msg: LocalKeyframe, ctx: &mut Context<Self>) {
         contained(ctx, "matcher", || {
-            let labels = msg.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect();
-            let points = msg.points_in_body.iter().map(|p| p.cast::<f32>()).collect();
-            self.keyframes.insert(msg.id, LocalKeyframeData { world_from_body: msg.world_from_body, points, labels });
+            let data = LocalKeyframeData { world_from_body: msg.world_from_body, scan: msg.scan.clone() };
+            self.keyframes.insert(msg.id, data);
             if self.config.association == Association::ScanContext {
-                let descriptor = ScanContext::new(&msg.points_in_body, &self.config.scan_context.descriptor);
+                let points: Vec<Point3<f64>> = msg.scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
+                let descriptor = ScanContext::new(&points, &self.config.scan_context.descriptor);
                 if let Some(links) = &self.links {
                     let (keyframe, world_from_body) = (msg.id, msg.world_from_body);
                     let share = ShareDescriptor { keyframe, world_from_body, descriptor: descriptor.clone() };
@@ -591,6 +620,26 @@ impl Handler<LocalKeyframe> for Matcher {
                 let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
                 for robot in robots {
                     self.try_match_places(robot);
+                }
+            }
+        });
+    }
+}
+
+impl Handler<LocalScansChanged> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: LocalScansChanged, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            for (id, change) in msg.changes {
+                match change {
+                    Some(scan) => {
+                        if let Some(k) = self.keyframes.get_mut(&id) {
+                            k.scan = scan;
+                        }
+                    }
+                    None => {
+                        self.keyframes.remove(&id);
+                    }
                 }
             }
         });
@@ -665,7 +714,17 @@ impl Handler<NeighbourKeyframe> for Matcher {
     fn handle(&mut self, msg: NeighbourKeyframe, ctx: &mut Context<Self>) {
         contained(ctx, "matcher", || {
             let (robot, id) = (msg.robot, msg.id);
-            self.entry(robot).keyframes.insert(id, msg);
+            let cap = self.config.max_held_keyframes;
+            let entry = self.entry(robot);
+            // Only a keyframe of the current round is kept (a late or duplicated one is not).
+            if !entry.round.contains(&id) {
+                tracing::debug!(neighbour = %robot, keyframe = id.0, "keyframe outside the round, not kept");
+                self.release(robot, vec![id]);
+                return;
+            }
+            entry.keyframes.insert(id, msg);
+            let released = hold_at_most(&mut entry.keyframes, &entry.round, cap);
+            self.release(robot, released);
             self.on_keyframe_resolved(robot, id);
         });
     }

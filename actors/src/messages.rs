@@ -52,14 +52,22 @@ pub struct NewKeyframe {
     pub edges: Vec<KeyframeEdge>,
 }
 
-/// Tracker → Matcher: a keyframe's labelled points, for object clouds and inter-robot ICP.
+/// Tracker → Matcher: a keyframe's labelled points, for object clouds and inter-robot ICP. The
+/// scan is the map's own, shared: the Matcher holds no copy.
 #[derive(Message, Clone, Debug)]
 #[rtype(result = "()")]
 pub struct LocalKeyframe {
     pub id: KeyframeId,
     pub world_from_body: Pose3,
-    pub points_in_body: Vec<Point3<f64>>,
-    pub labels: Vec<Option<LabelId>>,
+    pub scan: std::sync::Arc<sgm_model::scene_graph::SemanticScan>,
+}
+
+/// Tracker → Matcher: scans the map's cloud store compacted (`Some`: the new scan) or evicted
+/// (`None`), so that the Matcher lets go of the old ones.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct LocalScansChanged {
+    pub changes: Vec<sgm_model::scene_graph::cloud_store::CloudChange>,
 }
 
 /// Tracker → Matcher and Comms: the confirmed, matchable objects (world frame) and which
@@ -158,6 +166,16 @@ pub struct RequestObjectClouds {
 #[derive(Message, Clone, Debug)]
 #[rtype(result = "()")]
 pub struct RequestKeyframes {
+    pub robot: RobotId,
+    pub keyframes: Vec<KeyframeId>,
+}
+
+/// Matcher → Comms: neighbour keyframes the Matcher no longer holds (beyond
+/// `matcher.max_held_keyframes`, or once aligned): asking for one of them again is not a
+/// duplicate.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct KeyframesReleased {
     pub robot: RobotId,
     pub keyframes: Vec<KeyframeId>,
 }

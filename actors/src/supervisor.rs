@@ -182,6 +182,7 @@ pub fn start_robot_restored(
     tracker.do_send(Connect(TrackerLinks {
         optimiser: optimiser.clone().recipient(),
         matcher_keyframes: matcher.clone().recipient(),
+        matcher_scans: matcher.clone().recipient(),
         matcher_objects: matcher.clone().recipient(),
         comms_objects: comms.clone().recipient(),
         comms_outgoing: comms.clone().recipient(),
@@ -189,6 +190,7 @@ pub fn start_robot_restored(
     matcher.do_send(Connect(MatcherLinks {
         request_clouds: comms.clone().recipient(),
         request_keyframes: comms.clone().recipient(),
+        release_keyframes: comms.clone().recipient(),
         share_descriptors: comms.clone().recipient(),
         optimiser: optimiser.clone().recipient(),
     }));

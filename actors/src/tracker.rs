@@ -17,7 +17,8 @@ use sgm_model::perception::loop_closure;
 use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS, UNLABELLED};
 use sgm_model::perception::tracker::Tracker as ObjectTracker;
 use sgm_model::scene_graph::{
-    Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, ObjectId, RobotId, SceneGraph, SemanticScan,
+    CloudStoreStats, Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, ObjectId, RobotId, SceneGraph,
+    SemanticScan,
 };
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{
@@ -31,6 +32,7 @@ use std::collections::BTreeMap;
 pub struct TrackerLinks {
     pub optimiser: Recipient<NewKeyframe>,
     pub matcher_keyframes: Recipient<LocalKeyframe>,
+    pub matcher_scans: Recipient<LocalScansChanged>,
     pub matcher_objects: Recipient<LocalObjects>,
     pub comms_objects: Recipient<LocalObjects>,
     pub comms_outgoing: Recipient<Outgoing>,
@@ -51,6 +53,8 @@ pub struct GetMapSummary;
 pub struct MapSummary {
     pub keyframes: Vec<Keyframe>,
     pub objects: Vec<MapObject>,
+    /// What the map's cloud store holds (`tracker.cloud_store`).
+    pub clouds: CloudStoreStats,
 }
 
 /// One object of the map, in the world frame.
@@ -210,14 +214,27 @@ impl Tracker {
             links
                 .optimiser
                 .do_send(NewKeyframe { keyframe: Keyframe { id, stamp: scan.stamp, world_from_body }, edges });
-            links.matcher_keyframes.do_send(LocalKeyframe {
-                id,
-                world_from_body,
-                points_in_body: scan.points_in_body.clone(),
-                labels: scan.labels.clone(),
-            });
+            if let Some(scan) = self.graph.semantic_scan_shared(id) {
+                links.matcher_keyframes.do_send(LocalKeyframe { id, world_from_body, scan });
+            }
         }
+        self.fit_clouds();
         Ok(id)
+    }
+
+    /// Keeps the map's clouds within `tracker.cloud_store`; the Matcher follows the changes.
+    fn fit_clouds(&mut self) {
+        let classes = &self.classes;
+        let changes = self.graph.fit_clouds(&self.config.cloud_store, |l| classes.object_label(l.0).is_some());
+        if changes.is_empty() {
+            return;
+        }
+        let stats = self.graph.cloud_stats();
+        tracing::debug!(robot = %self.robot, changed = changes.len(), scans = stats.scans, bytes = stats.bytes,
+            "cloud store fitted to its budget");
+        if let Some(links) = &self.links {
+            links.matcher_scans.do_send(LocalScansChanged { changes });
+        }
     }
 
     fn publish_objects(&self) {
@@ -245,14 +262,9 @@ impl Tracker {
             .filter_map(|id| {
                 let o = self.graph.object(*id)?;
                 let centroid = self.graph.centroid_in_world(*id)?;
-                let points = object_cloud(
-                    self.scans_of(o.observed_in.iter().rev().take(MAX_VIEWS).copied()),
-                    o.label,
-                    &centroid,
-                    &o.size,
-                    0.3,
-                    0.1,
-                );
+                // The latest views that still hold a scan (older ones may have been evicted).
+                let views = o.observed_in.iter().rev().copied().filter(|k| self.graph.semantic_scan(*k).is_some());
+                let points = object_cloud(self.scans_of(views.take(MAX_VIEWS)), o.label, &centroid, &o.size, 0.3, 0.1);
                 let cloud = cloud_codec::encode(&points, self.cloud_resolution_m).map(|c| c.bytes).unwrap_or_default();
                 Some(ObjectCloud { id: *id, keyframes: o.observed_in.iter().copied().collect(), cloud })
             })
@@ -360,12 +372,11 @@ impl Handler<Republish> for Tracker {
         contained(ctx, "tracker", || {
             let Some(links) = &self.links else { return };
             for keyframe in self.graph.keyframes() {
-                let Some(scan) = self.graph.semantic_scan(keyframe.id) else { continue };
+                let Some(scan) = self.graph.semantic_scan_shared(keyframe.id) else { continue };
                 links.matcher_keyframes.do_send(LocalKeyframe {
                     id: keyframe.id,
                     world_from_body: keyframe.world_from_body,
-                    points_in_body: scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect(),
-                    labels: scan.labels.iter().map(|l| (*l != UNLABELLED).then_some(*l)).collect(),
+                    scan,
                 });
             }
             self.publish_objects();
@@ -397,7 +408,11 @@ impl Handler<GetMapSummary> for Tracker {
                 })
             })
             .collect();
-        MessageResult(MapSummary { keyframes: self.graph.keyframes().cloned().collect(), objects })
+        MessageResult(MapSummary {
+            keyframes: self.graph.keyframes().cloned().collect(),
+            objects,
+            clouds: self.graph.cloud_stats(),
+        })
     }
 }
 

@@ -2,6 +2,7 @@
 //! later issues) simulated scenarios. The `sgm` binary is a thin shell over this library.
 
 pub mod bag_out;
+pub mod memory;
 pub mod object_file;
 pub mod replay;
 pub mod report;

@@ -6,7 +6,7 @@
 //! radio model (its range needs positions: from the bags' ground truth when they have it).
 //! The report is the scenarios' report; trajectory errors need a ground-truth topic.
 
-use crate::report::{RobotTruth, RunRecord, TruthTrack};
+use crate::report::{series_point, RobotTruth, RunRecord, TruthTrack};
 use crate::runner::RunOutcome;
 use crate::scenario::Scenario;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
@@ -180,6 +180,7 @@ pub async fn replay(
     let report_every =
         ((scenario.scenario.report_interval_s / scenario.scenario.frame_interval_s).round() as u64).max(1);
     let mut observations = Vec::new();
+    let mut memory = Vec::new();
     let mut decoding = Duration::ZERO;
     let mut team: Option<Team> = None;
     let mut step = 0u64;
@@ -229,6 +230,7 @@ pub async fn replay(
         last_t = t;
         if step % report_every == 0 {
             observations.push(team.observe(t).await?);
+            memory.extend(crate::runner::sample_memory(t));
         }
         if let Some(bar) = progress {
             bar.set_position(step);
@@ -268,12 +270,16 @@ pub async fn replay(
     // The mission's span: the steps, or the stamps when they ran ahead of the records.
     let stepped = step as f64 * scenario.scenario.frame_interval_s;
     let sim_s = if last_t > stepped + scenario.scenario.frame_interval_s { last_t } else { stepped };
+    // The truth is known only now (read from the bags as they went): the series is made here.
+    let series = observations.iter().map(|o| series_point(o, &truths)).collect();
+    let last = observations.pop().unwrap_or_default();
     let record = RunRecord {
         scenario: format!("replay of {}", names.join(", ")),
         seed,
         sim_s,
         robots: truths,
-        observations,
+        series,
+        last,
         radio: shared.stats(),
         world_objects: Vec::new(),
         restarts: Vec::new(),
@@ -281,7 +287,7 @@ pub async fn replay(
         false_factors: Vec::new(),
         optimisers: team.optimiser_statuses().await?,
     };
-    let timing = Timing::measure(wall, sim_s, decoding);
+    let timing = Timing::measure(wall, sim_s, decoding, memory);
     Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing }, bags: bag_stats })
 }
 

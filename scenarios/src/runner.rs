@@ -9,7 +9,7 @@
 //! crashes or `persistence.directory` is set.
 
 use crate::bag_out::{BagRecorder, RecordedFrame};
-use crate::report::{RobotTruth, RunRecord, TruthTrack};
+use crate::report::{series_point, Observation, RobotTruth, RunRecord, TruthTrack};
 use crate::scenario::Scenario;
 use crate::sim::camera::{camera_from_body, camera_model, mislabels, noisy_labels, render};
 use crate::sim::false_factors::FalseFactors;
@@ -105,7 +105,21 @@ pub async fn run_recording(
     let dt = scenario.scenario.frame_interval_s;
     let steps = (scenario.scenario.duration_s / dt).round() as u64;
     let report_every = ((scenario.scenario.report_interval_s / dt).round() as u64).max(1);
-    let mut observations = Vec::new();
+    // The truth as the series needs it (the frame and byte counts are filled in at the end).
+    let mut truths: Vec<RobotTruth> = robots
+        .iter()
+        .map(|robot| RobotTruth {
+            name: robot.name.clone(),
+            truth: TruthTrack::Route(robot.route.clone()),
+            truth_from_world: robot.odometry.truth_from_world,
+            frames: 0,
+            raw_bytes: 0,
+            raw_max_bytes: 0,
+        })
+        .collect();
+    let mut series = Vec::new();
+    let mut last = Observation::default();
+    let mut memory = Vec::new();
     let mut simulation = Duration::ZERO;
     if let Some(bar) = progress {
         bar.set_length(steps);
@@ -172,7 +186,9 @@ pub async fn run_recording(
         }
         team.snapshot_due(t).await?;
         if step % report_every == 0 || step == steps {
-            observations.push(team.observe(t).await?);
+            last = team.observe(t).await?;
+            series.push(series_point(&last, &truths));
+            memory.extend(sample_memory(t));
         }
         if let Some(bar) = progress {
             bar.set_position(step);
@@ -184,25 +200,18 @@ pub async fn run_recording(
 
     let maps = team.maps().await?;
     let optimisers = team.optimiser_statuses().await?;
-    let truths = robots
-        .iter()
-        .map(|robot| RobotTruth {
-            name: robot.name.clone(),
-            truth: TruthTrack::Route(robot.route.clone()),
-            truth_from_world: robot.odometry.truth_from_world,
-            frames: robot.frames,
-            raw_bytes: robot.raw_bytes,
-            raw_max_bytes: robot.raw_max_bytes,
-        })
-        .collect();
+    for (truth, robot) in truths.iter_mut().zip(&robots) {
+        (truth.frames, truth.raw_bytes, truth.raw_max_bytes) = (robot.frames, robot.raw_bytes, robot.raw_max_bytes);
+    }
     let sim_s = steps as f64 * dt;
-    let timing = Timing::measure(wall, sim_s, simulation);
+    let timing = Timing::measure(wall, sim_s, simulation, memory);
     let record = RunRecord {
         scenario: scenario.scenario.name.clone(),
         seed,
         sim_s,
         robots: truths,
-        observations,
+        series,
+        last,
         radio: shared.stats(),
         world_objects: world.objects.iter().map(|o| (o.label, o.centre)).collect(),
         restarts: team.restarts().to_vec(),
@@ -212,6 +221,11 @@ pub async fn run_recording(
     };
     drop(snapshots);
     Ok(RunOutcome { record, world, maps, timing })
+}
+
+/// The resident memory now, for `timing.json`.
+pub(crate) fn sample_memory(t: f64) -> Option<crate::memory::MemorySample> {
+    crate::memory::resident_mb().0.map(|resident_mb| crate::memory::MemorySample { t, resident_mb })
 }
 
 /// Where a run keeps its snapshots: `persistence.directory`, or (when a robot crashes and none

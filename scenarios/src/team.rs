@@ -34,12 +34,17 @@ pub struct Timing {
     pub actor_busy_s: std::collections::BTreeMap<String, f64>,
     /// Time producing sensor frames (simulating, or reading and decoding bags), s.
     pub simulation_s: f64,
+    /// Resident memory at every observation, and its peak over the run, MiB (Linux).
+    pub memory: Vec<crate::memory::MemorySample>,
+    pub peak_resident_mb: Option<f64>,
 }
 
 impl Timing {
-    pub fn measure(wall: Instant, sim_s: f64, simulation: Duration) -> Self {
+    pub fn measure(wall: Instant, sim_s: f64, simulation: Duration, memory: Vec<crate::memory::MemorySample>) -> Self {
         let wall_s = wall.elapsed().as_secs_f64();
         Self {
+            memory,
+            peak_resident_mb: crate::memory::resident_mb().1,
             wall_s,
             sim_s,
             realtime_factor: sim_s / wall_s.max(1e-9),

@@ -147,6 +147,7 @@ mod tests {
                 anchor: KeyframeId(1),
                 confirmed: true,
             }],
+            clouds: Default::default(),
         };
         let header = std_msgs::Header { frame_id: "alpha/odom".into(), ..Default::default() };
         let array = map_markers(&header, &map, &classes);

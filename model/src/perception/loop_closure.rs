@@ -1,8 +1,9 @@
 //! Intra-robot loop closure as in LIO-SAM (paper §IV: "a Euclidean distance-based approach
 //! similar to that of LIO-SAM"): the nearest keyframe within `search_radius_m` whose stamp is at
-//! least `time_gap_s` older than the current one is the candidate; the current keyframe's scan
-//! is registered by ICP against a submap of the candidate and its `submap_neighbours` neighbours
-//! on either side (all in the world frame, at the current estimates); a registration that
+//! least `time_gap_s` older than the current one, and whose scan the cloud store still holds,
+//! is the candidate; the current keyframe's scan is registered by ICP against a submap of the
+//! candidate and its `submap_neighbours` neighbours on either side (all in the world frame, at
+//! the current estimates; neighbours whose scans were evicted add nothing); a registration that
 //! converged with inlier RMSE ≤ `max_rmse_m` gives the loop factor
 //!   z = x_candidate⁻¹ · (T_icp · x_current),
 //! with LIO-SAM's noise model: an isotropic σ equal to the RMSE on all six axes.
@@ -58,7 +59,7 @@ pub fn detect(graph: &SceneGraph, current: KeyframeId, config: &LoopClosureConfi
     let here = now.world_from_body.translation.vector;
     let candidate = graph
         .keyframes()
-        .filter(|k| k.stamp <= now.stamp - config.time_gap_s)
+        .filter(|k| k.stamp <= now.stamp - config.time_gap_s && graph.semantic_scan(k.id).is_some())
         .map(|k| ((k.world_from_body.translation.vector - here).norm(), k))
         .filter(|(d, _)| *d <= config.search_radius_m)
         .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.id.cmp(&b.1.id)))?

@@ -2,6 +2,7 @@
 //! that keep every link consistent. Maps are ordered (`BTreeMap`) so that iteration, and so every
 //! output derived from it, is deterministic.
 
+use super::cloud_store::{CloudChange, CloudStoreConfig, CloudStoreStats, KeyframeCloudStore};
 use super::{
     KeyframeEdge, KeyframeId, KeyframeRef, LabelId, Object, ObjectEdge, ObjectId, SceneGraphError, SemanticScan, Stamp,
 };
@@ -19,7 +20,8 @@ pub struct SceneGraph {
     objects: BTreeMap<ObjectId, Object>,
     /// Cross-layer index: the objects each keyframe observed.
     objects_by_keyframe: BTreeMap<KeyframeId, BTreeSet<ObjectId>>,
-    semantic: BTreeMap<KeyframeId, SemanticScan>,
+    /// The semantic layer, within a byte budget when the owner calls [`SceneGraph::fit_clouds`].
+    semantic: KeyframeCloudStore,
     next_object_id: u32,
 }
 
@@ -260,16 +262,37 @@ impl SceneGraph {
         Ok(())
     }
 
+    /// The scan of `keyframe`; `None` when it has none or it was evicted.
     pub fn semantic_scan(&self, keyframe: KeyframeId) -> Option<&SemanticScan> {
-        self.semantic.get(&keyframe)
+        self.semantic.get(keyframe)
+    }
+
+    /// The scan of `keyframe`, shared with its reader rather than copied.
+    pub fn semantic_scan_shared(&self, keyframe: KeyframeId) -> Option<std::sync::Arc<SemanticScan>> {
+        self.semantic.shared(keyframe)
+    }
+
+    /// Brings the semantic layer within `config`'s budget ([`KeyframeCloudStore::fit`]), judging
+    /// redundancy at the keyframes' current positions.
+    pub fn fit_clouds(
+        &mut self,
+        config: &CloudStoreConfig,
+        object_class: impl Fn(LabelId) -> bool,
+    ) -> Vec<CloudChange> {
+        let keyframes = &self.keyframes;
+        self.semantic.fit(config, object_class, |k| keyframes.get(&k).map(|kf| kf.world_from_body.translation.vector))
+    }
+
+    pub fn cloud_stats(&self) -> CloudStoreStats {
+        self.semantic.stats()
     }
 
     /// The semantic points of every keyframe with `label`, in the world frame (at the keyframes'
     /// current poses).
     pub fn semantic_points_in_world(&self, label: LabelId) -> Vec<Point3<f64>> {
         let mut out = Vec::new();
-        for (id, scan) in &self.semantic {
-            let Some(kf) = self.keyframes.get(id) else { continue };
+        for (id, scan) in self.semantic.iter() {
+            let Some(kf) = self.keyframes.get(&id) else { continue };
             for (p, l) in scan.points_in_body.iter().zip(&scan.labels) {
                 if *l == label {
                     out.push(kf.world_from_body * p.cast::<f64>());

@@ -5,7 +5,8 @@
 //!   loop and inter-robot edges;
 //! * **object layer**: objects (id, label, centroid, size) joined by edges weighted by centroid
 //!   distance (a fully connected graph, computed from the current positions on demand);
-//! * **semantic layer**: the labelled point cloud of each keyframe.
+//! * **semantic layer**: the labelled point cloud of each keyframe, held within a byte budget
+//!   (`cloud_store`: old scans are compacted, then evicted).
 //!
 //! Cross-layer links: an object knows the keyframes that observed it; a keyframe knows the objects
 //! it observed and owns its semantic scan. An object's centroid is stored in the body frame of the
@@ -13,6 +14,7 @@
 //! (§IV-A: "object positions are also sequentially updated based on the latest keyframe that
 //! observes each object").
 
+pub mod cloud_store;
 mod error;
 mod graph;
 mod ids;
@@ -20,6 +22,7 @@ mod keyframe;
 mod object;
 mod semantic;
 
+pub use cloud_store::{CloudStoreConfig, CloudStoreStats, KeyframeCloudStore};
 pub use error::SceneGraphError;
 pub use graph::SceneGraph;
 pub use ids::{KeyframeId, LabelId, ObjectId, RobotId};

@@ -36,6 +36,8 @@ pub struct RobotReport {
     /// Distance travelled, m: along the true path, or the estimated keyframes without truth.
     pub distance_m: f64,
     pub frames: u64,
+    /// The map's cloud store at the end (`tracker.cloud_store`).
+    pub clouds: sgm_model::scene_graph::CloudStoreStats,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -76,6 +78,8 @@ pub struct SeriesPoint {
     pub team_ate_rmse_m: Option<f64>,
     /// Bytes sent by the whole team so far.
     pub bytes_total: u64,
+    /// Bytes of clouds held by the whole team's maps (`tracker.cloud_store`).
+    pub cloud_bytes: u64,
     pub alignments: Vec<PairError>,
 }
 
@@ -129,10 +133,10 @@ pub(crate) fn trajectory(observation: &Observation, k: usize, truth: &RobotTruth
 
 /// Where each robot's map sits on the truth at one observation: the SE(3) fit of its keyframes
 /// to their true positions (`None` before 3 keyframes).
-fn maps_on_truth(observation: &Observation, record: &RunRecord) -> Vec<Option<Pose3>> {
-    (0..record.robots.len())
+fn maps_on_truth(observation: &Observation, robots: &[RobotTruth]) -> Vec<Option<Pose3>> {
+    (0..robots.len())
         .map(|k| {
-            let samples = trajectory(observation, k, &record.robots[k]);
+            let samples = trajectory(observation, k, &robots[k]);
             let (e, t) = positions(&samples, &Pose3::identity());
             ate(&e, &t).map(|a| a.truth_from_estimate)
         })
@@ -143,8 +147,8 @@ fn maps_on_truth(observation: &Observation, record: &RunRecord) -> Vec<Option<Po
 /// best fit, so that what is measured is how well the maps were joined, not how far each
 /// drifted from its start (that is `start_frame_translation_error_m`). Falls back to the start
 /// frames before a map has 3 keyframes. None without truth (a replayed bag without it).
-fn true_local_from_remote(fits: &[Option<Pose3>], record: &RunRecord, l: usize, r: usize) -> Option<Pose3> {
-    let (local, remote) = (&record.robots[l], &record.robots[r]);
+fn true_local_from_remote(fits: &[Option<Pose3>], robots: &[RobotTruth], l: usize, r: usize) -> Option<Pose3> {
+    let (local, remote) = (&robots[l], &robots[r]);
     if !(local.truth.is_known() && remote.truth.is_known()) {
         return None;
     }
@@ -174,19 +178,19 @@ fn positions(samples: &[(f64, Pose3, Pose3)], transform: &Pose3) -> (Vec<Point3<
 }
 
 /// Team ATE at one observation, and the robots it merged.
-fn team_ate(observation: &Observation, record: &RunRecord) -> (Option<f64>, Vec<String>) {
-    team_ate_placed(observation, record, |k| reference_from(observation, k))
+fn team_ate(observation: &Observation, robots: &[RobotTruth]) -> (Option<f64>, Vec<String>) {
+    team_ate_placed(observation, robots, |k| reference_from(observation, k))
 }
 
 /// Team ATE with robot k's map placed in the reference's world by `placed(k)` (skipped when
 /// `None`), and the robots it merged.
 fn team_ate_placed(
     observation: &Observation,
-    record: &RunRecord,
+    robots: &[RobotTruth],
     placed: impl Fn(usize) -> Option<Pose3>,
 ) -> (Option<f64>, Vec<String>) {
     let (mut estimate, mut truth, mut names) = (Vec::new(), Vec::new(), Vec::new());
-    for (k, robot) in record.robots.iter().enumerate() {
+    for (k, robot) in robots.iter().enumerate() {
         let Some(transform) = placed(k) else { continue };
         let samples = trajectory(observation, k, robot);
         if samples.is_empty() {
@@ -200,15 +204,15 @@ fn team_ate_placed(
     (ate(&estimate, &truth).map(|a| a.rmse_m), names)
 }
 
-fn pair_errors(observation: &Observation, record: &RunRecord) -> Vec<PairError> {
-    let fits = maps_on_truth(observation, record);
+fn pair_errors(observation: &Observation, robots: &[RobotTruth]) -> Vec<PairError> {
+    let fits = maps_on_truth(observation, robots);
     let mut out = Vec::new();
-    for (k, local) in record.robots.iter().enumerate() {
+    for (k, local) in robots.iter().enumerate() {
         let Some(Some((_, neighbours, _))) = observation.maps.get(k) else { continue };
         for n in neighbours {
             let r = usize::from(n.robot.0).wrapping_sub(1);
-            let (Some(remote), Some(estimate)) = (record.robots.get(r), n.local_from_remote) else { continue };
-            let Some(truth) = true_local_from_remote(&fits, record, k, r) else { continue };
+            let (Some(remote), Some(estimate)) = (robots.get(r), n.local_from_remote) else { continue };
+            let Some(truth) = true_local_from_remote(&fits, robots, k, r) else { continue };
             let e = pose_error(&estimate, &truth);
             out.push(PairError {
                 local: local.name.clone(),
@@ -257,8 +261,20 @@ fn object_quality(
     (found, spurious, (found > 0).then(|| error_sum / found as f64))
 }
 
+/// The series' point of one observation: what the team had made by then. Computed as the run
+/// goes, so that a long run keeps one point per observation, not every observation's map.
+pub fn series_point(observation: &Observation, robots: &[RobotTruth]) -> SeriesPoint {
+    SeriesPoint {
+        t: observation.t,
+        team_ate_rmse_m: team_ate(observation, robots).0,
+        bytes_total: bytes_sent(observation).bytes_total(),
+        cloud_bytes: observation.maps.iter().flatten().map(|(map, _, _)| map.clouds.bytes as u64).sum(),
+        alignments: pair_errors(observation, robots),
+    }
+}
+
 pub fn compute(record: &RunRecord) -> Report {
-    let last = record.observations.last().cloned().unwrap_or_default();
+    let last = &record.last;
     let robots = record
         .robots
         .iter()
@@ -295,17 +311,18 @@ pub fn compute(record: &RunRecord) -> Report {
                 object_error_m: error,
                 distance_m,
                 frames: truth.frames,
+                clouds: map.map(|m| m.clouds).unwrap_or_default(),
             }
         })
         .collect();
-    let fits = maps_on_truth(&last, record);
+    let fits = maps_on_truth(last, &record.robots);
     let mut alignments = Vec::new();
     for (k, local) in record.robots.iter().enumerate() {
         let Some(Some((_, neighbours, _))) = last.maps.get(k) else { continue };
         for n in neighbours {
             let r = usize::from(n.robot.0).wrapping_sub(1);
             let Some(remote) = record.robots.get(r) else { continue };
-            let truth = true_local_from_remote(&fits, record, k, r);
+            let truth = true_local_from_remote(&fits, &record.robots, k, r);
             let known = truth.and(n.local_from_remote);
             let truth = truth.unwrap_or_else(Pose3::identity);
             let error = known.map(|estimate| pose_error(&estimate, &truth));
@@ -338,21 +355,12 @@ pub fn compute(record: &RunRecord) -> Report {
         bytes_mean: if frames == 0 { 0.0 } else { raw_total as f64 / frames as f64 },
         bytes_max: record.robots.iter().map(|r| r.raw_max_bytes).max().unwrap_or(0),
     };
-    let (team_ate_rmse_m, team_ate_robots) = team_ate(&last, record);
-    let start_guess = |k| Some(reference_from(&last, k).unwrap_or_else(Pose3::identity));
-    let team_ate_all_start_guess_m = team_ate_placed(&last, record, start_guess).0;
-    let oracle = |k| true_local_from_remote(&fits, record, 0, k);
-    let team_ate_oracle_join_m = team_ate_placed(&last, record, oracle).0;
-    let series = record
-        .observations
-        .iter()
-        .map(|o| SeriesPoint {
-            t: o.t,
-            team_ate_rmse_m: team_ate(o, record).0,
-            bytes_total: bytes_sent(o).bytes_total(),
-            alignments: pair_errors(o, record),
-        })
-        .collect();
+    let (team_ate_rmse_m, team_ate_robots) = team_ate(last, &record.robots);
+    let start_guess = |k| Some(reference_from(last, k).unwrap_or_else(Pose3::identity));
+    let team_ate_all_start_guess_m = team_ate_placed(last, &record.robots, start_guess).0;
+    let oracle = |k| true_local_from_remote(&fits, &record.robots, 0, k);
+    let team_ate_oracle_join_m = team_ate_placed(last, &record.robots, oracle).0;
+    let series = record.series.clone();
     Report {
         scenario: record.scenario.clone(),
         seed: record.seed,
@@ -369,7 +377,7 @@ pub fn compute(record: &RunRecord) -> Report {
         radio: record.radio.clone(),
         world_objects: record.world_objects.len(),
         series,
-        ledger: super::ledger::compute(record, &last),
+        ledger: super::ledger::compute(record, last),
         back_end: super::back_end::compute(record),
     }
 }

@@ -10,7 +10,7 @@ use sgm_model::scene_graph::LabelledVoxels;
 const VOXEL_M: f64 = 0.1;
 
 pub fn merged_map(outcome: &RunOutcome) -> Vec<u8> {
-    let last = outcome.record.observations.last().cloned().unwrap_or_default();
+    let last = outcome.record.last.clone();
     let mut voxels = LabelledVoxels::new(VOXEL_M);
     for (k, map) in outcome.maps.iter().enumerate() {
         let Some(reference_from_robot) = reference_from(&last, k) else { continue };

@@ -61,6 +61,37 @@ fn accounting(s: &mut String, ledger: &super::ledger::Ledger) {
     let _ = writeln!(s);
 }
 
+/// The clouds the maps hold (deterministic) and the process's resident memory (not).
+fn memory(s: &mut String, report: &Report, timing: &Timing) {
+    let mib = |bytes: f64| bytes / 1024.0 / 1024.0;
+    let held: u64 = report.robots.iter().map(|r| r.clouds.bytes as u64).sum();
+    let scans: usize = report.robots.iter().map(|r| r.clouds.scans).sum();
+    let compacted: usize = report.robots.iter().map(|r| r.clouds.compacted).sum();
+    let evicted: u64 = report.robots.iter().map(|r| r.clouds.evicted).sum();
+    let peak = report.series.iter().max_by_key(|p| p.cloud_bytes);
+    let _ = write!(
+        s,
+        "Clouds: the maps hold {:.1} MiB in {scans} keyframe scans ({compacted} compacted, {evicted} evicted)",
+        mib(held as f64)
+    );
+    if let Some(p) = peak {
+        let _ = write!(s, ", at most {:.1} MiB (at {:.0} s)", mib(p.cloud_bytes as f64), p.t);
+    }
+    let _ = write!(s, ".");
+    if let Some(peak) = timing.peak_resident_mb {
+        let _ = write!(s, " Resident memory: peak {peak:.0} MiB");
+        match crate::memory::drift_after(&timing.memory, report.sim_s / 2.0) {
+            Some((lo, hi)) => {
+                let _ = write!(s, ", over the second half within {:+.1} % and {:+.1} %.", lo * 100.0, hi * 100.0);
+            }
+            None => {
+                let _ = write!(s, ".");
+            }
+        }
+    }
+    let _ = writeln!(s, "\n");
+}
+
 pub fn render(report: &Report, timing: &Timing) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Run report: {}\n", report.scenario);
@@ -140,6 +171,7 @@ pub fn render(report: &Report, timing: &Timing) -> String {
         );
     }
     let _ = writeln!(s, "\n");
+    memory(&mut s, report, timing);
     accounting(&mut s, &report.ledger);
     let _ = writeln!(
         s,

@@ -11,7 +11,7 @@ pub mod plots;
 mod truth;
 mod tum;
 
-pub use figures::{compute, AlignmentReport, MessageRow, Report, RobotReport, SeriesPoint};
+pub use figures::{compute, series_point, AlignmentReport, MessageRow, Report, RobotReport, SeriesPoint};
 pub use truth::TruthTrack;
 
 use crate::runner::{RunOutcome, Timing};
@@ -49,7 +49,10 @@ pub struct RunRecord {
     pub seed: u64,
     pub sim_s: f64,
     pub robots: Vec<RobotTruth>,
-    pub observations: Vec<Observation>,
+    /// The series' points, one per observation (`report_interval_s`), in time order.
+    pub series: Vec<SeriesPoint>,
+    /// The last observation (at the end of the run), in full.
+    pub last: Observation,
     pub radio: RadioStats,
     /// The world's objects: (class id, centre).
     pub world_objects: Vec<(u16, nalgebra::Point3<f64>)>,

@@ -84,7 +84,7 @@ fn map(outcome: &RunOutcome, path: &Path, text: bool) -> Result<(), String> {
             Rectangle::new([(x - 0.6, y - 0.6), (x + 0.6, y + 0.6)], colour(o.label).stroke_width(1))
         }))
         .map_err(err)?;
-    let last = outcome.record.observations.last().cloned().unwrap_or_default();
+    let last = outcome.record.last.clone();
     for (k, robot) in outcome.record.robots.iter().enumerate() {
         let c = ROBOT_COLOURS[k % ROBOT_COLOURS.len()];
         let samples = super::figures::trajectory(&last, k, robot);

@@ -20,7 +20,7 @@ fn line(out: &mut String, stamp: f64, pose: &Pose3) {
 
 /// (file name, contents) of every TUM file.
 pub fn files(record: &RunRecord) -> Vec<(String, String)> {
-    let Some(last) = record.observations.last() else { return Vec::new() };
+    let last = &record.last;
     let mut out = Vec::new();
     let (mut team, mut team_truth) = (String::new(), String::new());
     for (k, robot) in record.robots.iter().enumerate() {
