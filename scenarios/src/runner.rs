@@ -105,7 +105,8 @@ pub async fn run_recording(
     let dt = scenario.scenario.frame_interval_s;
     let steps = (scenario.scenario.duration_s / dt).round() as u64;
     let report_every = ((scenario.scenario.report_interval_s / dt).round() as u64).max(1);
-    // The truth as the series needs it (the frame and byte counts are filled in at the end).
+    // The truth as the series needs it (the world's placement is kept up to date, the frame and
+    // byte counts are filled in at the end).
     let mut truths: Vec<RobotTruth> = robots
         .iter()
         .map(|robot| RobotTruth {
@@ -187,6 +188,10 @@ pub async fn run_recording(
         team.snapshot_due(t).await?;
         if step % report_every == 0 || step == steps {
             last = team.observe(t).await?;
+            // A robot's world is placed on the truth at its first step.
+            for (truth, robot) in truths.iter_mut().zip(&robots) {
+                truth.truth_from_world = robot.odometry.truth_from_world;
+            }
             series.push(series_point(&last, &truths));
             memory.extend(sample_memory(t));
         }

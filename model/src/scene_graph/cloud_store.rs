@@ -341,7 +341,10 @@ mod tests {
         use super::*;
         use proptest::prelude::*;
 
-        fn scans() -> impl Strategy<Value = Vec<(Vec<(f32, f32, f32, u16)>, (f64, f64))>> {
+        /// A scan's points (x, y, z, label) and its keyframe's (x, y).
+        type Input = (Vec<(f32, f32, f32, u16)>, (f64, f64));
+
+        fn scans() -> impl Strategy<Value = Vec<Input>> {
             let point = (-20.0f32..20.0, -20.0f32..20.0, -2.0f32..4.0, 0u16..4);
             prop::collection::vec((prop::collection::vec(point, 0..300), (-10.0f64..10.0, -10.0f64..10.0)), 1..25)
         }

@@ -280,7 +280,7 @@ pub fn compute(record: &RunRecord) -> Report {
         .iter()
         .enumerate()
         .map(|(k, truth)| {
-            let samples = trajectory(&last, k, truth);
+            let samples = trajectory(last, k, truth);
             let (e, t) = positions(&samples, &Pose3::identity());
             let map = match last.maps.get(k) {
                 Some(Some((map, _, _))) => Some(map),
@@ -344,7 +344,7 @@ pub fn compute(record: &RunRecord) -> Report {
             });
         }
     }
-    let sent = bytes_sent(&last);
+    let sent = bytes_sent(last);
     let messages: BTreeMap<String, MessageRow> =
         MessageKind::ALL.iter().map(|kind| (format!("{kind:?}"), row(&sent.get(*kind)))).collect();
     let raw_total: u64 = record.robots.iter().map(|r| r.raw_bytes).sum();
