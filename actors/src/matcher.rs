@@ -828,3 +828,29 @@ impl Handler<GetNeighbours> for Matcher {
 connects!(Matcher => MatcherLinks);
 freezes!(Matcher => MatcherState);
 stops_on_injected_failure!(Matcher => "matcher");
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix6;
+
+    #[test]
+    fn held_neighbour_keyframes_beyond_the_cap_go_lowest_first_sparing_the_round() {
+        let keyframe = |id: u32| NeighbourKeyframe {
+            robot: RobotId(2),
+            id: KeyframeId(id),
+            world_from_body: Pose3::identity(),
+            covariance: Matrix6::identity(),
+            points_in_body: Vec::new(),
+        };
+        let mut held: BTreeMap<KeyframeId, NeighbourKeyframe> = (0..10).map(|k| (KeyframeId(k), keyframe(k))).collect();
+        let round: BTreeSet<KeyframeId> = [KeyframeId(1), KeyframeId(2)].into();
+        let released = hold_at_most(&mut held, &round, 5);
+        assert_eq!(released, [0, 3, 4, 5, 6].map(KeyframeId));
+        assert_eq!(held.keys().copied().collect::<Vec<_>>(), [1, 2, 7, 8, 9].map(KeyframeId));
+        // The round itself is never dropped, even over the cap.
+        let everything: BTreeSet<KeyframeId> = held.keys().copied().collect();
+        assert!(hold_at_most(&mut held, &everything, 2).is_empty());
+        assert_eq!(held.len(), 5);
+    }
+}
