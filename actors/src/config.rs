@@ -227,7 +227,8 @@ pub struct MatcherSection {
     pub min_keyframe_factors: usize,
     /// Neighbour keyframes (clouds) held per neighbour between rounds, at most: kept so that a
     /// round after a refutation need not ask for them again; the lowest ids outside the current
-    /// round go first, and all go once the neighbour is aligned. Default 64.
+    /// round go first, and all go once the neighbour is aligned. Default 16 (two rounds; a
+    /// keyframe is about 370 KB as held, and a pair refuted again and again fills its cap).
     pub max_held_keyframes: usize,
 }
 
@@ -247,7 +248,7 @@ impl Default for MatcherSection {
             structure_check: StructureCheck::default(),
             min_structure_agreement: 0.3,
             min_keyframe_factors: 2,
-            max_held_keyframes: 64,
+            max_held_keyframes: 16,
         }
     }
 }
