@@ -462,20 +462,18 @@ impl RobotConfig {
             "finite and ≥ 0",
         )?;
         let c = &self.tracker.cloud_store;
-        check(non_negative(c.budget_mb), "tracker.cloud_store.budget_mb", c.budget_mb, "finite and ≥ 0")?;
-        check(positive(c.object_voxel_m), "tracker.cloud_store.object_voxel_m", c.object_voxel_m, "finite and > 0")?;
-        check(
-            positive(c.structure_voxel_m),
-            "tracker.cloud_store.structure_voxel_m",
-            c.structure_voxel_m,
-            "finite and > 0",
-        )?;
-        check(
-            non_negative(c.redundant_within_m),
-            "tracker.cloud_store.redundant_within_m",
-            c.redundant_within_m,
-            "finite and ≥ 0",
-        )?;
+        for (key, v) in [
+            ("tracker.cloud_store.budget_mb", c.budget_mb),
+            ("tracker.cloud_store.redundant_within_m", c.redundant_within_m),
+        ] {
+            check(non_negative(v), key, v, "finite and ≥ 0")?;
+        }
+        for (key, v) in [
+            ("tracker.cloud_store.object_voxel_m", c.object_voxel_m),
+            ("tracker.cloud_store.structure_voxel_m", c.structure_voxel_m),
+        ] {
+            check(positive(v), key, v, "finite and > 0")?;
+        }
         let m = &self.matcher;
         check(m.min_matched_objects >= 3, "matcher.min_matched_objects", m.min_matched_objects, "≥ 3")?;
         check(

@@ -245,15 +245,16 @@ impl Tracker {
         }
     }
 
-    fn scans_of<'a>(&'a self, keyframes: impl IntoIterator<Item = KeyframeId> + 'a) -> Vec<ScanRef<'a>> {
-        keyframes
-            .into_iter()
-            .filter_map(|k| {
-                let kf = self.graph.keyframe(k)?;
-                let scan = self.graph.semantic_scan(k)?;
-                Some((&kf.world_from_body, &scan.points_in_body[..], &scan.labels[..]))
-            })
-            .collect()
+    /// The scans the map still holds of `keyframes`, in their order (evicted ones skipped).
+    fn scans_of<'a>(
+        &'a self,
+        keyframes: impl IntoIterator<Item = KeyframeId> + 'a,
+    ) -> impl Iterator<Item = ScanRef<'a>> {
+        keyframes.into_iter().filter_map(|k| {
+            let kf = self.graph.keyframe(k)?;
+            let scan = self.graph.semantic_scan(k)?;
+            Some((&kf.world_from_body, &scan.points_in_body[..], &scan.labels[..]))
+        })
     }
 
     fn serve_object_clouds(&self, robot: RobotId, ids: &[ObjectId]) -> WireMessage {
@@ -263,8 +264,8 @@ impl Tracker {
                 let o = self.graph.object(*id)?;
                 let centroid = self.graph.centroid_in_world(*id)?;
                 // The latest views that still hold a scan (older ones may have been evicted).
-                let views = o.observed_in.iter().rev().copied().filter(|k| self.graph.semantic_scan(*k).is_some());
-                let points = object_cloud(self.scans_of(views.take(MAX_VIEWS)), o.label, &centroid, &o.size, 0.3, 0.1);
+                let views = self.scans_of(o.observed_in.iter().rev().copied()).take(MAX_VIEWS);
+                let points = object_cloud(views, o.label, &centroid, &o.size, 0.3, 0.1);
                 let cloud = cloud_codec::encode(&points, self.cloud_resolution_m).map(|c| c.bytes).unwrap_or_default();
                 Some(ObjectCloud { id: *id, keyframes: o.observed_in.iter().copied().collect(), cloud })
             })

@@ -20,6 +20,11 @@ pub fn resident_mb() -> (Option<f64>, Option<f64>) {
     (status_kb(&status, "VmRSS:").map(mib), status_kb(&status, "VmHWM:").map(mib))
 }
 
+/// The resident memory at simulated time `t`, for `timing.json`.
+pub fn sample(t: f64) -> Option<MemorySample> {
+    resident_mb().0.map(|resident_mb| MemorySample { t, resident_mb })
+}
+
 fn mib(kb: u64) -> f64 {
     kb as f64 / 1024.0
 }

@@ -230,7 +230,7 @@ pub async fn replay(
         last_t = t;
         if step % report_every == 0 {
             observations.push(team.observe(t).await?);
-            memory.extend(crate::runner::sample_memory(t));
+            memory.extend(crate::memory::sample(t));
         }
         if let Some(bar) = progress {
             bar.set_position(step);

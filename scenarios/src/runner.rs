@@ -193,7 +193,7 @@ pub async fn run_recording(
                 truth.truth_from_world = robot.odometry.truth_from_world;
             }
             series.push(series_point(&last, &truths));
-            memory.extend(sample_memory(t));
+            memory.extend(crate::memory::sample(t));
         }
         if let Some(bar) = progress {
             bar.set_position(step);
@@ -226,11 +226,6 @@ pub async fn run_recording(
     };
     drop(snapshots);
     Ok(RunOutcome { record, world, maps, timing })
-}
-
-/// The resident memory now, for `timing.json`.
-pub(crate) fn sample_memory(t: f64) -> Option<crate::memory::MemorySample> {
-    crate::memory::resident_mb().0.map(|resident_mb| crate::memory::MemorySample { t, resident_mb })
 }
 
 /// Where a run keeps its snapshots: `persistence.directory`, or (when a robot crashes and none

@@ -16,6 +16,7 @@
 //! answers such a request with `RefusalReason::Unknown` ("unknown, or its cloud was evicted").
 
 use super::{KeyframeId, LabelId, SemanticScan};
+use crate::perception::point_tree::PointTree;
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
@@ -158,15 +159,19 @@ impl KeyframeCloudStore {
             changes.push((*id, Some(compact)));
         }
         // 2. Eviction: redundant scans first, then the oldest.
-        let cell = config.redundant_within_m;
-        if cell.is_finite() && cell > 0.0 {
-            let held = PositionGrid::new(cell, self.scans.keys().filter_map(|&k| Some((k, position(k)?))));
+        let radius = config.redundant_within_m;
+        if radius.is_finite() && radius > 0.0 {
+            let held: Vec<(KeyframeId, Point3<f64>)> =
+                self.scans.keys().filter_map(|&k| Some((k, Point3::from(position(k)?)))).collect();
+            let tree = PointTree::new(&held.iter().map(|(_, p)| *p).collect::<Vec<_>>());
             for id in &older {
                 if bytes <= budget {
                     return changes;
                 }
                 let Some(here) = position(*id) else { continue };
-                if held.has_newer_within(*id, &here, cell) {
+                // A keyframe newer than this one, with its scan held, within the radius.
+                let near = tree.nearest_k_within(&Point3::from(here), held.len(), radius);
+                if near.into_iter().any(|i| held[i].0 > *id) {
                     bytes -= self.evict(*id);
                     changes.push((*id, None));
                 }
@@ -219,40 +224,6 @@ fn compacted(scan: &SemanticScan, config: &CloudStoreConfig, object_class: impl 
     let (points_in_body, labels) =
         sums.into_iter().map(|(sum, n, label)| (Point3::from((sum / n as f64).cast::<f32>()), label)).unzip();
     SemanticScan { points_in_body, labels }
-}
-
-/// Keyframe positions hashed into cubes of one side, for "is there a newer one this close".
-struct PositionGrid {
-    cell: f64,
-    cells: HashMap<[i64; 3], Vec<(KeyframeId, Vector3<f64>)>>,
-}
-
-impl PositionGrid {
-    fn new(cell: f64, positions: impl Iterator<Item = (KeyframeId, Vector3<f64>)>) -> Self {
-        let mut cells: HashMap<[i64; 3], Vec<(KeyframeId, Vector3<f64>)>> = HashMap::new();
-        for (id, p) in positions {
-            cells.entry(Self::key(cell, &p)).or_default().push((id, p));
-        }
-        Self { cell, cells }
-    }
-
-    fn key(cell: f64, p: &Vector3<f64>) -> [i64; 3] {
-        [(p.x / cell).floor() as i64, (p.y / cell).floor() as i64, (p.z / cell).floor() as i64]
-    }
-
-    /// Whether a keyframe newer than `id` lies within `radius` (≤ the cell side) of `here`.
-    fn has_newer_within(&self, id: KeyframeId, here: &Vector3<f64>, radius: f64) -> bool {
-        let [x, y, z] = Self::key(self.cell, here);
-        (-1..=1).any(|dx| {
-            (-1..=1).any(|dy| {
-                (-1..=1).any(|dz| {
-                    self.cells
-                        .get(&[x + dx, y + dy, z + dz])
-                        .is_some_and(|v| v.iter().any(|(k, p)| *k > id && (p - here).norm() <= radius))
-                })
-            })
-        })
-    }
 }
 
 #[cfg(test)]
