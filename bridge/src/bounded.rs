@@ -22,6 +22,11 @@ pub fn set_max_message_bytes(bytes: usize) {
     MAX_MESSAGE_BYTES.store(bytes, Ordering::Relaxed);
 }
 
+/// The largest message accepted, bytes (`ros.max_message_bytes`).
+pub fn max_message_bytes() -> usize {
+    MAX_MESSAGE_BYTES.load(Ordering::Relaxed)
+}
+
 /// Where a message's bytes do not fit its layout.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum LayoutError {
@@ -29,6 +34,8 @@ pub enum LayoutError {
     TooLarge { len: usize, max: usize },
     #[error("field `{field}` needs {needed} bytes, {left} left")]
     Short { field: &'static str, needed: u64, left: usize },
+    #[error("field `{field}` declares {len} bytes, at most {max} accepted")]
+    FieldTooLarge { field: &'static str, len: usize, max: usize },
     #[error("{0} bytes after the last field")]
     Trailing(usize),
 }
@@ -170,7 +177,7 @@ impl Layout for std_msgs::Header {
 /// Checks `body` (a message without its 4-byte length prefix) against M's layout and
 /// `ros.max_message_bytes`.
 pub fn check<M: Layout>(body: &[u8]) -> Result<(), LayoutError> {
-    check_within::<M>(body, MAX_MESSAGE_BYTES.load(Ordering::Relaxed))
+    check_within::<M>(body, max_message_bytes())
 }
 
 /// As [`check`], with at most `max` bytes.
@@ -194,7 +201,7 @@ impl<M: rosrust::RosMsg + Layout> rosrust::RosMsg for Bounded<M> {
 
     fn decode<R: io::Read>(r: R) -> io::Result<Self> {
         // At most one byte more than accepted is read: enough to know it is too large.
-        let max = MAX_MESSAGE_BYTES.load(Ordering::Relaxed);
+        let max = max_message_bytes();
         let mut body = Vec::new();
         io::Read::read_to_end(&mut r.take(max as u64 + 1), &mut body)?;
         check::<M>(&body).map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;

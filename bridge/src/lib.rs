@@ -4,6 +4,7 @@
 
 pub mod bag;
 pub mod bounded;
+pub mod bounded_deliver;
 pub mod config;
 pub mod convert;
 pub mod error;

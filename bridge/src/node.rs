@@ -9,6 +9,7 @@
 //! wall clock; only the tick and publish loop waits on it.
 
 use crate::bounded::{Bounded, Layout};
+use crate::bounded_deliver::{BoundedDeliver, BoundedDeliverReq, BoundedDeliverRes};
 use crate::config::RosConfig;
 use crate::convert::cloud::cloud_msg;
 use crate::convert::markers::{keyframe_path, map_markers, neighbour_transforms};
@@ -221,11 +222,11 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
         let deliver_name = RosConfig::resolve(&ros.topics.deliver, &robot_name, id);
         let deliver = {
             let (comms, counts) = (comms.clone(), counts.clone());
-            rosrust::service::<sgm_msgs::Deliver, _>(&deliver_name, move |request| {
+            rosrust::service::<BoundedDeliver, _>(&deliver_name, move |request: BoundedDeliverReq| {
                 counts.received.fetch_add(1, Ordering::Relaxed);
-                comms.do_send(Delivered { bytes: request.data });
+                comms.do_send(Delivered { bytes: request.0.data });
                 // Authentication and decoding happen in Comms; receipt is all we can vouch for.
-                Ok(sgm_msgs::DeliverRes { accepted: true, reason: String::new() })
+                Ok(BoundedDeliverRes(sgm_msgs::DeliverRes { accepted: true, reason: String::new() }))
             })
             .map_err(ros_error)?
         };

@@ -1,10 +1,12 @@
 //! The ROS transport: `Comms`'s sealed envelopes over ROS 1, so robots in different processes
 //! (or machines) cooperate through one master. Broadcasts (object data) go on the team topic
 //! (`sgm_msgs/Envelope`); envelopes addressed to one robot (requests and replies) go to that
-//! robot's `sgm_msgs/Deliver` service. Sending runs on a worker thread behind a bounded queue:
-//! `Comms` never waits on the network, and a full queue drops (counted) instead of growing.
-//! The payload is the wire protocol's, MAC included: ROS adds transport, not trust.
+//! robot's `sgm_msgs/Deliver` service, read within bounds at both ends (`bounded_deliver`).
+//! Sending runs on a worker thread behind a bounded queue: `Comms` never waits on the network,
+//! and a full queue drops (counted) instead of growing. The payload is the wire protocol's,
+//! MAC included: ROS adds transport, not trust.
 
+use crate::bounded_deliver::{BoundedDeliver, BoundedDeliverReq};
 use crate::config::RosConfig;
 use crate::msg::sgm_msgs;
 use sgm_actors::transport::Transport;
@@ -34,6 +36,7 @@ impl TransportCounts {
             "send_failed": self.send_failed.load(Ordering::Relaxed),
             "queue_full": self.queue_full.load(Ordering::Relaxed),
             "received": self.received.load(Ordering::Relaxed),
+            "refused": crate::bounded_deliver::refused_requests(),
         })
     }
 }
@@ -51,18 +54,18 @@ impl RosTransport {
         let (queue, incoming) = sync_channel::<(Destination, Vec<u8>)>(SEND_QUEUE);
         let worker_counts = counts.clone();
         std::thread::spawn(move || {
-            let mut clients: BTreeMap<u16, rosrust::Client<sgm_msgs::Deliver>> = BTreeMap::new();
+            let mut clients: BTreeMap<u16, rosrust::Client<BoundedDeliver>> = BTreeMap::new();
             for (to, data) in incoming {
                 let ok = match to {
                     Destination::Robot(r) => {
                         let name = RosConfig::resolve(&deliver_template, "", r.0);
                         let client = match clients.get(&r.0) {
                             Some(c) => Ok(c.clone()),
-                            None => rosrust::client::<sgm_msgs::Deliver>(&name).inspect(|c| {
+                            None => rosrust::client::<BoundedDeliver>(&name).inspect(|c| {
                                 clients.insert(r.0, c.clone());
                             }),
                         };
-                        let request = sgm_msgs::DeliverReq { from_robot: robot.0, data };
+                        let request = BoundedDeliverReq(sgm_msgs::DeliverReq { from_robot: robot.0, data });
                         match client.map_err(|e| e.to_string()).map(|c| c.req(&request).map_err(|e| e.to_string())) {
                             Ok(Ok(Ok(_))) => true,
                             Ok(Ok(Err(refusal))) => {

@@ -6,6 +6,7 @@
 
 use rosrust::RosMsg;
 use sgm_bridge::bounded::{Bounded, Layout};
+use sgm_bridge::bounded_deliver::BoundedDeliverReq;
 use sgm_bridge::msg::{nav_msgs, sensor_msgs, sgm_msgs};
 use std::path::Path;
 
@@ -33,5 +34,6 @@ fn every_crash_input_is_refused_without_a_large_allocation() {
         let _ = refused::<sensor_msgs::CameraInfo>(&framed);
         let _ = refused::<nav_msgs::Odometry>(&framed);
         let _ = refused::<sgm_msgs::Envelope>(&framed);
+        let _ = BoundedDeliverReq::decode_slice(&framed);
     }
 }

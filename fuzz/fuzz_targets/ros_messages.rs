@@ -2,11 +2,13 @@
 //! each subscribed type — PointCloud2, Image, CameraInfo, Odometry, the team's Envelope —
 //! through `bounded::Bounded` (the layout and size check, then rosrust's decoder) and, when
 //! that accepts them, through the same checks and conversions as the live node (`Inputs`).
+//! The same bytes as a request to the node's Deliver service (`bounded_deliver`).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 use rosrust::RosMsg;
 use sgm_bridge::bounded::{Bounded, Layout};
+use sgm_bridge::bounded_deliver::BoundedDeliverReq;
 use sgm_bridge::config::RosConfig;
 use sgm_bridge::inputs::Inputs;
 use sgm_bridge::msg::{nav_msgs, sensor_msgs, sgm_msgs};
@@ -34,4 +36,5 @@ fuzz_target!(|data: &[u8]| {
         let _ = inputs.odometry(&m);
     }
     let _ = decode::<sgm_msgs::Envelope>(&framed);
+    let _ = BoundedDeliverReq::decode_slice(&framed);
 });

@@ -8,7 +8,8 @@
 //!   keyframe trajectory), the keyframe path, tf of the neighbour's world, the semantic map on
 //!   demand, and a JSON status;
 //! - refuse malformed messages (wrong field types, truncated data, unknown encodings, wrong
-//!   frame, a zero quaternion), log and count each, and keep running;
+//!   frame, a zero quaternion) and a Deliver request that declares 4 GB, log and count each,
+//!   and keep running;
 //! - exit cleanly on SIGINT.
 //!
 //! rosrust allows one node per process, so this file holds one test.
@@ -16,7 +17,7 @@
 use rosrust::RosMsg;
 use serde_json::Value;
 use sgm_bridge::convert::cloud::read_cloud;
-use sgm_bridge::msg::{nav_msgs, sensor_msgs, std_msgs, tf2_msgs, visualization_msgs};
+use sgm_bridge::msg::{nav_msgs, sensor_msgs, sgm_msgs, std_msgs, tf2_msgs, visualization_msgs};
 use sgm_model::perception::classes::ClassTable;
 use sgm_scenarios::runner::run_recording;
 use sgm_scenarios::scenario::Scenario;
@@ -215,6 +216,55 @@ impl Feed {
     }
 }
 
+/// `sgm_msgs/Deliver` as a hostile caller sends it: [`LyingRequest`] for a request.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct LyingDeliver;
+
+/// A Deliver request whose `data` declares 0xFFFF_FFF0 bytes and holds 16.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct LyingRequest;
+
+impl rosrust::Message for LyingDeliver {
+    fn msg_definition() -> String {
+        String::new()
+    }
+
+    fn md5sum() -> String {
+        <sgm_msgs::Deliver as rosrust::Message>::md5sum()
+    }
+
+    fn msg_type() -> String {
+        "sgm_msgs/Deliver".into()
+    }
+}
+
+impl RosMsg for LyingDeliver {
+    fn encode<W: std::io::Write>(&self, _: W) -> std::io::Result<()> {
+        Ok(())
+    }
+
+    fn decode<R: std::io::Read>(_: R) -> std::io::Result<Self> {
+        Ok(Self)
+    }
+}
+
+impl rosrust::ServicePair for LyingDeliver {
+    type Request = LyingRequest;
+    type Response = sgm_msgs::DeliverRes;
+}
+
+impl RosMsg for LyingRequest {
+    fn encode<W: std::io::Write>(&self, mut w: W) -> std::io::Result<()> {
+        w.write_all(&9u16.to_le_bytes())?;
+        w.write_all(&0xFFFF_FFF0u32.to_le_bytes())?;
+        w.write_all(&[0; 16])
+    }
+
+    fn decode<R: std::io::Read>(_: R) -> std::io::Result<Self> {
+        Ok(Self)
+    }
+}
+
 /// Every message of `bags` as (record time ns, topic, bytes), in record-time order.
 fn bag_messages(bags: &[PathBuf]) -> Vec<(u64, String, Vec<u8>)> {
     let mut all = Vec::new();
@@ -408,6 +458,22 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
         assert!(log.contains(reason), "alpha's log names {reason:?}:\n{log}");
     }
     assert_eq!(log.matches("message refused").count(), 6, "{log}");
+
+    // A Deliver request whose `data` declares 4 GB, of which 16 bytes come: refused before
+    // anything is reserved (rosrust's own decoder reserves the 4 GB and waits for the rest, so
+    // the caller would get no answer at all), logged and counted; alpha keeps running.
+    let service = format!("/sgm/robot_{}/deliver", after["id"]);
+    let client = rosrust::client::<LyingDeliver>(&service).expect("alpha's Deliver service");
+    let (answered, answer) = std::sync::mpsc::channel();
+    std::thread::spawn(move || answered.send(client.req(&LyingRequest).map_err(|e| e.to_string())));
+    // The refusal reaches the caller as rosrust's failure reply or, with the unread bytes still
+    // in the socket, as a connection reset.
+    let reply = answer.recv_timeout(Duration::from_secs(20)).expect("alpha answers a lying Deliver request");
+    assert!(!matches!(reply, Ok(Ok(_))), "alpha took a request declaring 4 GB: {reply:?}");
+    statuses.wait_for("alpha", 20, "the refused request counted", |s| s["transport"]["refused"] == 1);
+    assert!(nodes.running("alpha"), "alpha died on a lying Deliver request");
+    let log = nodes.log("alpha");
+    assert!(log.contains("Deliver request refused: field `data` declares 4294967280 bytes"), "{log}");
 
     // Shut down (each writes its snapshot on SIGINT) and start alpha again: it resumes with
     // its map and its alignment, before any new sensor input.

@@ -328,11 +328,12 @@ fn code_value(name: &str) -> Option<f64> {
         "RetryConfig::timeout_s" => retry.timeout_s,
         "RetryConfig::backoff" => retry.backoff,
         "RetryConfig::max_retries" => f64::from(retry.max_retries),
+        "RosConfig::max_message_bytes" => sgm_bridge::config::RosConfig::default().max_message_bytes as f64,
         _ => return None,
     })
 }
 
-const LIMIT_NAMES: [&str; 23] = [
+const LIMIT_NAMES: [&str; 24] = [
     "PROTOCOL_VERSION",
     "MAC_BYTES",
     "WireLimits::max_envelope_bytes",
@@ -356,6 +357,7 @@ const LIMIT_NAMES: [&str; 23] = [
     "RetryConfig::timeout_s",
     "RetryConfig::backoff",
     "RetryConfig::max_retries",
+    "RosConfig::max_message_bytes",
 ];
 
 #[test]
