@@ -260,6 +260,8 @@ fn init_logging(command: &Command) {
 }
 
 fn main() -> ExitCode {
+    // Before the first allocation that matters: resident memory then follows what is held.
+    sgm_scenarios::memory::keep_large_blocks_out_of_the_heap();
     let cli = Cli::parse();
     init_logging(&cli.command);
     match cli.command {
