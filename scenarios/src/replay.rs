@@ -230,6 +230,7 @@ pub async fn replay(
         last_t = t;
         if step % report_every == 0 {
             observations.push(team.observe(t).await?);
+            crate::memory::release_free_pages();
             memory.extend(crate::memory::sample(t));
         }
         if let Some(bar) = progress {

@@ -193,6 +193,7 @@ pub async fn run_recording(
                 truth.truth_from_world = robot.odometry.truth_from_world;
             }
             series.push(series_point(&last, &truths));
+            crate::memory::release_free_pages();
             memory.extend(crate::memory::sample(t));
         }
         if let Some(bar) = progress {
