@@ -1,5 +1,6 @@
-//! `memory::keep_large_blocks_out_of_the_heap`, in a process of its own (the setting is
-//! process-wide): a large block freed no longer pulls the blocks after it into the heap.
+//! `memory::keep_large_blocks_out_of_the_heap` and `memory::release_free_pages`, in a process of
+//! their own and in one test (both act on the whole process): a large block freed no longer pulls
+//! the blocks after it into the heap, and the holes freed blocks leave are given back.
 
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 #[test]
@@ -27,4 +28,17 @@ fn a_freed_large_block_leaves_the_next_ones_their_own_mappings() {
     );
     drop(scan);
     assert!(mapped() < with_scan, "freeing the block did not unmap it");
+
+    // 512 heap blocks of 64 KiB; every other one freed leaves 16 MiB of holes between blocks
+    // still held, which glibc keeps resident until it is asked to give them back.
+    let resident = || sgm_scenarios::memory::resident_mb().0.expect("/proc/self/status");
+    let mut blocks: Vec<Option<Vec<u8>>> = (0..512).map(|i| Some(vec![i as u8; 64 * 1024])).collect();
+    for block in blocks.iter_mut().step_by(2) {
+        drop(block.take());
+    }
+    let freed = resident();
+    assert!(sgm_scenarios::memory::release_free_pages(), "nothing was given back");
+    let released = resident();
+    assert!(freed - released >= 12.0, "16 MiB of holes: {freed:.1} MiB resident, then {released:.1} MiB");
+    drop(std::hint::black_box(blocks));
 }
