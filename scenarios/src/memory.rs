@@ -2,8 +2,8 @@
 //! the program holds from glibc's `mallinfo2`. The runner samples both at every observation and
 //! keeps them in `timing.json`, beside the wall times, because like them they vary from run to
 //! run (the allocator, the thread count). The deterministic counterpart is the clouds each map
-//! holds (`report.json`). [`keep_large_blocks_out_of_the_heap`] is the allocator setting that
-//! keeps resident memory as flat as what is held.
+//! holds (`report.json`). Two allocator calls keep resident memory as flat as what is held:
+//! [`keep_large_blocks_out_of_the_heap`] at start, and [`release_free_pages`] at every observation.
 
 use serde::Serialize;
 
