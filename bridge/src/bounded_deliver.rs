@@ -65,22 +65,18 @@ impl rosrust::ServicePair for BoundedDeliver {
     type Response = BoundedDeliverRes;
 }
 
-fn refused(kind: io::ErrorKind, e: LayoutError) -> io::Error {
-    io::Error::new(kind, e)
-}
-
 /// A u32 length prefix, then that many bytes of `field`; at most `max` of them.
 fn read_counted<R: Read>(mut r: R, field: &'static str, max: usize) -> io::Result<Vec<u8>> {
     let declared = u32::decode(&mut r)?;
     let len = usize::try_from(declared).unwrap_or(usize::MAX);
     if len > max {
-        return Err(refused(io::ErrorKind::InvalidData, LayoutError::FieldTooLarge { field, len, max }));
+        return Err(io::Error::new(io::ErrorKind::InvalidData, LayoutError::FieldTooLarge { field, len, max }));
     }
     let mut bytes = Vec::new();
     r.take(u64::from(declared)).read_to_end(&mut bytes)?;
     if bytes.len() < len {
         let e = LayoutError::Short { field, needed: u64::from(declared), left: bytes.len() };
-        return Err(refused(io::ErrorKind::UnexpectedEof, e));
+        return Err(io::Error::new(io::ErrorKind::UnexpectedEof, e));
     }
     Ok(bytes)
 }
