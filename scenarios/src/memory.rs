@@ -3,9 +3,12 @@
 //! keeps them in `timing.json`, beside the wall times, because like them they vary from run to
 //! run (the allocator, the thread count). The deterministic counterpart is the clouds each map
 //! holds (`report.json`). Two allocator calls keep resident memory as flat as what is held:
-//! [`keep_large_blocks_out_of_the_heap`] at start, and [`release_free_pages`] at every observation.
+//! [`keep_large_blocks_out_of_the_heap`] at start, and [`release_free_pages`] at every observation
+//! (in `sgm ros`, every [`RELEASE_INTERVAL`] through [`release_free_pages_every`]).
 
 use serde::Serialize;
+use std::sync::mpsc::{self, RecvTimeoutError};
+use std::time::Duration;
 
 /// Resident memory at one time of the run.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -89,6 +92,40 @@ pub fn release_free_pages() -> bool {
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 pub fn release_free_pages() -> bool {
     false
+}
+
+/// Calls [`release_free_pages`] every `interval` on a thread of its own, until the returned guard
+/// is dropped. For a program without observations to hang the call on: `sgm ros` runs for hours
+/// on wall time, and gives the pages back every [`RELEASE_INTERVAL`].
+pub fn release_free_pages_every(interval: Duration) -> std::io::Result<PeriodicRelease> {
+    let (stop, stopped) = mpsc::channel::<()>();
+    let thread = std::thread::Builder::new().name("sgm-release-pages".into()).spawn(move || {
+        // Dropping the guard disconnects the channel and ends the wait at once.
+        while let Err(RecvTimeoutError::Timeout) = stopped.recv_timeout(interval) {
+            release_free_pages();
+        }
+    })?;
+    Ok(PeriodicRelease { stop: Some(stop), thread: Some(thread) })
+}
+
+/// How often `sgm ros` gives free pages back: the runner's default observation interval
+/// (`scenario.report_interval_s`), in wall time.
+pub const RELEASE_INTERVAL: Duration = Duration::from_secs(10);
+
+/// The thread of [`release_free_pages_every`]; dropping it stops the thread and waits for it.
+pub struct PeriodicRelease {
+    stop: Option<mpsc::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Drop for PeriodicRelease {
+    fn drop(&mut self) {
+        drop(self.stop.take());
+        if let Some(thread) = self.thread.take() {
+            // The thread only calls malloc_trim; a panic there has nothing to hand on.
+            let _ = thread.join();
+        }
+    }
 }
 
 fn mib(kb: u64) -> f64 {

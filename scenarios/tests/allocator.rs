@@ -1,6 +1,7 @@
 //! `memory::keep_large_blocks_out_of_the_heap` and `memory::release_free_pages`, in a process of
 //! their own and in one test (both act on the whole process): a large block freed no longer pulls
-//! the blocks after it into the heap, and the holes freed blocks leave are given back.
+//! the blocks after it into the heap, and the holes freed blocks leave are given back, by one call
+//! and by `memory::release_free_pages_every`'s thread.
 
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 #[test]
@@ -40,5 +41,30 @@ fn a_freed_large_block_leaves_the_next_ones_their_own_mappings() {
     assert!(sgm_scenarios::memory::release_free_pages(), "nothing was given back");
     let released = resident();
     assert!(freed - released >= 12.0, "16 MiB of holes: {freed:.1} MiB resident, then {released:.1} MiB");
+
+    // The same holes made again, with the periodic release (what `sgm ros` runs) doing the call.
+    for (i, block) in blocks.iter_mut().enumerate().step_by(2) {
+        *block = Some(vec![i as u8; 64 * 1024]);
+    }
+    {
+        let _release =
+            sgm_scenarios::memory::release_free_pages_every(std::time::Duration::from_millis(20)).expect("a thread");
+        for block in blocks.iter_mut().step_by(2) {
+            drop(block.take());
+        }
+        let freed = resident();
+        // Polled, not timed: the thread gives the pages back within its first few periods.
+        let released = (0..500)
+            .map(|_| {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+                resident()
+            })
+            .find(|&now| freed - now >= 12.0);
+        assert!(
+            released.is_some(),
+            "the periodic release gave nothing back in 10 s: {freed:.1} MiB resident, then {:.1} MiB",
+            resident()
+        );
+    }
     drop(std::hint::black_box(blocks));
 }

@@ -29,6 +29,9 @@ pub fn execute(options: Options) -> Result<()> {
     if let Some(id) = options.id {
         config.robot.robot.id = id;
     }
+    // The node runs for hours on wall time, with no observations to give free pages back at.
+    let _release = sgm_scenarios::memory::release_free_pages_every(sgm_scenarios::memory::RELEASE_INTERVAL)
+        .context("starting the thread that gives free memory back")?;
     node::run(config)?;
     Ok(())
 }
