@@ -1,7 +1,8 @@
-//! `memory::keep_large_blocks_out_of_the_heap` and `memory::release_free_pages`, in a process of
-//! their own and in one test (both act on the whole process): a large block freed no longer pulls
-//! the blocks after it into the heap, and the holes freed blocks leave are given back, by one call
-//! and by `memory::release_free_pages_every`'s thread.
+//! `memory::heap_mb`, `memory::keep_large_blocks_out_of_the_heap` and `memory::release_free_pages`,
+//! in a process of their own and in one test (each reads or acts on the whole process): what is
+//! held is counted, a large block freed no longer pulls the blocks after it into the heap, and
+//! the holes freed blocks leave are given back, by one call and by
+//! `memory::release_free_pages_every`'s thread.
 
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 #[test]
@@ -13,6 +14,15 @@ fn a_freed_large_block_leaves_the_next_ones_their_own_mappings() {
         // SAFETY: mallinfo2 only reads the allocator's counters.
         unsafe { libc::mallinfo2() }.hblkhd
     }
+
+    // heap_mb counts a block while it is held (read here, where no other test allocates).
+    let heap = || sgm_scenarios::memory::heap_mb().expect("mallinfo2 with glibc");
+    let before = heap();
+    let block = std::hint::black_box(vec![1u8; 64 << 20]);
+    let held = heap();
+    assert!(held - before >= 63.0, "{before} MiB, then {held} MiB with 64 MiB held");
+    drop(block);
+    assert!(heap() < held - 63.0, "freeing 64 MiB left {} MiB held", heap());
 
     assert!(std::env::var_os("MALLOC_MMAP_THRESHOLD_").is_none(), "run without MALLOC_MMAP_THRESHOLD_");
     assert!(keep_large_blocks_out_of_the_heap());
