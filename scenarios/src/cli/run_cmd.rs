@@ -108,7 +108,7 @@ pub fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
     let total: u64 = report.messages.values().map(|m| m.bytes_total).sum();
     let _ = writeln!(
         s,
-        "radio: {:.1} KB sent, {:.3} % of raw point-cloud sharing ({:.1} MB)",
+        "radio: {:.1} KiB sent, {:.3} % of raw point-cloud sharing ({:.1} MiB)",
         total as f64 / 1024.0,
         report.bytes_ratio_to_raw * 100.0,
         report.point_cloud_raw.bytes_total as f64 / 1024.0 / 1024.0

@@ -139,7 +139,7 @@ pub fn render(report: &Report, timing: &Timing) -> String {
             a.rotation_error_deg.map_or("—".into(), |v| format!("{v:.2}"))
         );
     }
-    let _ = writeln!(s, "\n## Messages (paper Table 4 layout; whole team)\n\n| message | count | mean (KB) | max (KB) | total (KB) |\n|---|---|---|---|---|");
+    let _ = writeln!(s, "\n## Messages (paper Table 4 layout; whole team)\n\n| message | count | mean (KiB) | max (KiB) | total (KiB) |\n|---|---|---|---|---|");
     let mut row = |name: &str, m: &MessageRow| {
         let (mean, max, total) = (kib(m.bytes_mean), kib(m.bytes_max as f64), kib(m.bytes_total as f64));
         let _ = writeln!(s, "| {name} | {} | {mean} | {max} | {total} |", m.count);
