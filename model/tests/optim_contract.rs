@@ -226,20 +226,21 @@ mod marginals_and_incremental {
     use sgm_model::optim::marginals::marginal_covariances;
     use sgm_model::optim::solver::{Optimizer, Structure};
 
-    fn tiny_grid() -> Graph3 {
-        let path =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/posegraph/3d/tinyGrid3D.g2o");
+    fn grid(name: &str) -> Graph3 {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/posegraph/3d").join(name);
         let text = std::fs::read_to_string(path).expect("shared data beside the repo");
         let G2oGraph::Spatial(mut g) = read_g2o(&[&text]).unwrap() else { panic!("3-D") };
         g.add_prior_at_current(0, GTSAM_PRIOR_SIGMAS_3D);
         g
     }
 
-    #[test]
-    fn marginals_equal_the_dense_inverse_of_the_stacked_jacobian() {
-        let mut g = tiny_grid();
-        optimize(&mut g, &LmParams::default()).unwrap();
-        // Independent dense H = Jᵀ J from the factor Jacobians.
+    fn tiny_grid() -> Graph3 {
+        grid("tinyGrid3D.g2o")
+    }
+
+    /// Each requested pose's covariance against the dense inverse of H = Jᵀ J built here from the
+    /// factor Jacobians, the poses asked for in the order given.
+    fn check_against_the_dense_inverse(g: &Graph3, asked: &[usize]) {
         let n = g.values.len() * 6;
         let rows = (g.betweens.len() + g.priors.len()) * 6;
         let mut j = DMatrix::<f64>::zeros(rows, n);
@@ -253,14 +254,32 @@ mod marginals_and_incremental {
             j.view_mut(((g.betweens.len() + k) * 6, p.variable * 6), (6, 6)).copy_from(&jp);
         }
         let dense = (j.transpose() * &j).try_inverse().expect("anchored graph");
-        let structure = Structure::new(&g).unwrap();
-        let all: Vec<usize> = (0..g.values.len()).collect();
-        let cov = marginal_covariances(&g, &structure, &all).unwrap();
-        for (k, c) in cov.iter().enumerate() {
+        let structure = Structure::new(g).unwrap();
+        let cov = marginal_covariances(g, &structure, asked).unwrap();
+        assert_eq!(cov.len(), asked.len());
+        for (c, &k) in cov.iter().zip(asked) {
             let reference = dense.view((k * 6, k * 6), (6, 6));
             assert!((c - reference).norm() < 1e-9 * reference.norm().max(1e-12), "pose {k}: {c} vs {reference}");
             assert!(c.symmetric_eigenvalues().min() > 0.0);
         }
+    }
+
+    #[test]
+    fn marginals_equal_the_dense_inverse_of_the_stacked_jacobian() {
+        let mut g = tiny_grid();
+        optimize(&mut g, &LmParams::default()).unwrap();
+        check_against_the_dense_inverse(&g, &(0..g.values.len()).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn marginals_of_more_poses_than_one_batch_equal_the_dense_inverse() {
+        // smallGrid3D's 125 poses: four batches of 32, asked for newest first and one twice.
+        let mut g = grid("smallGrid3D.g2o");
+        optimize(&mut g, &LmParams::default()).unwrap();
+        let mut asked: Vec<usize> = (0..g.values.len()).rev().collect();
+        asked.push(40);
+        assert!(asked.len() > 3 * 32);
+        check_against_the_dense_inverse(&g, &asked);
     }
 
     #[test]

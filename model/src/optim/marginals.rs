@@ -1,8 +1,8 @@
 //! Marginal covariances of selected poses, from the sparse Cholesky factorisation of the
 //! information matrix H = Jᵀ J at the current estimate (Gauss–Newton approximation, as GTSAM's
 //! `Marginals`): the covariance of pose k is the k-th diagonal D × D block of H⁻¹, obtained by
-//! solving H X = E_k for the D unit columns E_k of that block — D sparse triangular solve pairs
-//! per pose, never a dense inverse. Covariances are in the tangent space of the pose's right
+//! solving H X = E_k for the D unit columns E_k of that block — a pair of sparse triangular
+//! solves per column, the columns of 32 poses at once, never a dense inverse. Covariances are in the tangent space of the pose's right
 //! perturbation (x ⊕ δ = x · Exp(δ)), the chart of the factors. Sent with keyframe responses.
 
 use super::graph::PoseGraph;
@@ -13,6 +13,12 @@ use faer::sparse::linalg::solvers::Llt;
 use faer::sparse::SparseColMatRef;
 use faer::{Conj, MatMut, Side};
 use nalgebra::SMatrix;
+
+/// Variables whose columns are solved for in one pass over the factor. Six columns at a time
+/// leave the supernodes' dense kernels mostly idle; 32 variables (192 columns) keep the buffer
+/// at n × 192 values (37 MB for 4 000 poses) and are measured by `cargo bench -p sgm-model
+/// --bench marginals`.
+const SOLVED_TOGETHER: usize = 32;
 
 /// Covariances of `variables` (indices into `graph.values`); a fixed variable has zero
 /// covariance. `structure` must fit `graph` (see [`Structure::fits`]).
@@ -38,19 +44,28 @@ pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
     let llt = Llt::try_new_with_symbolic(structure.symbolic_llt().clone(), matrix, Side::Upper)
         .map_err(|_| SolveError::Singular)?;
     let n = g.len();
-    let mut out = Vec::with_capacity(variables.len());
-    for &v in variables {
-        let Some(block) = structure.block_of.get(v).copied().flatten() else {
-            out.push(SMatrix::zeros());
-            continue;
-        };
-        // D right-hand sides at once: the unit columns of this block.
-        let mut rhs = vec![0.0; n * D];
-        for k in 0..D {
-            rhs[k * n + block * D + k] = 1.0;
+    let mut out = vec![SMatrix::zeros(); variables.len()];
+    // (output slot, block) of each free variable; a fixed one keeps its zero covariance.
+    let free: Vec<(usize, usize)> = variables
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &v)| structure.block_of.get(v).copied().flatten().map(|block| (i, block)))
+        .collect();
+    let mut rhs = Vec::new();
+    for chunk in free.chunks(SOLVED_TOGETHER) {
+        // D right-hand sides per variable, the unit columns of its block, all in one solve.
+        let width = chunk.len() * D;
+        rhs.clear();
+        rhs.resize(n * width, 0.0);
+        for (j, &(_, block)) in chunk.iter().enumerate() {
+            for k in 0..D {
+                rhs[(j * D + k) * n + block * D + k] = 1.0;
+            }
         }
-        llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(&mut rhs, n, D));
-        out.push(SMatrix::<f64, D, D>::from_fn(|r, c| rhs[c * n + block * D + r]));
+        llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(&mut rhs, n, width));
+        for (j, &(i, block)) in chunk.iter().enumerate() {
+            out[i] = SMatrix::<f64, D, D>::from_fn(|r, c| rhs[(j * D + c) * n + block * D + r]);
+        }
     }
     Ok(out)
 }
