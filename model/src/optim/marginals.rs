@@ -2,8 +2,9 @@
 //! information matrix H = Jᵀ J at the current estimate (Gauss–Newton approximation, as GTSAM's
 //! `Marginals`): the covariance of pose k is the k-th diagonal D × D block of H⁻¹, obtained by
 //! solving H X = E_k for the D unit columns E_k of that block — a pair of sparse triangular
-//! solves per column, the columns of 32 poses at once, never a dense inverse. Covariances are in the tangent space of the pose's right
-//! perturbation (x ⊕ δ = x · Exp(δ)), the chart of the factors. Sent with keyframe responses.
+//! solves per column, the columns of 32 poses at once, never a dense inverse. Covariances are in
+//! the tangent space of the pose's right perturbation (x ⊕ δ = x · Exp(δ)), the chart of the
+//! factors. Sent with keyframe responses.
 
 use super::graph::PoseGraph;
 use super::manifold::Manifold;
