@@ -80,8 +80,8 @@ pub fn keep_large_blocks_out_of_the_heap() -> bool {
 /// lie in its heaps; returns whether any were. The runner calls it at every observation.
 ///
 /// Freed blocks leave holes that glibc keeps resident: in 1200 s of the endurance scenario, while
-/// what the program held stayed flat, the gap between resident
-/// memory and what is held grew from 19 to 56 MiB, with the mmap threshold fixed
+/// what the program held stayed flat, the gap between resident memory and what is held grew from
+/// 19 to 56 MiB, with the mmap threshold fixed
 /// ([`keep_large_blocks_out_of_the_heap`]). A trim costs a walk over the free lists.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 pub fn release_free_pages() -> bool {
