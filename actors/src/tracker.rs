@@ -22,7 +22,8 @@ use sgm_model::scene_graph::{
 };
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{
-    pack_covariance, KeyframeRefusal, KeyframeResponse, ObjectCloud, ObjectCloudResponse, RefusalReason, WirePose,
+    expand_covariance, pack_covariance, KeyframeRefusal, KeyframeResponse, ObjectCloud, ObjectCloudResponse,
+    RefusalReason, WirePose,
 };
 use sgm_model::wire::Message as WireMessage;
 use std::collections::BTreeMap;
@@ -101,7 +102,9 @@ pub struct Tracker {
     next_keyframe: u32,
     /// Odometry pose of the latest keyframe (for increments).
     last_odometry: Option<(KeyframeId, Pose3)>,
-    covariances: BTreeMap<KeyframeId, Matrix6<f64>>,
+    /// The latest marginal covariance of each keyframe, as served: the wire's packed upper
+    /// triangle (84 bytes, not a 288-byte `Matrix6<f64>`; one per keyframe, kept for hours).
+    covariances: BTreeMap<KeyframeId, [f32; 21]>,
     /// Stamp of the latest loop-closure attempt.
     last_loop_attempt: Option<f64>,
 }
@@ -140,7 +143,7 @@ impl Tracker {
             objects: self.objects.clone(),
             next_keyframe: self.next_keyframe,
             last_odometry: self.last_odometry,
-            covariances: self.covariances.clone(),
+            covariances: self.covariances.iter().map(|(k, p)| (*k, expand_covariance(p))).collect(),
             last_loop_attempt: self.last_loop_attempt,
         }
     }
@@ -152,7 +155,7 @@ impl Tracker {
         self.graph = state.graph;
         self.objects = state.objects;
         self.last_odometry = state.last_odometry;
-        self.covariances = state.covariances;
+        self.covariances = state.covariances.iter().map(|(k, m)| (*k, pack_covariance(m))).collect();
         self.last_loop_attempt = state.last_loop_attempt;
         self
     }
@@ -279,16 +282,14 @@ impl Tracker {
         let scan = self.graph.semantic_scan(id)?;
         let points: Vec<Point3<f64>> = scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
         let cloud = cloud_codec::encode(&points, self.cloud_resolution_m).ok()?.bytes;
-        let covariance = self
-            .covariances
-            .get(&id)
-            .copied()
-            .unwrap_or_else(|| self.odometry_information.try_inverse().unwrap_or_else(Matrix6::identity));
+        let covariance = self.covariances.get(&id).copied().unwrap_or_else(|| {
+            pack_covariance(&self.odometry_information.try_inverse().unwrap_or_else(Matrix6::identity))
+        });
         Some(WireMessage::KeyframeResponse(KeyframeResponse {
             keyframe: id,
             stamp: kf.stamp,
             world_from_body: WirePose::from(&kf.world_from_body),
-            covariance: pack_covariance(&covariance),
+            covariance,
             cloud,
         }))
     }
@@ -330,7 +331,7 @@ impl Handler<PosesOptimised> for Tracker {
                 tracing::warn!(robot = %self.robot, "optimised poses not applied: {e}");
                 return;
             }
-            self.covariances.extend(msg.covariances);
+            self.covariances.extend(msg.covariances.iter().map(|(k, m)| (*k, pack_covariance(m))));
             self.publish_objects();
         });
     }

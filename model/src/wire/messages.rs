@@ -277,8 +277,9 @@ pub fn pack_covariance(m: &Matrix6<f64>) -> [f32; 21] {
     out
 }
 
-/// Unpacks [`pack_covariance`]; `None` unless finite, symmetric positive definite.
-pub fn unpack_covariance(packed: &[f32; 21]) -> Option<Matrix6<f64>> {
+/// The symmetric matrix whose upper triangle [`pack_covariance`] packed, unchecked: for data
+/// this process packed itself (`pack_covariance(&expand_covariance(&p)) == p`).
+pub fn expand_covariance(packed: &[f32; 21]) -> Matrix6<f64> {
     let mut m = Matrix6::zeros();
     let mut k = 0;
     for i in 0..6 {
@@ -288,6 +289,12 @@ pub fn unpack_covariance(packed: &[f32; 21]) -> Option<Matrix6<f64>> {
             k += 1;
         }
     }
+    m
+}
+
+/// Unpacks [`pack_covariance`] from outside; `None` unless finite, symmetric positive definite.
+pub fn unpack_covariance(packed: &[f32; 21]) -> Option<Matrix6<f64>> {
+    let m = expand_covariance(packed);
     (m.iter().all(|v| v.is_finite()) && m.cholesky().is_some()).then_some(m)
 }
 
@@ -339,5 +346,8 @@ mod tests {
         let unpacked = unpack_covariance(&pack_covariance(&cov)).unwrap();
         assert!((unpacked - cov).abs().max() < 1e-6);
         assert_eq!(unpack_covariance(&[0.0; 21]), None);
+        let packed = pack_covariance(&cov);
+        assert_eq!(pack_covariance(&expand_covariance(&packed)), packed);
+        assert_eq!(expand_covariance(&packed).transpose(), expand_covariance(&packed));
     }
 }
