@@ -173,6 +173,10 @@ pub struct ScanContextSection {
     /// Correspondence distance of the coarse ICP stage from the descriptor's yaw, m (the
     /// fine stage uses `icp.max_correspondence_distance_m`). Default 5.
     pub coarse_correspondence_m: f64,
+    /// Descriptors kept at most: ours, and each neighbour's. Beyond it every second one is
+    /// dropped (in keyframe order, the newest kept), so what stays spans the whole run, thinner
+    /// the older it is. A 20 × 60 descriptor is 4.8 KB. Default 1000.
+    pub max_places: usize,
 }
 
 impl Default for ScanContextSection {
@@ -182,6 +186,7 @@ impl Default for ScanContextSection {
             max_distance: 0.13,
             ring_key_candidates: 10,
             coarse_correspondence_m: 5.0,
+            max_places: 1000,
         }
     }
 }
@@ -496,6 +501,7 @@ impl RobotConfig {
         check(c >= 1, "matcher.scan_context.ring_key_candidates", c, "≥ 1")?;
         let c = sc.coarse_correspondence_m;
         check(positive(c), "matcher.scan_context.coarse_correspondence_m", c, "> 0")?;
+        check(sc.max_places >= 2, "matcher.scan_context.max_places", sc.max_places, "≥ 2")?;
         check(m.keyframe_neighbourhood <= 50, "matcher.keyframe_neighbourhood", m.keyframe_neighbourhood, "0–50")?;
         check(
             m.keyframe_voxel_m.is_finite() && (0.0..=5.0).contains(&m.keyframe_voxel_m),
@@ -628,6 +634,9 @@ mod tests {
         std::env::set_var("SGM_TEST_C__COMMS__MAX_KEYFRAMES_IN_FLIGHT", "0");
         let e = RobotConfig::load_with_env(None, "SGM_TEST_C").unwrap_err();
         assert_eq!(e.to_string(), "comms.max_keyframes_in_flight = 0: allowed ≥ 1");
+        std::env::set_var("SGM_TEST_E__MATCHER__SCAN_CONTEXT__MAX_PLACES", "1");
+        let e = RobotConfig::load_with_env(None, "SGM_TEST_E").unwrap_err();
+        assert_eq!(e.to_string(), "matcher.scan_context.max_places = 1: allowed ≥ 2");
         writeln!(file, "[comms.limits]\nbogus = 1").unwrap();
         let e = RobotConfig::load_with_env(Some(file.path()), "SGM_TEST_D").unwrap_err();
         assert!(e.to_string().contains("bogus"), "{e}");

@@ -16,7 +16,7 @@ use crate::clock::Clock;
 use crate::config::{Association, MatcherSection};
 use crate::containment::contained;
 use crate::messages::*;
-use crate::place_candidates::{PlaceCandidate, PlaceCandidates};
+use crate::place_candidates::{EvenPlaces, PlaceCandidate, PlaceCandidates};
 use crate::protocol::{Matched, Neighbour, Protocol, RetryConfig, Wait};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use nalgebra::Point3;
@@ -177,8 +177,9 @@ pub struct Matcher {
     links: Option<MatcherLinks>,
     local: LocalObjects,
     keyframes: BTreeMap<KeyframeId, LocalKeyframeData>,
-    /// Scan Context association only: each local keyframe's descriptor.
-    places: BTreeMap<KeyframeId, Place>,
+    /// Scan Context association only: our keyframes' descriptors, at most
+    /// `scan_context.max_places`, spread over the run.
+    places: EvenPlaces,
     neighbours: BTreeMap<RobotId, NeighbourEntry>,
 }
 
@@ -199,7 +200,7 @@ impl Matcher {
             links: None,
             local: LocalObjects::default(),
             keyframes: BTreeMap::new(),
-            places: BTreeMap::new(),
+            places: EvenPlaces::default(),
             neighbours: BTreeMap::new(),
         }
     }
@@ -345,6 +346,17 @@ impl Matcher {
         }
     }
 
+    /// Scan Context association: our descriptors of `dropped` are gone; no neighbour's
+    /// candidates may name them.
+    fn forget_places(&mut self, dropped: &[KeyframeId]) {
+        if dropped.is_empty() {
+            return;
+        }
+        for entry in self.neighbours.values_mut() {
+            entry.places.forget_local(dropped);
+        }
+    }
+
     /// Scan Context association: compares the descriptors not yet compared and starts an
     /// alignment round from the best candidate pair not refuted recently.
     fn try_match_places(&mut self, robot: RobotId) {
@@ -357,7 +369,7 @@ impl Matcher {
         }
         entry.last_attempt = Some(now);
         entry.match_again = false;
-        entry.places.update(&self.places, &self.config.scan_context);
+        entry.places.update(self.places.held(), &self.config.scan_context);
         let candidate = loop {
             let Some(c) = entry.places.take_best() else { return };
             let (Some(local), Some(remote)) = (self.keyframes.get(&c.local), entry.places.remote_pose(c.remote)) else {
@@ -616,7 +628,8 @@ impl Handler<LocalKeyframe> for Matcher {
                     let share = ShareDescriptor { keyframe, world_from_body, descriptor: descriptor.clone() };
                     links.share_descriptors.do_send(share);
                 }
-                self.places.insert(msg.id, Place::new(descriptor));
+                let dropped = self.places.insert(msg.id, Place::new(descriptor), self.config.scan_context.max_places);
+                self.forget_places(&dropped);
                 let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
                 for robot in robots {
                     self.try_match_places(robot);
@@ -639,6 +652,10 @@ impl Handler<LocalScansChanged> for Matcher {
                     }
                     None => {
                         self.keyframes.remove(&id);
+                        // Its descriptor could only lead to a keyframe we cannot register.
+                        if self.places.remove(id) {
+                            self.forget_places(&[id]);
+                        }
                     }
                 }
             }
@@ -655,11 +672,12 @@ impl Handler<NeighbourDescriptors> for Matcher {
             }
             let now = self.clock.now();
             let shape = (self.config.scan_context.descriptor.rings, self.config.scan_context.descriptor.sectors);
+            let max_places = self.config.scan_context.max_places;
             let entry = self.entry(msg.robot);
             // A descriptor of another shape can never match ours: not kept.
             for (id, world_from_body, descriptor) in msg.descriptors {
                 if (descriptor.rings, descriptor.sectors) == shape {
-                    entry.places.add_remote(id, world_from_body, Place::new(descriptor));
+                    entry.places.add_remote(id, world_from_body, Place::new(descriptor), max_places);
                 }
             }
             // The number of descriptors held stands in for an object-data revision.
