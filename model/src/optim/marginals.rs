@@ -1,18 +1,26 @@
 //! Marginal covariances of selected poses, from the sparse Cholesky factorisation of the
 //! information matrix H = Jᵀ J at the current estimate (Gauss–Newton approximation, as GTSAM's
-//! `Marginals`): the covariance of pose k is the k-th diagonal D × D block of H⁻¹, obtained by
-//! solving H X = E_k for the D unit columns E_k of that block — a pair of sparse triangular
-//! solves per column, the columns of 32 poses at once, never a dense inverse. Covariances are in
+//! `Marginals`): the covariance of pose k is the k-th diagonal D × D block of H⁻¹, never a
+//! dense inverse. With the factor P H Pᵀ = L Lᵀ (P the fill-reducing permutation),
+//!
+//! ```text
+//! E_kᵀ H⁻¹ E_k = (L⁻¹ P E_k)ᵀ (L⁻¹ P E_k) = Y_kᵀ Y_k,
+//! ```
+//!
+//! so one forward solve L Y_k = P E_k per block (its D unit columns; the columns of 32 poses
+//! at once) and a D × D Gram product give it: half the triangular solves of solving
+//! H X = E_k. A simplicial factor (tiny graphs) solves H X = E_k in full. Covariances are in
 //! the tangent space of the pose's right perturbation (x ⊕ δ = x · Exp(δ)), the chart of the
 //! factors. Sent with keyframe responses.
 
 use super::graph::PoseGraph;
 use super::manifold::Manifold;
 use super::solver::{assemble, least_squares, Kernel, SolveError, Structure};
-use faer::linalg::solvers::SolveCore;
-use faer::sparse::linalg::solvers::Llt;
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
+use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymbolicCholeskyRaw};
 use faer::sparse::SparseColMatRef;
-use faer::{Conj, MatMut, Side};
+use faer::{get_global_parallelism, Conj, MatMut, Side};
 use nalgebra::SMatrix;
 
 /// Variables whose columns are solved for in one pass over the factor. Six columns at a time
@@ -41,10 +49,31 @@ pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
 ) -> Result<Vec<SMatrix<f64, D, D>>, SolveError> {
     let (mut h, mut g) = (Vec::new(), Vec::new());
     assemble(graph, &graph.values, structure, kernel, &mut h, &mut g);
-    let matrix = SparseColMatRef::new(structure.symbolic_matrix().as_ref(), &h);
-    let llt = Llt::try_new_with_symbolic(structure.symbolic_llt().clone(), matrix, Side::Upper)
-        .map_err(|_| SolveError::Singular)?;
     let n = g.len();
+    let factorisation = |e: &dyn std::fmt::Debug| SolveError::Factorisation(format!("{e:?}"));
+    let symbolic: SymbolicCholesky<usize> = factorize_symbolic_cholesky(
+        structure.symbolic_matrix().as_ref(),
+        Side::Upper,
+        Default::default(),
+        Default::default(),
+    )
+    .map_err(|e| factorisation(&e))?;
+    let par = get_global_parallelism();
+    let width_max = SOLVED_TOGETHER.min(variables.len().max(1)) * D;
+    let scratch = StackReq::any_of(&[
+        symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+        symbolic.solve_in_place_scratch::<f64>(width_max, par),
+    ]);
+    let mut buffer = MemBuffer::try_new(scratch).map_err(|e| factorisation(&e))?;
+    let stack = MemStack::new(&mut buffer);
+    let mut values = vec![0.0; symbolic.len_val()];
+    let matrix = SparseColMatRef::new(structure.symbolic_matrix().as_ref(), &h);
+    symbolic
+        .factorize_numeric_llt(&mut values, matrix, Side::Upper, Default::default(), par, stack, Default::default())
+        .map_err(|_| SolveError::Singular)?;
+    // Row of P E_k's unit entry for unknown i: P moves row fwd[r] of H to row r.
+    let permuted = |i: usize| symbolic.perm().map_or(i, |p| p.arrays().1[i]);
+
     let mut out = vec![SMatrix::zeros(); variables.len()];
     // (output slot, block) of each free variable; a fixed one keeps its zero covariance.
     let free: Vec<(usize, usize)> = variables
@@ -58,14 +87,35 @@ pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
         let width = chunk.len() * D;
         rhs.clear();
         rhs.resize(n * width, 0.0);
-        for (j, &(_, block)) in chunk.iter().enumerate() {
-            for k in 0..D {
-                rhs[(j * D + k) * n + block * D + k] = 1.0;
+        match symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(supernodal) => {
+                for (j, &(_, block)) in chunk.iter().enumerate() {
+                    for k in 0..D {
+                        rhs[(j * D + k) * n + permuted(block * D + k)] = 1.0;
+                    }
+                }
+                let factor = SupernodalLltRef::new(supernodal, &values);
+                let y = MatMut::from_column_major_slice_mut(&mut rhs, n, width);
+                factor.l_solve_with_conj(Conj::No, y, par, stack);
+                for (j, &(i, _)) in chunk.iter().enumerate() {
+                    // Σ = Yᵀ Y over the block's D columns of Y.
+                    let column = |c: usize| &rhs[(j * D + c) * n..(j * D + c + 1) * n];
+                    out[i] =
+                        SMatrix::<f64, D, D>::from_fn(|r, c| column(r).iter().zip(column(c)).map(|(a, b)| a * b).sum());
+                }
             }
-        }
-        llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(&mut rhs, n, width));
-        for (j, &(i, block)) in chunk.iter().enumerate() {
-            out[i] = SMatrix::<f64, D, D>::from_fn(|r, c| rhs[(j * D + c) * n + block * D + r]);
+            SymbolicCholeskyRaw::Simplicial(_) => {
+                for (j, &(_, block)) in chunk.iter().enumerate() {
+                    for k in 0..D {
+                        rhs[(j * D + k) * n + block * D + k] = 1.0;
+                    }
+                }
+                let x = MatMut::from_column_major_slice_mut(&mut rhs, n, width);
+                LltRef::new(&symbolic, &values).solve_in_place_with_conj(Conj::No, x, par, stack);
+                for (j, &(i, block)) in chunk.iter().enumerate() {
+                    out[i] = SMatrix::<f64, D, D>::from_fn(|r, c| rhs[(j * D + c) * n + block * D + r]);
+                }
+            }
         }
     }
     Ok(out)

@@ -139,10 +139,6 @@ impl<const D: usize> Structure<D> {
         &self.symbolic_matrix
     }
 
-    pub(crate) fn symbolic_llt(&self) -> &SymbolicLlt<usize> {
-        &self.symbolic_llt
-    }
-
     /// Whether this structure still describes `graph` (same variables, fixed flags and joined
     /// pairs): then its symbolic factorisation can be reused.
     pub fn fits<G: Manifold<D>>(&self, graph: &PoseGraph<G, D>) -> bool {
