@@ -680,7 +680,7 @@ impl Handler<NeighbourDescriptors> for Matcher {
                     entry.places.add_remote(id, world_from_body, Place::new(descriptor), max_places);
                 }
             }
-            // The number of descriptors held stands in for an object-data revision.
+            // The number of keyframes the neighbour shared stands in for an object-data revision.
             let revision = u32::try_from(entry.places.remote_count()).unwrap_or(u32::MAX);
             entry.protocol = entry.protocol.take().map(|p| p.on_objects(revision, now));
             self.try_match_places(msg.robot);
