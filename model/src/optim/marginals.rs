@@ -17,10 +17,12 @@ use super::graph::PoseGraph;
 use super::manifold::Manifold;
 use super::solver::{assemble, least_squares, Kernel, SolveError, Structure};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
 use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymbolicCholeskyRaw};
 use faer::sparse::SparseColMatRef;
-use faer::{get_global_parallelism, Conj, MatMut, Side};
+use faer::{get_global_parallelism, Accum, Conj, MatMut, MatRef, Side};
 use nalgebra::SMatrix;
 
 /// Variables whose columns are solved for in one pass over the factor. Six columns at a time
@@ -82,6 +84,7 @@ pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
         .filter_map(|(i, &v)| structure.block_of.get(v).copied().flatten().map(|block| (i, block)))
         .collect();
     let mut rhs = Vec::new();
+    let mut below = Vec::new();
     for chunk in free.chunks(SOLVED_TOGETHER) {
         // D right-hand sides per variable, the unit columns of its block, all in one solve.
         let width = chunk.len() * D;
@@ -95,13 +98,12 @@ pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
                     }
                 }
                 let factor = SupernodalLltRef::new(supernodal, &values);
-                let y = MatMut::from_column_major_slice_mut(&mut rhs, n, width);
-                factor.l_solve_with_conj(Conj::No, y, par, stack);
+                forward_solve_sparse(factor, MatMut::from_column_major_slice_mut(&mut rhs, n, width), &mut below, par);
                 for (j, &(i, _)) in chunk.iter().enumerate() {
-                    // Σ = Yᵀ Y over the block's D columns of Y.
-                    let column = |c: usize| &rhs[(j * D + c) * n..(j * D + c + 1) * n];
-                    out[i] =
-                        SMatrix::<f64, D, D>::from_fn(|r, c| column(r).iter().zip(column(c)).map(|(a, b)| a * b).sum());
+                    // Σ = Yᵀ Y over the block's D columns of Y (one blocked pass over them).
+                    let y = MatRef::from_column_major_slice(&rhs[j * D * n..(j + 1) * D * n], n, D);
+                    let gram = y.transpose() * y;
+                    out[i] = SMatrix::<f64, D, D>::from_fn(|r, c| gram[(r, c)]);
                 }
             }
             SymbolicCholeskyRaw::Simplicial(_) => {
@@ -119,4 +121,40 @@ pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
         }
     }
     Ok(out)
+}
+
+/// Solves L Y = B in place for the supernodal factor L, skipping every supernode whose rows of
+/// Y are still zero there: with unit right-hand sides only the supernodes on the paths from
+/// their rows to the root of the elimination tree are touched. Otherwise as faer's
+/// `l_solve_with_conj`: per supernode, its diagonal block solves its rows, and the rows below
+/// (its pattern) take away L_below · Y_rows. `below` is scratch.
+fn forward_solve_sparse(
+    factor: SupernodalLltRef<'_, usize, f64>,
+    mut y: MatMut<'_, f64>,
+    below: &mut Vec<f64>,
+    par: faer::Par,
+) {
+    let width = y.ncols();
+    for s in 0..factor.symbolic().n_supernodes() {
+        let supernode = factor.supernode(s);
+        let l = supernode.val();
+        let size = l.ncols();
+        let (l_top, l_bottom) = l.split_at_row(size);
+        let start = supernode.start();
+        let mut rows = y.as_mut().subrows_mut(start, size);
+        if (0..width).all(|j| rows.as_ref().col(j).iter().all(|v| *v == 0.0)) {
+            continue;
+        }
+        solve_lower_triangular_in_place(l_top, rows.as_mut(), par);
+        let pattern = supernode.pattern();
+        below.clear();
+        below.resize(pattern.len() * width, 0.0);
+        let mut product = MatMut::from_column_major_slice_mut(below, pattern.len(), width);
+        matmul(product.as_mut(), Accum::Replace, l_bottom, rows.as_ref(), 1.0, par);
+        for j in 0..width {
+            for (k, &i) in pattern.iter().enumerate() {
+                y[(i, j)] -= product[(k, j)];
+            }
+        }
+    }
 }
