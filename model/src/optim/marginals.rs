@@ -25,11 +25,12 @@ use faer::sparse::SparseColMatRef;
 use faer::{get_global_parallelism, Accum, Conj, MatMut, MatRef, Side};
 use nalgebra::SMatrix;
 
-/// Variables whose columns are solved for in one pass over the factor. Six columns at a time
-/// leave the supernodes' dense kernels mostly idle; 32 variables (192 columns) keep the buffer
-/// at n × 192 values (37 MB for 4 000 poses) and are measured by `cargo bench -p sgm-model
-/// --bench marginals`.
-const SOLVED_TOGETHER: usize = 32;
+/// Variables whose columns are solved for in one pass over the factor. Fewer columns in flight
+/// leave more supernodes all zero, which [`forward_solve_sparse`] skips; more keep the dense
+/// kernels busy. `cargo bench -p sgm-model --bench marginals` (sphere2500, newest 200): 4
+/// variables (24 columns) 107 ms, 1: 117 ms, 8: 125 ms, 16: 169 ms, 32: 224 ms. The buffer is
+/// n × 24 values (2.3 MB for 2 000 poses).
+const SOLVED_TOGETHER: usize = 4;
 
 /// Covariances of `variables` (indices into `graph.values`); a fixed variable has zero
 /// covariance. `structure` must fit `graph` (see [`Structure::fits`]).
