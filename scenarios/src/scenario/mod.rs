@@ -461,9 +461,9 @@ impl Scenario {
 /// `Scenario::default()` as the bottom layer of every scenario, built once per process.
 ///
 /// `config::Config::try_from` sets it key by key and rebuilds the whole tree after each key
-/// (`Config::set` calls `refresh`). That took 10.7 ms a scenario, nearly all of
-/// `Scenario::from_toml` (release build, 200 loads of `quickstart`); merging and deserialising
-/// take 0.3 ms. The `scenario_config` fuzz target parses one scenario per input.
+/// (`Config::set` calls `refresh`): 10.8 ms, against 0.34 ms for the rest of a load of
+/// `quickstart` (release; `cargo bench -p sgm-scenarios --bench scenario_load`). The
+/// `scenario_config` fuzz target parses one scenario per input.
 fn defaults_source() -> Result<config::Config, &'static String> {
     static DEFAULTS: std::sync::OnceLock<Result<config::Config, String>> = std::sync::OnceLock::new();
     DEFAULTS.get_or_init(|| config::Config::try_from(&Scenario::default()).map_err(|e| e.to_string())).as_ref().cloned()
