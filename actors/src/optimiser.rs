@@ -20,8 +20,8 @@ use sgm_model::geometry::Pose3;
 use sgm_model::optim::factors::{Between, Prior};
 use sgm_model::optim::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
 use sgm_model::optim::marginals::marginal_covariances_with;
-use sgm_model::optim::robust::{optimize_gnc_incremental, rejection_weights, weighted};
-use sgm_model::optim::solver::{optimize, LmParams, SolveError, Structure};
+use sgm_model::optim::robust::{optimize_gnc_incremental_with, rejection_weights, weighted};
+use sgm_model::optim::solver::{least_squares, optimize_with, LmParams, SolveError, Structure};
 use sgm_model::scene_graph::{KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, RobotId};
 use std::collections::BTreeMap;
 
@@ -157,19 +157,24 @@ impl Optimiser {
         self.candidates.push(edge.kind != KeyframeEdgeKind::Odometry);
     }
 
-    /// Solves the graph; returns the between factors rejected as outliers.
-    fn solve(&mut self) -> Result<Vec<usize>, SolveError> {
+    /// Solves the graph on `structure` (built for it); returns the between factors rejected as
+    /// outliers.
+    fn solve(&mut self, structure: &Structure<6>) -> Result<Vec<usize>, SolveError> {
         let params = LmParams::default();
         if self.config.reject_outliers {
-            optimize_gnc_incremental(&mut self.graph, &params, &self.candidates, &self.rejected).map(|(_, r)| r)
+            optimize_gnc_incremental_with(&mut self.graph, &params, structure, &self.candidates, &self.rejected)
+                .map(|(_, r)| r)
         } else {
-            optimize(&mut self.graph, &params).map(|_| Vec::new())
+            optimize_with(&mut self.graph, &params, structure, &least_squares).map(|_| Vec::new())
         }
     }
 
+    /// Solves, then publishes the poses and the newest keyframes' marginal covariances. One
+    /// symbolic factorisation serves both (`cargo bench -p sgm-model --bench optimiser_cycle`).
     fn solve_and_publish(&mut self) {
-        let rejected = match self.solve() {
-            Ok(rejected) => rejected,
+        let solved = Structure::new(&self.graph).and_then(|s| Ok((self.solve(&s)?, s)));
+        let (rejected, structure) = match solved {
+            Ok(solved) => solved,
             Err(e) => {
                 tracing::warn!(robot = %self.robot, "pose graph not optimised: {e}");
                 return;
@@ -187,11 +192,8 @@ impl Optimiser {
             .collect();
         let poses: Vec<(KeyframeId, Pose3)> = local.iter().map(|(k, i)| (*k, self.graph.values[*i])).collect();
         let latest: Vec<(KeyframeId, usize)> = local.iter().rev().take(MARGINALS).copied().collect();
-        let covariances = Structure::new(&self.graph)
-            .and_then(|s| {
-                let variables: Vec<usize> = latest.iter().map(|(_, i)| *i).collect();
-                marginal_covariances_with(&self.graph, &s, &variables, &weighted(&weights))
-            })
+        let variables: Vec<usize> = latest.iter().map(|(_, i)| *i).collect();
+        let covariances = marginal_covariances_with(&self.graph, &structure, &variables, &weighted(&weights))
             .map(|c| latest.iter().map(|(k, _)| *k).zip(c).collect())
             .unwrap_or_default();
         if let Some(links) = &self.links {

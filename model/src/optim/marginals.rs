@@ -20,7 +20,7 @@ use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
-use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymbolicCholeskyRaw};
+use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholeskyRaw};
 use faer::sparse::SparseColMatRef;
 use faer::{get_global_parallelism, Accum, Conj, MatMut, MatRef, Side};
 use nalgebra::SMatrix;
@@ -54,13 +54,7 @@ pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
     assemble(graph, &graph.values, structure, kernel, &mut h, &mut g);
     let n = g.len();
     let factorisation = |e: &dyn std::fmt::Debug| SolveError::Factorisation(format!("{e:?}"));
-    let symbolic: SymbolicCholesky<usize> = factorize_symbolic_cholesky(
-        structure.symbolic_matrix().as_ref(),
-        Side::Upper,
-        Default::default(),
-        Default::default(),
-    )
-    .map_err(|e| factorisation(&e))?;
+    let symbolic = structure.symbolic();
     let par = get_global_parallelism();
     let width_max = SOLVED_TOGETHER.min(variables.len().max(1)) * D;
     let scratch = StackReq::any_of(&[
@@ -114,7 +108,7 @@ pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
                     }
                 }
                 let x = MatMut::from_column_major_slice_mut(&mut rhs, n, width);
-                LltRef::new(&symbolic, &values).solve_in_place_with_conj(Conj::No, x, par, stack);
+                LltRef::new(symbolic, &values).solve_in_place_with_conj(Conj::No, x, par, stack);
                 for (j, &(i, block)) in chunk.iter().enumerate() {
                     out[i] = SMatrix::<f64, D, D>::from_fn(|r, c| rhs[(j * D + c) * n + block * D + r]);
                 }

@@ -130,13 +130,25 @@ pub fn optimize_gnc_incremental<G: Manifold<D>, const D: usize>(
     previous: &[usize],
 ) -> Result<(Summary, Vec<usize>), SolveError> {
     let structure = Structure::new(graph)?;
+    optimize_gnc_incremental_with(graph, params, &structure, candidates, previous)
+}
+
+/// As [`optimize_gnc_incremental`], on a symbolic `structure` built for this graph's factors
+/// (the caller keeps it for the marginal covariances after the solve).
+pub fn optimize_gnc_incremental_with<G: Manifold<D>, const D: usize>(
+    graph: &mut PoseGraph<G, D>,
+    params: &LmParams,
+    structure: &Structure<D>,
+    candidates: &[bool],
+    previous: &[usize],
+) -> Result<(Summary, Vec<usize>), SolveError> {
     let c2 = chi2_99(D);
     let n = graph.betweens.len();
     let candidate = |k: usize| k < n && candidates.get(k).copied().unwrap_or(false);
     let left_out: Vec<usize> = previous.iter().copied().filter(|k| candidate(*k)).collect();
     let weights = rejection_weights(n, &left_out);
     let start = graph.values.clone();
-    let summary = optimize_with(graph, params, &structure, &weighted(&weights))?;
+    let summary = optimize_with(graph, params, structure, &weighted(&weights))?;
     let stands = squared_residuals(graph)
         .iter()
         .enumerate()
@@ -148,7 +160,7 @@ pub fn optimize_gnc_incremental<G: Manifold<D>, const D: usize>(
     }
     graph.values = start;
     let mask: Vec<bool> = (0..graph.betweens.len()).map(candidate).collect();
-    gnc_tls(graph, params, &structure, c2, &mask)
+    gnc_tls(graph, params, structure, c2, &mask)
 }
 
 fn gnc_tls<G: Manifold<D>, const D: usize>(
