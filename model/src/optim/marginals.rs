@@ -16,13 +16,11 @@
 use super::graph::PoseGraph;
 use super::manifold::Manifold;
 use super::solver::{assemble, least_squares, Kernel, SolveError, Structure};
-use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
-use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholeskyRaw};
-use faer::sparse::SparseColMatRef;
-use faer::{get_global_parallelism, Accum, Conj, MatMut, MatRef, Side};
+use faer::sparse::linalg::cholesky::SymbolicCholeskyRaw;
+use faer::{get_global_parallelism, Accum, MatMut, MatRef};
 use nalgebra::SMatrix;
 
 /// Variables whose columns are solved for in one pass over the factor. Fewer columns in flight
@@ -53,21 +51,10 @@ pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
     let (mut h, mut g) = (Vec::new(), Vec::new());
     assemble(graph, &graph.values, structure, kernel, &mut h, &mut g);
     let n = g.len();
-    let factorisation = |e: &dyn std::fmt::Debug| SolveError::Factorisation(format!("{e:?}"));
     let symbolic = structure.symbolic();
     let par = get_global_parallelism();
-    let width_max = SOLVED_TOGETHER.min(variables.len().max(1)) * D;
-    let scratch = StackReq::any_of(&[
-        symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
-        symbolic.solve_in_place_scratch::<f64>(width_max, par),
-    ]);
-    let mut buffer = MemBuffer::try_new(scratch).map_err(|e| factorisation(&e))?;
-    let stack = MemStack::new(&mut buffer);
-    let mut values = vec![0.0; symbolic.len_val()];
-    let matrix = SparseColMatRef::new(structure.symbolic_matrix().as_ref(), &h);
-    symbolic
-        .factorize_numeric_llt(&mut values, matrix, Side::Upper, Default::default(), par, stack, Default::default())
-        .map_err(|_| SolveError::Singular)?;
+    let mut factor = structure.numeric_factor(SOLVED_TOGETHER.min(variables.len().max(1)) * D)?;
+    structure.factorize(&h, &mut factor)?;
     // Row of P E_k's unit entry for unknown i: P moves row fwd[r] of H to row r.
     let permuted = |i: usize| symbolic.perm().map_or(i, |p| p.arrays().1[i]);
 
@@ -92,7 +79,7 @@ pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
                         rhs[(j * D + k) * n + permuted(block * D + k)] = 1.0;
                     }
                 }
-                let factor = SupernodalLltRef::new(supernodal, &values);
+                let factor = SupernodalLltRef::new(supernodal, &factor.values);
                 forward_solve_sparse(factor, MatMut::from_column_major_slice_mut(&mut rhs, n, width), &mut below, par);
                 for (j, &(i, _)) in chunk.iter().enumerate() {
                     // Σ = Yᵀ Y over the block's D columns of Y (one blocked pass over them).
@@ -108,7 +95,7 @@ pub fn marginal_covariances_with<G: Manifold<D>, const D: usize>(
                     }
                 }
                 let x = MatMut::from_column_major_slice_mut(&mut rhs, n, width);
-                LltRef::new(symbolic, &values).solve_in_place_with_conj(Conj::No, x, par, stack);
+                structure.solve_in_place(&mut factor, x);
                 for (j, &(i, block)) in chunk.iter().enumerate() {
                     out[i] = SMatrix::<f64, D, D>::from_fn(|r, c| rhs[(j * D + c) * n + block * D + r]);
                 }

@@ -12,7 +12,7 @@
 
 use super::graph::PoseGraph;
 use super::manifold::Manifold;
-use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{get_global_parallelism, Conj, MatMut, Side};
@@ -66,6 +66,13 @@ pub enum SolveError {
     NonFinite,
     #[error("sparse factorisation failed: {0}")]
     Factorisation(String),
+}
+
+/// The numeric Cholesky factor L of a matrix on a [`Structure`]'s pattern, with the scratch to
+/// compute it and solve with it: allocated once per optimisation, not per damped solve.
+pub(crate) struct NumericFactor {
+    pub(crate) values: Vec<f64>,
+    scratch: MemBuffer,
 }
 
 /// Block sparsity of H and the symbolic factorisation for it: built once per graph shape and
@@ -138,13 +145,50 @@ impl<const D: usize> Structure<D> {
         (graph.values.len(), graph.fixed.clone(), pairs)
     }
 
-    pub(crate) fn symbolic_matrix(&self) -> &SymbolicSparseColMat<usize> {
-        &self.symbolic_matrix
-    }
-
     /// The symbolic Cholesky factorisation of H's pattern (ordering, elimination tree, supernodes).
     pub(crate) fn symbolic(&self) -> &SymbolicCholesky<usize> {
         &self.symbolic
+    }
+
+    /// Room for a numeric factor on this pattern and the scratch to compute it and to solve
+    /// with it, `width` right-hand sides at a time.
+    pub(crate) fn numeric_factor(&self, width: usize) -> Result<NumericFactor, SolveError> {
+        let par = get_global_parallelism();
+        let scratch = StackReq::any_of(&[
+            self.symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+            self.symbolic.solve_in_place_scratch::<f64>(width, par),
+        ]);
+        let scratch = MemBuffer::try_new(scratch).map_err(|e| SolveError::Factorisation(format!("{e:?}")))?;
+        Ok(NumericFactor { values: vec![0.0; self.symbolic.len_val()], scratch })
+    }
+
+    /// Factors the matrix whose upper triangle on this pattern holds `upper` into `factor`, as
+    /// faer's `Llt::try_new_with_symbolic` does; `Singular` unless positive definite.
+    pub(crate) fn factorize(&self, upper: &[f64], factor: &mut NumericFactor) -> Result<(), SolveError> {
+        factor.values.fill(0.0);
+        let matrix = SparseColMatRef::new(self.symbolic_matrix.as_ref(), upper);
+        self.symbolic
+            .factorize_numeric_llt(
+                &mut factor.values,
+                matrix,
+                Side::Upper,
+                Default::default(),
+                get_global_parallelism(),
+                MemStack::new(&mut factor.scratch),
+                Default::default(),
+            )
+            .map(|_| ())
+            .map_err(|_| SolveError::Singular)
+    }
+
+    /// Solves L Lᵀ X = B in place (B at most the `width` columns `factor` was made for).
+    pub(crate) fn solve_in_place(&self, factor: &mut NumericFactor, x: MatMut<'_, f64>) {
+        LltRef::new(&self.symbolic, &factor.values).solve_in_place_with_conj(
+            Conj::No,
+            x,
+            get_global_parallelism(),
+            MemStack::new(&mut factor.scratch),
+        );
     }
 
     /// Whether this structure still describes `graph` (same variables, fixed flags and joined
@@ -258,13 +302,15 @@ pub(crate) fn assemble<G: Manifold<D>, const D: usize>(
     }
 }
 
-/// Solves (H + λ I) δ = −g; `None` if not positive definite.
+/// Solves (H + λ I) δ = −g; `None` if not positive definite. `damped` and `factor` are
+/// reused from one call to the next.
 pub(crate) fn solve_damped<const D: usize>(
     s: &Structure<D>,
     h: &[f64],
     g: &[f64],
     lambda: f64,
     damped: &mut Vec<f64>,
+    factor: &mut NumericFactor,
 ) -> Option<Vec<f64>> {
     damped.clear();
     damped.extend_from_slice(h);
@@ -273,31 +319,9 @@ pub(crate) fn solve_damped<const D: usize>(
             damped[s.col_ptr[c + 1] - 1] += lambda;
         }
     }
-    let matrix = SparseColMatRef::new(s.symbolic_matrix.as_ref(), damped);
-    // As faer's `Llt::try_new_with_symbolic` and its solve, on the structure's own symbolic factor.
-    let par = get_global_parallelism();
-    let mut factor = vec![0.0; s.symbolic.len_val()];
-    let mut scratch =
-        MemBuffer::try_new(s.symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default())).ok()?;
-    s.symbolic
-        .factorize_numeric_llt(
-            &mut factor,
-            matrix,
-            Side::Upper,
-            Default::default(),
-            par,
-            MemStack::new(&mut scratch),
-            Default::default(),
-        )
-        .ok()?;
+    s.factorize(damped, factor).ok()?;
     let mut rhs: Vec<f64> = g.iter().map(|v| -v).collect();
-    let mut scratch = MemBuffer::try_new(s.symbolic.solve_in_place_scratch::<f64>(1, par)).ok()?;
-    LltRef::new(&s.symbolic, &factor).solve_in_place_with_conj(
-        Conj::No,
-        MatMut::from_column_major_slice_mut(&mut rhs, s.dim(), 1),
-        par,
-        MemStack::new(&mut scratch),
-    );
+    s.solve_in_place(factor, MatMut::from_column_major_slice_mut(&mut rhs, s.dim(), 1));
     rhs.iter().all(|v| v.is_finite()).then_some(rhs)
 }
 
@@ -336,6 +360,7 @@ pub fn optimize_with<G: Manifold<D>, const D: usize>(
     let mut error = initial_error;
     let mut lambda = if params.gauss_newton { 0.0 } else { params.lambda_initial };
     let (mut h, mut g, mut damped) = (Vec::new(), Vec::new(), Vec::new());
+    let mut factor = structure.numeric_factor(1)?;
     let mut iterations = 0;
     let mut converged = false;
     while iterations < params.max_iterations {
@@ -343,7 +368,7 @@ pub fn optimize_with<G: Manifold<D>, const D: usize>(
         assemble(graph, &graph.values, structure, kernel, &mut h, &mut g);
         // Inner loop: raise λ until a step lowers the error.
         let accepted = loop {
-            let Some(delta) = solve_damped(structure, &h, &g, lambda, &mut damped) else {
+            let Some(delta) = solve_damped(structure, &h, &g, lambda, &mut damped, &mut factor) else {
                 if params.gauss_newton || lambda >= params.lambda_max {
                     return Err(SolveError::Singular);
                 }
