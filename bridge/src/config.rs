@@ -4,6 +4,7 @@
 //! Relative topic names resolve in the node's namespace (`__ns`, `ROS_NAMESPACE`).
 
 use crate::error::InputError;
+use crate::transport::peer::PeerConfig;
 use serde::{Deserialize, Serialize};
 use sgm_model::geometry::Pose3;
 
@@ -34,6 +35,8 @@ pub struct RosConfig {
     /// Any received message longer than this is refused before it is decoded, bytes
     /// (`bounded`). Default 134 217 728 (128 MiB).
     pub max_message_bytes: usize,
+    /// Envelopes addressed to one robot: per-peer queues, call timeout, back-off.
+    pub peers: PeerConfig,
 }
 
 /// Default of `ros.max_message_bytes`: 2 000 000 points of 64 bytes fit.
@@ -54,6 +57,7 @@ impl Default for RosConfig {
             max_cloud_points: 2_000_000,
             max_image_pixels: 4096 * 4096,
             max_message_bytes: DEFAULT_MAX_MESSAGE_BYTES,
+            peers: PeerConfig::default(),
         }
     }
 }
@@ -193,6 +197,18 @@ impl RosConfig {
         positive(self.sync.max_wait_s, "sync.max_wait_s")?;
         positive(self.publish_interval_s, "publish_interval_s")?;
         positive(self.map_voxel_m, "map_voxel_m")?;
+        positive(self.peers.call_timeout_s, "peers.call_timeout_s")?;
+        positive(self.peers.backoff_initial_s, "peers.backoff_initial_s")?;
+        positive(self.peers.backoff_max_s, "peers.backoff_max_s")?;
+        if self.peers.queue == 0 {
+            return Err(InputError::invalid("ros.peers.queue = 0: ≥ 1 expected"));
+        }
+        if self.peers.backoff_max_s < self.peers.backoff_initial_s {
+            return Err(InputError::invalid(format!(
+                "ros.peers.backoff_max_s = {}: ≥ backoff_initial_s ({}) expected",
+                self.peers.backoff_max_s, self.peers.backoff_initial_s
+            )));
+        }
         if self.queue_size == 0 || self.max_cloud_points == 0 || self.max_image_pixels == 0 {
             return Err(InputError::invalid("ros.queue_size, max_cloud_points and max_image_pixels must be ≥ 1"));
         }

@@ -12,4 +12,5 @@ pub mod inputs;
 pub mod msg;
 pub mod node;
 pub mod sync;
+pub mod timeline;
 pub mod transport;

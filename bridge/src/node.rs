@@ -18,6 +18,7 @@ use crate::error::InputError;
 use crate::inputs::{Inputs, Payload};
 use crate::msg::{nav_msgs, sensor_msgs, sgm_msgs, std_msgs, tf2_msgs, visualization_msgs};
 use crate::sync::Synchroniser;
+use crate::transport::peers::MasterLocator;
 use crate::transport::{RosTransport, TransportCounts};
 use serde::{Deserialize, Serialize};
 use sgm_actors::clock::Clock;
@@ -166,8 +167,10 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
     let system = actix_rt::System::new();
     system.block_on(async move {
         let counts = Arc::new(TransportCounts::default());
-        let transport =
-            RosTransport::start(&ros, sgm_model::scene_graph::RobotId(id), counts.clone()).map_err(ros_error)?;
+        let locator = Arc::new(MasterLocator::of_this_node().map_err(ros_error)?);
+        let transport = RosTransport::start(&ros, sgm_model::scene_graph::RobotId(id), counts.clone(), locator)
+            .map_err(ros_error)?;
+        let peers = transport.peers();
         // Snapshots: resume from the latest whole one; if the latest and the previous are both
         // unusable, refuse to start (and overwrite nothing) with the reason for each.
         let persistence = &config.robot.persistence;
@@ -300,7 +303,7 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
                 "accepted": InputCounts::snapshot(&side.counts.accepted),
                 "refused": InputCounts::snapshot(&side.counts.refused),
                 "sync": sync_counts,
-                "transport": counts.snapshot(),
+                "transport": crate::transport::status(&counts, &peers),
                 "comms": comms_status,
                 "neighbours": neighbours.iter().map(|n| serde_json::json!({
                     "robot": n.robot.0,
