@@ -3,6 +3,7 @@
 //! each message decoded and checked by [`Inputs`]. A reader thread per bag decodes ahead into a
 //! bounded channel, so bags decode in parallel and memory stays bounded.
 
+use crate::bounded::{check_within, Layout};
 use crate::config::RosConfig;
 use crate::error::InputError;
 use crate::inputs::Inputs;
@@ -61,7 +62,10 @@ fn hex(md5: &[u8; 16]) -> String {
     md5.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-fn decode<M: RosMsg>(data: &[u8]) -> Result<M, InputError> {
+/// Decodes a bag's message within the live node's bounds (`bounded`): its bytes walked against
+/// M's layout and `ros.max_message_bytes` before rosrust reserves what a length prefix declares.
+fn decode<M: RosMsg + Layout>(data: &[u8], max_bytes: usize) -> Result<M, InputError> {
+    check_within::<M>(data, max_bytes).map_err(|e| InputError::invalid(format!("refused before decoding: {e}")))?;
     M::decode(data).map_err(|e| InputError::invalid(format!("does not decode: {e}")))
 }
 
@@ -70,6 +74,8 @@ struct Decoder {
     topics: Vec<(String, Kind)>,
     inputs: Inputs,
     connections: BTreeMap<u32, Option<(String, Kind)>>,
+    /// `ros.max_message_bytes`.
+    max_bytes: usize,
 }
 
 impl Decoder {
@@ -93,11 +99,11 @@ impl Decoder {
 
     fn payload(&self, kind: Kind, data: &[u8]) -> Result<Payload, InputError> {
         match kind {
-            Kind::Cloud => self.inputs.cloud(&decode(data)?),
-            Kind::Image => self.inputs.image(&decode(data)?),
-            Kind::CameraInfo => self.inputs.camera_info(&decode(data)?),
-            Kind::Odometry => self.inputs.odometry(&decode(data)?),
-            Kind::GroundTruth => self.inputs.ground_truth(&decode(data)?),
+            Kind::Cloud => self.inputs.cloud(&decode(data, self.max_bytes)?),
+            Kind::Image => self.inputs.image(&decode(data, self.max_bytes)?),
+            Kind::CameraInfo => self.inputs.camera_info(&decode(data, self.max_bytes)?),
+            Kind::Odometry => self.inputs.odometry(&decode(data, self.max_bytes)?),
+            Kind::GroundTruth => self.inputs.ground_truth(&decode(data, self.max_bytes)?),
         }
     }
 
@@ -149,6 +155,7 @@ pub fn read_bag(path: &Path, config: &RosConfig, robot: &str, id: u16) -> Receiv
         topics,
         inputs: Inputs::new(config, robot, id),
         connections: BTreeMap::new(),
+        max_bytes: config.max_message_bytes,
     };
     let path: PathBuf = path.to_path_buf();
     std::thread::spawn(move || {
@@ -173,5 +180,21 @@ mod tests {
         assert!(topic_matches("/alpha/points", "/alpha/points"));
         assert!(!topic_matches("/alpha/mypoints", "points"));
         assert!(!topic_matches("/points2", "points"));
+    }
+
+    /// A 30-byte Odometry in a bag that declares 4 GB of frame id: refused by the layout walk,
+    /// not handed to rosrust (which would reserve the 4 GB), exactly as the live node refuses it.
+    #[test]
+    fn bag_messages_decode_within_the_live_nodes_bounds() {
+        let mut data = vec![0u8; 12];
+        data.extend_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+        data.extend_from_slice(&[0u8; 14]);
+        let e = decode::<nav_msgs::Odometry>(&data, 1 << 20).unwrap_err().to_string();
+        assert!(e.starts_with("refused before decoding: field `header.frame_id`"), "{e}");
+        // Within bounds but larger than the configured maximum.
+        let odometry = nav_msgs::Odometry::default().encode_vec().unwrap();
+        let e = decode::<nav_msgs::Odometry>(&odometry[4..], 100).unwrap_err().to_string();
+        assert!(e.contains("at most 100 accepted"), "{e}");
+        assert!(decode::<nav_msgs::Odometry>(&odometry[4..], 1 << 20).is_ok());
     }
 }
