@@ -4,6 +4,7 @@
 //! Relative topic names resolve in the node's namespace (`__ns`, `ROS_NAMESPACE`).
 
 use crate::error::InputError;
+use crate::timeline::TimelineConfig;
 use crate::transport::peer::PeerConfig;
 use serde::{Deserialize, Serialize};
 use sgm_model::geometry::Pose3;
@@ -37,6 +38,8 @@ pub struct RosConfig {
     pub max_message_bytes: usize,
     /// Envelopes addressed to one robot: per-peer queues, call timeout, back-off.
     pub peers: PeerConfig,
+    /// When a sensor stamp is believed: jumps confirmed before the timeline restarts.
+    pub timeline: TimelineConfig,
 }
 
 /// Default of `ros.max_message_bytes`: 2 000 000 points of 64 bytes fit.
@@ -58,6 +61,7 @@ impl Default for RosConfig {
             max_image_pixels: 4096 * 4096,
             max_message_bytes: DEFAULT_MAX_MESSAGE_BYTES,
             peers: PeerConfig::default(),
+            timeline: TimelineConfig::default(),
         }
     }
 }
@@ -200,6 +204,10 @@ impl RosConfig {
         positive(self.peers.call_timeout_s, "peers.call_timeout_s")?;
         positive(self.peers.backoff_initial_s, "peers.backoff_initial_s")?;
         positive(self.peers.backoff_max_s, "peers.backoff_max_s")?;
+        positive(self.timeline.max_jump_s, "timeline.max_jump_s")?;
+        if self.timeline.confirm_messages == 0 {
+            return Err(InputError::invalid("ros.timeline.confirm_messages = 0: ≥ 1 expected"));
+        }
         if self.peers.queue == 0 {
             return Err(InputError::invalid("ros.peers.queue = 0: ≥ 1 expected"));
         }

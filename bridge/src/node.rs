@@ -128,6 +128,11 @@ impl SensorSide {
         self.sync.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
+    /// The ROS time of mission time `t` (outputs are stamped in ROS time).
+    fn ros_time(&self, t: sgm_model::scene_graph::Stamp) -> rosrust::Time {
+        self.sync().ros_time(self.epoch, t)
+    }
+
     /// Counts a checked input of `topic`, feeds it to the synchroniser, and hands every frame
     /// then assembled to the robot, moving its clock to the frame's stamp.
     fn receive(&self, topic: &'static str, input: Result<Payload, InputError>) {
@@ -235,7 +240,9 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
         };
 
         let side = Arc::new(SensorSide {
-            sync: Mutex::new(Synchroniser::new(ros.sync.clone(), ros.labels, camera_from_body)),
+            sync: Mutex::new(
+                Synchroniser::new(ros.sync.clone(), ros.labels, camera_from_body).with_timeline(ros.timeline.clone()),
+            ),
             inputs: Inputs::new(&ros, &robot_name, id),
             counts: InputCounts::new(&["points", "labels", "camera_info", "odometry"]),
             handle: handle.clone(),
@@ -272,7 +279,7 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
             since_publish = Duration::ZERO;
             seq = seq.wrapping_add(1);
             let header =
-                std_msgs::Header { seq, stamp: side.epoch.time(handle.clock.now()), frame_id: world_frame.clone() };
+                std_msgs::Header { seq, stamp: side.ros_time(handle.clock.now()), frame_id: world_frame.clone() };
             let (Ok(map), Ok(neighbours), Ok(comms_status)) = (
                 handle.tracker.send(GetMapSummary).await,
                 handle.matcher.send(GetNeighbours).await,
@@ -281,7 +288,7 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
                 continue;
             };
             let _ = publishers.markers.send(map_markers(&header, &map, &classes));
-            let _ = publishers.path.send(keyframe_path(&header, &map, |t| side.epoch.time(t)));
+            let _ = publishers.path.send(keyframe_path(&header, &map, |t| side.ros_time(t)));
             let tf = neighbour_transforms(&header, &neighbours, |r| {
                 RosConfig::resolve(&ros.frames.world, &format!("robot_{}", r.0), r.0)
             });
@@ -293,7 +300,10 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
                     let _ = publishers.map.send(semantic_map(&header, &graph, &classes, ros.map_voxel_m));
                 }
             }
-            let sync_counts = side.sync().counts.clone();
+            let (sync_counts, timeline) = {
+                let sync = side.sync();
+                (sync.counts.clone(), sync.timeline().clone())
+            };
             let status = serde_json::json!({
                 "robot": robot_name,
                 "id": id,
@@ -303,6 +313,7 @@ pub fn run(config: NodeConfig) -> Result<(), NodeError> {
                 "accepted": InputCounts::snapshot(&side.counts.accepted),
                 "refused": InputCounts::snapshot(&side.counts.refused),
                 "sync": sync_counts,
+                "timeline": timeline,
                 "transport": crate::transport::status(&counts, &peers),
                 "comms": comms_status,
                 "neighbours": neighbours.iter().map(|n| serde_json::json!({

@@ -6,11 +6,16 @@
 //! A cloud waits while its partners may still come; once the streams are `max_wait_s` past it,
 //! it is dropped and counted. Time here is the streams' own (header stamps), never the wall
 //! clock, so a replay is deterministic. Every buffer is bounded.
+//!
+//! Stamps are checked first by the [`Timeline`]: a stamp far from its stream waits until others
+//! confirm it (a jump: the timeline restarts, the buffers start afresh and mission time goes on)
+//! or is dropped as an outlier (a glitch), so one bad stamp never stops the streams.
 
 use crate::config::{LabelSource, SyncConfig};
 use crate::convert::cloud::{Scan, NO_LABEL};
 use crate::convert::time::Epoch;
 use crate::inputs::Payload;
+use crate::timeline::{Timeline, TimelineConfig, TimelineCounts};
 use serde::Serialize;
 use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_model::geometry::Pose3;
@@ -31,6 +36,8 @@ pub struct SyncCounts {
     pub no_label_field: u64,
     pub out_of_order: u64,
     pub overflow: u64,
+    /// Clouds still waiting for partners when the timeline restarted (dropped).
+    pub at_restart: u64,
 }
 
 pub struct Synchroniser {
@@ -44,6 +51,7 @@ pub struct Synchroniser {
     latest: Stamp,
     /// No more input will come (a bag's end): nothing waits for a partner any longer.
     ended: bool,
+    timeline: Timeline<Payload>,
     pub counts: SyncCounts,
 }
 
@@ -77,8 +85,34 @@ impl Synchroniser {
             clouds: VecDeque::new(),
             latest: f64::NEG_INFINITY,
             ended: false,
+            timeline: Timeline::new(TimelineConfig::default()),
             counts: SyncCounts::default(),
         }
+    }
+
+    /// With stamps checked by `config` (`[ros.timeline]`) instead of its defaults.
+    pub fn with_timeline(mut self, config: TimelineConfig) -> Self {
+        self.timeline = Timeline::new(config);
+        self
+    }
+
+    /// What the timeline did: restarts, outliers, messages waiting.
+    pub fn timeline(&self) -> &TimelineCounts {
+        &self.timeline.counts
+    }
+
+    /// The ROS time of mission time `t` (for outputs), given the epoch stamps are counted from.
+    pub fn ros_time(&self, epoch: Epoch, t: Stamp) -> rosrust::Time {
+        self.timeline.to_ros(epoch.time(t))
+    }
+
+    /// The timeline restarted: nothing buffered can meet what comes next.
+    fn restart(&mut self) {
+        self.counts.at_restart += self.clouds.len() as u64;
+        self.clouds.clear();
+        self.odometry.clear();
+        self.images.clear();
+        self.latest = f64::NEG_INFINITY;
     }
 
     fn saw(&mut self, t: Stamp) {
@@ -113,14 +147,41 @@ impl Synchroniser {
     /// Feeds a checked input, its stamp taken from `epoch`. A true pose is not the
     /// synchroniser's business: it is handed back (stamped) to the caller.
     pub fn feed(&mut self, epoch: Epoch, payload: Payload) -> Option<(Stamp, Pose3)> {
+        let stamp = match &payload {
+            Payload::Cloud(t, _) | Payload::Image(t, _) | Payload::Odometry(t, _) => *t,
+            Payload::CameraInfo(_) => {
+                self.feed_checked(epoch, payload);
+                return None;
+            }
+            Payload::GroundTruth(t, pose) => {
+                return Some((epoch.stamp(self.timeline.to_mission(*t)), *pose));
+            }
+        };
+        let admitted = self.timeline.admit(stamp, payload);
+        if let Some(restart) = admitted.restart {
+            tracing::warn!(
+                from_s = restart.from_s,
+                to_s = restart.to_s,
+                "sensor stamps jumped by {:.3} s and stayed there: the timeline restarts (mission time goes on)",
+                restart.to_s - restart.from_s
+            );
+            self.restart();
+        }
+        for (t, payload) in admitted.released {
+            self.feed_checked(epoch, with_stamp(payload, t));
+        }
+        None
+    }
+
+    /// Feeds an input whose stamp the timeline passed (in mission time).
+    fn feed_checked(&mut self, epoch: Epoch, payload: Payload) {
         match payload {
             Payload::Cloud(t, scan) => self.cloud(epoch.stamp(t), scan),
             Payload::Image(t, image) => self.image(epoch.stamp(t), image),
             Payload::CameraInfo(camera) => self.camera_info(camera),
             Payload::Odometry(t, pose) => self.odometry(epoch.stamp(t), pose),
-            Payload::GroundTruth(t, pose) => return Some((epoch.stamp(t), pose)),
+            Payload::GroundTruth(..) => {}
         }
-        None
     }
 
     /// Clouds still waiting for a partner.
@@ -231,7 +292,10 @@ impl Synchroniser {
     /// The input has ended (the last message of a bag): the frames that can still be
     /// assembled, with the nearest image in tolerance and no waiting for later partners; every
     /// other waiting cloud is dropped and counted. Afterwards nothing is pending.
-    pub fn finish(&mut self) -> Vec<SensorFrame> {
+    pub fn finish(&mut self, epoch: Epoch) -> Vec<SensorFrame> {
+        for (t, payload) in self.timeline.finish() {
+            self.feed_checked(epoch, with_stamp(payload, t));
+        }
         self.ended = true;
         self.ready()
     }
@@ -246,6 +310,17 @@ impl Synchroniser {
         while self.images.front().is_some_and(|(t, _)| *t < horizon) {
             self.images.pop_front();
         }
+    }
+}
+
+/// `payload` restamped `t`.
+fn with_stamp(payload: Payload, t: rosrust::Time) -> Payload {
+    match payload {
+        Payload::Cloud(_, scan) => Payload::Cloud(t, scan),
+        Payload::Image(_, image) => Payload::Image(t, image),
+        Payload::Odometry(_, pose) => Payload::Odometry(t, pose),
+        Payload::GroundTruth(_, pose) => Payload::GroundTruth(t, pose),
+        Payload::CameraInfo(c) => Payload::CameraInfo(c),
     }
 }
 
@@ -279,7 +354,7 @@ mod tests {
         s.cloud(0.5, scan(3));
         assert_eq!(s.ready().len(), 1);
         assert_eq!(s.pending(), 1, "the second cloud waits for odometry after it");
-        assert!(s.finish().is_empty());
+        assert!(s.finish(Epoch { sec: 0 }).is_empty());
         assert_eq!((s.pending(), s.counts.no_odometry, s.counts.frames), (0, 1, 1));
 
         // The only image is 10 ms after the cloud, in tolerance: a closer one might have come,
@@ -292,7 +367,7 @@ mod tests {
         s.image(0.21, image());
         assert!(s.ready().is_empty());
         assert_eq!(s.pending(), 1);
-        let frames = s.finish();
+        let frames = s.finish(Epoch { sec: 0 });
         assert_eq!((frames.len(), s.pending(), s.counts.no_image), (1, 0, 0));
     }
 
@@ -347,6 +422,43 @@ mod tests {
         assert!(s.ready().is_empty());
         assert_eq!((s.counts.no_image, s.pending()), (1, 0));
         assert_eq!(s.counts.frames, 2);
+    }
+
+    fn ros(s: f64) -> rosrust::Time {
+        rosrust::Time { sec: s.floor() as u32, nsec: ((s - s.floor()) * 1e9).round() as u32 }
+    }
+
+    /// The field case: one odometry stamped years ahead before the stream, then a bag played
+    /// twice in a row (`rosbag play --loop`). Before the timeline, the first refused every
+    /// later message as out of order (0 frames); now it is an outlier, and the loop restarts
+    /// the timeline: every frame of both passes is assembled, mission time going on.
+    #[test]
+    fn a_stamp_years_ahead_and_a_looped_bag_do_not_stop_the_frames() {
+        let mut s = Synchroniser::new(SyncConfig::default(), LabelSource::Cloud, Pose3::identity());
+        let epoch = Epoch { sec: 0 };
+        s.feed(epoch, Payload::Odometry(ros(2_000_000_000.0), Pose3::identity()));
+        let mut frames = Vec::new();
+        for pass in 0..2 {
+            // 20 s a pass: the loop jumps back farther than `ros.timeline.max_jump_s`.
+            for k in 0..200 {
+                let t = 1_700_000_000.0 + 0.1 * f64::from(k);
+                s.feed(epoch, Payload::Odometry(ros(t), Pose3::identity()));
+                s.feed(epoch, Payload::Cloud(ros(t), scan(2)));
+                frames.extend(s.ready());
+            }
+            if pass == 1 {
+                frames.extend(s.finish(epoch));
+            }
+        }
+        let timeline = s.timeline();
+        assert_eq!((timeline.outliers, timeline.restarts), (1, 1));
+        assert_eq!(s.counts.out_of_order, 0);
+        // Every cloud of both passes but those waiting when the loop came round.
+        assert_eq!(s.counts.frames + s.counts.at_restart, 400, "{:?}", s.counts);
+        assert!(s.counts.frames >= 398, "{:?}", s.counts);
+        let stamps: Vec<f64> = frames.iter().map(|f| f.stamp).collect();
+        assert!(stamps.windows(2).all(|w| w[1] > w[0]), "mission time only goes forward");
+        assert!((stamps[0] - 1_700_000_000.0).abs() < 1e-6, "no offset before the restart");
     }
 
     #[test]

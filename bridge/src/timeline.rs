@@ -119,6 +119,11 @@ impl<T> Timeline<T> {
         (a - b).abs() <= self.max_jump()
     }
 
+    /// The mission time of ROS time `t` (for inputs that are not checked: ground truth).
+    pub fn to_mission(&self, t: Time) -> Time {
+        time(nanos(t) + self.offset)
+    }
+
     /// The ROS time of mission time `t`.
     pub fn to_ros(&self, t: Time) -> Time {
         time(nanos(t) - self.offset)

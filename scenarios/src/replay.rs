@@ -19,6 +19,7 @@ use sgm_bridge::bag::reader::{read_bag, BagItem, Payload};
 use sgm_bridge::config::LabelSource;
 use sgm_bridge::convert::time::Epoch;
 use sgm_bridge::sync::{SyncCounts, Synchroniser};
+use sgm_bridge::timeline::TimelineCounts;
 use sgm_model::geometry::Pose3;
 use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, RobotId, Stamp};
 use std::collections::BTreeMap;
@@ -35,6 +36,8 @@ pub struct BagStats {
     /// Messages refused, by topic (each is logged with the reason).
     pub refused: BTreeMap<String, u64>,
     pub sync: SyncCounts,
+    /// Stamps checked against the stream: outliers dropped, jumps that restarted the timeline.
+    pub timeline: TimelineCounts,
 }
 
 /// A finished replay: the run and what the bags held.
@@ -148,7 +151,7 @@ pub async fn replay(
         .enumerate()
         .map(|(k, path)| BagRobot {
             stream: read_bag(path, &ros, &names[k], k as u16 + 1).into_iter().peekable(),
-            sync: Synchroniser::new(ros.sync.clone(), ros.labels, camera_from_body),
+            sync: Synchroniser::new(ros.sync.clone(), ros.labels, camera_from_body).with_timeline(ros.timeline.clone()),
             truth: Vec::new(),
             first_odometry: None,
             stats: BagStats { robot: names[k].clone(), bag: path.display().to_string(), ..BagStats::default() },
@@ -200,7 +203,11 @@ pub async fn replay(
             robot.pull(limit, &mut epoch, RobotId(k as u16 + 1), &shared)?;
             // At the bag's end no partner can come: settle every waiting cloud now, or the
             // replay would wait for it forever.
-            let ready = if robot.stream.peek().is_none() { robot.sync.finish() } else { robot.sync.ready() };
+            let ready = if robot.stream.peek().is_none() {
+                robot.sync.finish(epoch.unwrap_or(Epoch { sec: 0 }))
+            } else {
+                robot.sync.ready()
+            };
             for frame in ready {
                 robot.frames += 1;
                 frames.push((k, frame));
@@ -261,7 +268,7 @@ pub async fn replay(
             raw_bytes: r.raw_bytes,
             raw_max_bytes: r.raw_max_bytes,
         });
-        bag_stats.push(BagStats { sync: r.sync.counts.clone(), ..r.stats });
+        bag_stats.push(BagStats { sync: r.sync.counts.clone(), timeline: r.sync.timeline().clone(), ..r.stats });
     }
     let world = World {
         bounds,

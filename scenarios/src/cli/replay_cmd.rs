@@ -54,6 +54,13 @@ pub fn execute(options: Options) -> Result<()> {
             b.sync.no_odometry,
             b.sync.no_image + b.sync.no_camera_info
         );
+        let t = &b.timeline;
+        if t.restarts > 0 || t.outliers > 0 {
+            println!(
+                "  {}: stamps: {} outliers dropped, the timeline restarted {} times (last jump {:?})",
+                b.robot, t.outliers, t.restarts, t.last_jump
+            );
+        }
     }
     Ok(())
 }
