@@ -34,9 +34,9 @@ pub enum TeamKeyError {
     Length(usize),
     #[error("a team key is 64 hexadecimal digits; character {0} is not one")]
     Digit(usize),
-    #[error("a team passphrase needs at least {MIN_PASSPHRASE_CHARS} characters; got {0}")]
+    #[error("a team passphrase needs at least 12 characters; got {0}")]
     ShortPassphrase(usize),
-    #[error("a team salt needs at least {MIN_SALT_BYTES} bytes (argon2's minimum); got {0}")]
+    #[error("a team salt needs at least 8 bytes (argon2's minimum); got {0}")]
     ShortSalt(usize),
     #[error("argon2id refused the passphrase: {0}")]
     Kdf(String),
@@ -174,6 +174,11 @@ mod tests {
         // 63 hex digits and a letter: a passphrase.
         assert!(!TeamKey::is_hex(&hex.replace("ff0", "fg0")));
         assert_eq!(format!("{a:?}"), "TeamKey(<redacted>)");
+        // The messages spell the limits out; they follow the constants.
+        let short = format!("a team passphrase needs at least {MIN_PASSPHRASE_CHARS} characters; got 5");
+        assert_eq!(TeamKeyError::ShortPassphrase(5).to_string(), short);
+        let salt = format!("a team salt needs at least {MIN_SALT_BYTES} bytes (argon2's minimum); got 5");
+        assert_eq!(TeamKeyError::ShortSalt(5).to_string(), salt);
     }
 
     /// Against the reference C implementation of argon2 (through Python's argon2-cffi 25.1.0,
