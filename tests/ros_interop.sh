@@ -9,15 +9,17 @@
 #      robot.launch` per robot (alpha and bravo, their own namespaces, configured by the
 #      package's config/*.toml, points and odometry remapped to velodyne_points and Odometry)
 #      starts the two `sgm ros` processes under a rosmaster on 127.0.0.1, fed by Debian's
-#      `rosbag play` of those bags at 3x with the topics renamed to match: both align through
+#      `rosbag play` of those bags at 3x with the topics renamed to match, the team key in a file
+#      made as the book says (mode 600, team_key_file:=): both align through
 #      the master; `rostopic echo` sees their MarkerArray, Path and status; every frame accepted;
 #   4. malformed messages from `rostopic pub` (unknown encoding, wrong frame, truncated cloud)
 #      are refused and counted while the node keeps running; SIGINT to roslaunch stops its node;
 #   5. a bag recorded by Debian's `rosbag record` (lz4 chunks) of that traffic replays through
 #      `sgm replay` and both robots align;
-#   6. as root: the two nodes again, each in its own network namespace joined by a veth pair,
-#      each fed by a rospy script (tests/ros_feed.py) in its namespace, so everything between
-#      the robots crosses a network: both align, and the veth counters show the traffic.
+#   6. as root: the two nodes again (plain `sgm ros`, SGM__COMMS__TEAM_KEY_FILE), each in its
+#      own network namespace joined by a veth pair, each fed by a rospy script
+#      (tests/ros_feed.py) in its namespace, so everything between the robots crosses a
+#      network: both align, and the veth counters show the traffic.
 # Everything listens on 127.0.0.1 (or the namespaces' private veth addresses) and every process
 # started here is stopped by PID; the namespaces are deleted.
 set -euo pipefail
@@ -45,6 +47,10 @@ for robot in alpha bravo; do
 done
 
 echo "== the shipped ROS package: one roslaunch per robot, inputs remapped, through rosmaster"
+# The team's own key, made as the book's security chapter says (the built-in one is refused).
+(umask 077 && head -c 32 /dev/urandom | od -An -vtx1 | tr -d ' \n' > "$WORK/team.key")
+[ "$(stat -c %a "$WORK/team.key")" = 600 ] && grep -xE '[0-9a-f]{64}' "$WORK/team.key" >/dev/null \
+  || fail "team.key: mode $(stat -c %a "$WORK/team.key"), $(wc -c < "$WORK/team.key") bytes"
 # As the book's step by step: the package on ROS_PACKAGE_PATH, `sgm` on PATH (where the
 # package's scripts/sgm_node finds it; SGM_BIN if the binary has another name).
 export ROS_PACKAGE_PATH=$PWD/bridge/ros:${ROS_PACKAGE_PATH:-/usr/share}
@@ -66,7 +72,8 @@ for _ in $(seq 100); do rostopic list >/dev/null 2>&1 && break; sleep 0.1; done
 # One after the other: two roslaunch starting at once on a fresh master race on /run_id.
 LAUNCH_STARTED=$(date +%s.%N)
 launch_robot() {
-  PATH="$SGM_PATH" roslaunch sgm robot.launch robot:="$1" id:="$2" points:=velodyne_points odometry:=Odometry \
+  PATH="$SGM_PATH" roslaunch sgm robot.launch robot:="$1" id:="$2" team_key_file:="$WORK/team.key" \
+    points:=velodyne_points odometry:=Odometry \
     >"$WORK/roslaunch_$1.log" 2>&1 &
   LAUNCHED=$!; PIDS+=($LAUNCHED)
   for _ in $(seq 100); do rosnode list 2>/dev/null | grep "^/$1/sgm_$1\$" >/dev/null && return 0; sleep 0.2; done
@@ -195,8 +202,10 @@ if [ "$(id -u)" = 0 ] && command -v ip >/dev/null; then
   bg_a rosmaster --core -p 11311 >"$ROS_HOME/master_netns.log" 2>&1 & PIDS+=($!)
   for _ in $(seq 100); do in_b rostopic list >/dev/null 2>&1 && break; sleep 0.1; done
   in_b rostopic list >/dev/null 2>&1 || fail "the master in $A is not reachable from $B"
-  bg_a "$SGM" ros --robot alpha --scenario quickstart __ns:=/alpha >"$WORK/alpha_netns.log" 2>&1 & PIDS+=($!)
-  bg_b "$SGM" ros --robot bravo --scenario quickstart __ns:=/bravo >"$WORK/bravo_netns.log" 2>&1 & PIDS+=($!)
+  SGM__COMMS__TEAM_KEY_FILE=$WORK/team.key bg_a "$SGM" ros --robot alpha --scenario quickstart __ns:=/alpha \
+    >"$WORK/alpha_netns.log" 2>&1 & PIDS+=($!)
+  SGM__COMMS__TEAM_KEY_FILE=$WORK/team.key bg_b "$SGM" ros --robot bravo --scenario quickstart __ns:=/bravo \
+    >"$WORK/bravo_netns.log" 2>&1 & PIDS+=($!)
   bg_a /usr/bin/python3 tests/ros_feed.py "$WORK/bags/alpha.bag" 3 >"$WORK/feed_alpha.log" 2>&1 & FEED_A=$!; PIDS+=($FEED_A)
   bg_b /usr/bin/python3 tests/ros_feed.py "$WORK/bags/bravo.bag" 3 >"$WORK/feed_bravo.log" 2>&1 & FEED_B=$!; PIDS+=($FEED_B)
   wait "$FEED_A" || { cat "$WORK/feed_alpha.log"; fail "rospy feeder of alpha"; }

@@ -16,7 +16,7 @@ use sgm_model::geometry::Pose3;
 use sgm_model::scene_graph::{KeyframeId, RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{pack_covariance, KeyframeRefusal, KeyframeResponse, RefusalReason, WirePose};
-use sgm_model::wire::{Message as WireMessage, TeamKey};
+use sgm_model::wire::Message as WireMessage;
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Arc, Mutex};
 
@@ -162,7 +162,7 @@ struct Pair {
 fn pair(model: Box<dyn RadioModel>, config: &CommsConfig) -> Pair {
     let radio = InProcessRadio::new(model);
     let clock = Clock::starting_at(0.0);
-    let key = TeamKey::from_passphrase(&config.team_key).unwrap();
+    let key = config.team_key().unwrap();
     let start = |robot: RobotId| {
         let comms = Comms::new(robot, config.clone(), key.clone(), clock.clone(), Box::new(radio.clone()), 0).start();
         radio.attach(robot, comms.clone().recipient());
@@ -335,7 +335,7 @@ async fn descriptors_are_batched_broadcast_and_delivered() {
     };
     let radio = InProcessRadio::new(Box::new(PerfectLinks));
     let clock = Clock::starting_at(0.0);
-    let key = TeamKey::from_passphrase(&config.team_key).unwrap();
+    let key = config.team_key().unwrap();
     let heard = Arc::new(Mutex::new(Heard::default()));
     let recorder = Recorder(heard.clone()).start();
     let mut robots = Vec::new();

@@ -68,6 +68,16 @@ impl NodeConfig {
 pub enum NodeError {
     #[error("{0}")]
     Config(ConfigError),
+    #[error(
+        "the team key is public ({published}): anyone who reaches the ROS master could forge, alter \
+         and replay this team's messages. Give the team a key of its own: \
+         `(umask 077 && head -c 32 /dev/urandom | od -An -vtx1 | tr -d ' \\n' > team.key)`, copy team.key \
+         to every robot (mode 600) and set comms.team_key_file to its absolute path \
+         (SGM__COMMS__TEAM_KEY_FILE=/path/to/team.key, or roslaunch sgm robot.launch \
+         team_key_file:=/path/to/team.key); for development on a private network only, \
+         `sgm ros --development-key` starts with a public key"
+    )]
+    PublicKey { published: &'static str },
     #[error("[ros]: {0}")]
     Ros(InputError),
     #[error("ROS: {0}")]
@@ -159,8 +169,40 @@ fn subscribe<M: rosrust::Message + Layout>(
         .map_err(ros_error)
 }
 
-/// Runs robot `config` as a ROS node until ROS shuts down (SIGINT, `rosnode kill`).
-pub fn run(config: NodeConfig) -> Result<(), NodeError> {
+/// Whether a node may start with a team key of
+/// [`PUBLIC_TEAM_KEYS`](sgm_actors::config::PUBLIC_TEAM_KEYS).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PublicKeys {
+    /// Refuse to start (the default of `sgm ros`).
+    Refuse,
+    /// Start, with a warning (`sgm ros --development-key`).
+    AllowForDevelopment,
+}
+
+/// Refuses a public team key (the default, or one printed in the book or the shipped
+/// configurations) unless `public` allows it, and then warns. A ROS node listens on a network,
+/// where anyone who knows the key can speak for the team.
+pub fn check_team_key(config: &RobotConfig, public: PublicKeys) -> Result<(), NodeError> {
+    let Some(key) = config.comms.public_team_key().map_err(NodeError::Config)? else { return Ok(()) };
+    match public {
+        PublicKeys::Refuse => Err(NodeError::PublicKey { published: key.published }),
+        PublicKeys::AllowForDevelopment => {
+            tracing::warn!(
+                robot = %config.robot.name,
+                "DEVELOPMENT KEY: the team key is public ({}); anyone who reaches the ROS master can \
+                 forge, alter and replay this team's messages. Never use --development-key in the field: \
+                 set comms.team_key_file to a key of the team's own",
+                key.published
+            );
+            Ok(())
+        }
+    }
+}
+
+/// Runs robot `config` as a ROS node until ROS shuts down (SIGINT, `rosnode kill`); a public
+/// team key is refused unless `public` allows it ([`check_team_key`]).
+pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
+    check_team_key(&config.robot, public)?;
     let robot_name = config.robot.robot.name.clone();
     let id = config.robot.robot.id;
     rosrust::try_init(&format!("sgm_{robot_name}")).map_err(ros_error)?;

@@ -57,6 +57,11 @@ enum Command {
         /// its shared sections, [ros], and this robot's name and id from [[robots]].
         #[arg(long)]
         scenario: Option<String>,
+        /// Start even with a public team key (the built-in default, or one printed in the book or
+        /// the shipped configurations), with a warning: for development on a private network
+        /// only. Without it such a key is refused; set comms.team_key_file to a key of your own.
+        #[arg(long)]
+        development_key: bool,
         /// ROS remapping arguments, read by rosrust.
         #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
         remappings: Vec<String>,
@@ -274,8 +279,8 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Ros { robot, id, config, scenario, remappings: _ } => {
-            match cli::ros_cmd::execute(cli::ros_cmd::Options { robot, id, config, scenario }) {
+        Command::Ros { robot, id, config, scenario, development_key, remappings: _ } => {
+            match cli::ros_cmd::execute(cli::ros_cmd::Options { robot, id, config, scenario, development_key }) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("sgm ros: {e:#}");

@@ -12,6 +12,9 @@
 //!   and keep running;
 //! - exit cleanly on SIGINT.
 //!
+//! The robots share a team key of their own, as in the field: 32 bytes from /dev/urandom as 64
+//! hex digits in a file of mode 600, named by `SGM__COMMS__TEAM_KEY_FILE`.
+//!
 //! rosrust allows one node per process, so this file holds one test.
 
 use rosrust::RosMsg;
@@ -55,6 +58,19 @@ fn embedded_master() -> SocketAddr {
     addr
 }
 
+/// A fresh team key in `dir/team.key` (mode 600), as the book's command makes one.
+fn team_key_file(dir: &Path) -> PathBuf {
+    use std::io::{Read, Write};
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut bytes = [0u8; 32];
+    std::fs::File::open("/dev/urandom").and_then(|mut f| f.read_exact(&mut bytes)).expect("/dev/urandom");
+    let hex: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+    let path = dir.join("team.key");
+    let mut file = std::fs::OpenOptions::new().write(true).create_new(true).mode(0o600).open(&path).expect("team.key");
+    writeln!(file, "{hex}").expect("team.key written");
+    path
+}
+
 /// The `sgm ros` processes; killed if the test fails.
 struct Nodes {
     children: Vec<(String, Child, PathBuf)>,
@@ -71,6 +87,7 @@ impl Nodes {
                 let child = Command::new(env!("CARGO_BIN_EXE_sgm"))
                     .args(["ros", "--robot", robot, "--scenario", "quickstart", &format!("__ns:=/{robot}")])
                     .env("SGM__PERSISTENCE__DIRECTORY", dir.join("snapshots"))
+                    .env("SGM__COMMS__TEAM_KEY_FILE", dir.join("team.key"))
                     .env("ROS_MASTER_URI", format!("http://{master}"))
                     .env("ROS_IP", "127.0.0.1")
                     .env("ROS_HOME", dir)
@@ -342,6 +359,7 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
     std::env::set_var("ROS_MASTER_URI", format!("http://{master}"));
     std::env::set_var("ROS_IP", "127.0.0.1");
     rosrust::try_init("sgm_node_test").expect("rosrust node");
+    team_key_file(dir.path());
     let mut nodes = Nodes::start(master, dir.path(), &ROBOTS, 1);
 
     let mut feeds: BTreeMap<String, Feed> = BTreeMap::new();

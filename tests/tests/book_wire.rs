@@ -9,7 +9,7 @@
 //! Tables and dumps are found by the HTML comment before them (`<!-- limits-table -->`, …).
 
 use nalgebra::{Point3, Vector3};
-use sgm_actors::config::{CommsConfig, RobotConfig};
+use sgm_actors::config::{CommsConfig, RobotConfig, DEFAULT_TEAM_SALT};
 use sgm_actors::protocol::RetryConfig;
 use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId};
 use sgm_model::wire::cloud_codec::{self, CodecError};
@@ -17,6 +17,7 @@ use sgm_model::wire::messages::{
     KeyframeDescriptors, KeyframeRefusal, KeyframeRequest, KeyframeResponse, ObjectCloudRequest, ObjectCloudResponse,
     ObjectData, RefusalReason, WireDescriptor, WireObject, WirePose, DESCRIPTOR_HEIGHT_STEP_M, SIZE_STEP_M,
 };
+use sgm_model::wire::team_key::{KDF_LANES, KDF_MEMORY_KIB, KDF_PASSES};
 use sgm_model::wire::{
     open, seal, Destination, Envelope, Message, MessageKind, RejectionCounts, ReplayError, ReplayWindow, TeamKey,
     WireError, WireLimits, MAC_BYTES, PROTOCOL_VERSION,
@@ -262,7 +263,20 @@ fn codec_axis_bits() -> u32 {
 
 /// The shortest passphrase accepted, by behaviour.
 fn shortest_passphrase() -> usize {
-    (1..100).find(|n| TeamKey::from_passphrase(&"p".repeat(*n)).is_ok()).unwrap()
+    (1..100).find(|n| TeamKey::from_passphrase(&"p".repeat(*n), DEFAULT_TEAM_SALT).is_ok()).unwrap()
+}
+
+/// The shortest `comms.team_salt` the configuration accepts, by behaviour.
+fn shortest_salt() -> usize {
+    let accepted = |n: usize| {
+        let comms = CommsConfig {
+            team_key: "a passphrase of the test".into(),
+            team_salt: "s".repeat(n),
+            ..CommsConfig::default()
+        };
+        comms.team_key().is_ok()
+    };
+    (1..100).find(|n| accepted(*n)).unwrap()
 }
 
 /// The smallest `comms.limits.max_envelope_bytes` the configuration accepts, by behaviour.
@@ -314,6 +328,10 @@ fn code_value(name: &str) -> Option<f64> {
         "cloud_codec::VERSION" => f64::from(cloud_codec::encode(&[], 0.01).unwrap().bytes[0]),
         "replay::WINDOW" => replay_window() as f64,
         "TeamKey::from_passphrase" => shortest_passphrase() as f64,
+        "MIN_SALT_BYTES" => shortest_salt() as f64,
+        "KDF_MEMORY_KIB" => f64::from(KDF_MEMORY_KIB),
+        "KDF_PASSES" => f64::from(KDF_PASSES),
+        "KDF_LANES" => f64::from(KDF_LANES),
         "SIZE_STEP_M" => SIZE_STEP_M,
         // An f32: its shortest decimal form, as written.
         "DESCRIPTOR_HEIGHT_STEP_M" => DESCRIPTOR_HEIGHT_STEP_M.to_string().parse().ok()?,
@@ -333,7 +351,7 @@ fn code_value(name: &str) -> Option<f64> {
     })
 }
 
-const LIMIT_NAMES: [&str; 24] = [
+const LIMIT_NAMES: [&str; 28] = [
     "PROTOCOL_VERSION",
     "MAC_BYTES",
     "WireLimits::max_envelope_bytes",
@@ -346,6 +364,10 @@ const LIMIT_NAMES: [&str; 24] = [
     "cloud_codec::VERSION",
     "replay::WINDOW",
     "TeamKey::from_passphrase",
+    "MIN_SALT_BYTES",
+    "KDF_MEMORY_KIB",
+    "KDF_PASSES",
+    "KDF_LANES",
     "SIZE_STEP_M",
     "DESCRIPTOR_HEIGHT_STEP_M",
     "Comms::receive",

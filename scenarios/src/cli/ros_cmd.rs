@@ -1,8 +1,9 @@
-//! `sgm ros --robot NAME [--id N] [--config FILE | --scenario NAME_OR_FILE] [remappings…]`:
-//! one robot as a ROS 1 node until SIGINT.
+//! `sgm ros --robot NAME [--id N] [--config FILE | --scenario NAME_OR_FILE]
+//! [--development-key] [remappings…]`: one robot as a ROS 1 node until SIGINT. A public team key
+//! (the default, or one printed in the book) is refused unless `--development-key` is given.
 
 use anyhow::{bail, Context, Result};
-use sgm_bridge::node::{self, NodeConfig};
+use sgm_bridge::node::{self, NodeConfig, PublicKeys};
 use sgm_scenarios::scenario::Scenario;
 use std::path::PathBuf;
 
@@ -11,6 +12,8 @@ pub struct Options {
     pub id: Option<u16>,
     pub config: Option<PathBuf>,
     pub scenario: Option<String>,
+    /// Start even with a public team key (a loud warning).
+    pub development_key: bool,
 }
 
 pub fn execute(options: Options) -> Result<()> {
@@ -32,6 +35,7 @@ pub fn execute(options: Options) -> Result<()> {
     // The node runs for hours on wall time, with no observations to give free pages back at.
     let _release = sgm_scenarios::memory::release_free_pages_every(sgm_scenarios::memory::RELEASE_INTERVAL)
         .context("starting the thread that gives free memory back")?;
-    node::run(config)?;
+    let public = if options.development_key { PublicKeys::AllowForDevelopment } else { PublicKeys::Refuse };
+    node::run(config, public)?;
     Ok(())
 }

@@ -10,8 +10,8 @@ mod validate;
 
 use serde::{Deserialize, Serialize};
 use sgm_actors::config::{
-    environment, CommsConfig, FusionConfig, MatcherSection, OptimiserConfig, PersistenceConfig, RobotConfig,
-    RobotSection, TrackerSection,
+    environment, CommsConfig, ConfigError, FusionConfig, MatcherSection, OptimiserConfig, PersistenceConfig,
+    RobotConfig, RobotSection, TrackerSection,
 };
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -23,6 +23,9 @@ pub enum ScenarioError {
     Load { source_name: String, message: String },
     #[error("{source_name}: {key} = {value}: allowed {allowed}")]
     Invalid { source_name: String, key: String, value: String, allowed: String },
+    /// The robots' sections (`[comms]`, `[matcher]`, …), checked as a robot's configuration.
+    #[error("{source_name}: {error}")]
+    Robot { source_name: String, error: ConfigError },
     #[error("no scenario named {name:?} in the library ({known}) and no file at that path")]
     Unknown { name: String, known: String },
 }
@@ -423,6 +426,10 @@ impl Scenario {
             value,
             allowed,
         })?;
+        scenario
+            .robot_config(0)
+            .validate()
+            .map_err(|error| ScenarioError::Robot { source_name: source_name.into(), error })?;
         Ok(scenario)
     }
 

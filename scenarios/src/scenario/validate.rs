@@ -2,7 +2,6 @@
 
 use super::Scenario;
 use crate::sim::shapes::shape_of;
-use sgm_actors::config::ConfigError;
 
 type Failure = (String, String, String);
 
@@ -204,9 +203,6 @@ impl Scenario {
                 "a name no other robot has",
             )?;
         }
-        self.robot_config(0).validate().map_err(|e| match e {
-            ConfigError::Invalid { key, value, allowed } => (key, value, allowed),
-            ConfigError::Load { source_name, message } => (source_name, String::new(), message),
-        })
+        Ok(())
     }
 }
