@@ -14,6 +14,7 @@ const LIBRARY: &[(&str, &str)] = &[
     ("faults/late_join", include_str!("../../library/faults/late_join.toml")),
     ("faults/crash_restart", include_str!("../../library/faults/crash_restart.toml")),
     ("faults/false_factors", include_str!("../../library/faults/false_factors.toml")),
+    ("field/fleet_four", include_str!("../../library/field/fleet_four.toml")),
     ("endurance/team_of_eight_1h", include_str!("../../library/endurance/team_of_eight_1h.toml")),
 ];
 
