@@ -25,8 +25,8 @@ use sgm_model::wire::messages::{
     WireDescriptor,
 };
 use sgm_model::wire::{
-    open, seal, Destination, Envelope, Message as WireMessage, RejectionCounts, ReplayWindow, TeamKey, TrafficAccount,
-    PROTOCOL_VERSION,
+    open, seal, Destination, Envelope, Message as WireMessage, RejectionCounts, ReplayGuard, Sequence, TeamKey,
+    TrafficAccount, PROTOCOL_VERSION,
 };
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 
@@ -88,13 +88,14 @@ pub struct KeyframeLedger {
 pub struct GetCommsStatus;
 
 /// What of Comms a snapshot keeps: the numbering that must never repeat, the replay windows
-/// (a message recorded before a crash is still refused after it), which keyframes each
+/// per sender and incarnation (a message recorded before a crash is still refused after it),
+/// which keyframes each
 /// neighbour already gave us or was given, and the accounts.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CommsState {
     pub sequence: u64,
     pub revision: u32,
-    pub replay: BTreeMap<RobotId, ReplayWindow>,
+    pub replay: ReplayGuard,
     pub keyframes_held: BTreeMap<RobotId, BTreeSet<KeyframeId>>,
     pub keyframes_sent: BTreeMap<RobotId, BTreeSet<KeyframeId>>,
     pub status: CommsStatus,
@@ -136,7 +137,7 @@ pub struct Comms {
     transport: Box<dyn Transport>,
     links: Option<CommsLinks>,
     sequence: u64,
-    replay: BTreeMap<RobotId, ReplayWindow>,
+    replay: ReplayGuard,
     last_heard: BTreeMap<RobotId, Stamp>,
     links_down: BTreeSet<RobotId>,
     status: CommsStatus,
@@ -159,9 +160,10 @@ pub struct Comms {
 }
 
 impl Comms {
-    /// `sequence_start`: first sequence number. Sequences must never repeat under one team key,
-    /// also across restarts from a snapshot: start above anything sent before (the supervisor
-    /// uses the clock at start, in microseconds).
+    /// `sequence_start`: first sequence number (`incarnation ‖ counter`, see
+    /// `sgm_model::wire::replay`). Sequences must never repeat under one team key, also across
+    /// restarts: the ROS node starts a fresh random incarnation at every start; simulation
+    /// stays in incarnation 0 and starts its counter at the (never receding) clock in µs.
     pub fn new(
         robot: RobotId,
         config: CommsConfig,
@@ -178,7 +180,7 @@ impl Comms {
             transport,
             links: None,
             sequence: sequence_start,
-            replay: BTreeMap::new(),
+            replay: ReplayGuard::default(),
             last_heard: BTreeMap::new(),
             links_down: BTreeSet::new(),
             status: CommsStatus::default(),
@@ -208,10 +210,14 @@ impl Comms {
         }
     }
 
-    /// Continues from `state`: sequence numbers and revisions go on above the snapshot's (and
-    /// above `sequence_start`, whichever is higher).
+    /// Continues from `state`: revisions go on above the snapshot's; sequence numbers too when
+    /// this start keeps the snapshot's incarnation (simulation), and otherwise start afresh in
+    /// the new one (a ROS node: what it sent after the snapshot stays unique).
     pub fn thawed(mut self, state: CommsState) -> Self {
-        self.sequence = self.sequence.max(state.sequence);
+        let incarnation = |s: u64| Sequence::from_bits(s).incarnation;
+        if incarnation(state.sequence) == incarnation(self.sequence) {
+            self.sequence = self.sequence.max(state.sequence);
+        }
         self.revision = state.revision;
         self.replay = state.replay;
         for (robot, held) in state.keyframes_held {
@@ -464,7 +470,7 @@ impl Comms {
         if envelope.from == self.robot || !envelope.to.includes(self.robot) {
             return;
         }
-        if let Err(e) = self.replay.entry(envelope.from).or_default().accept(envelope.sequence) {
+        if let Err(e) = self.replay.accept(envelope.from.0, envelope.sequence) {
             self.status.rejected.record_replay(&e);
             return;
         }

@@ -91,8 +91,9 @@ pub fn start_robot_on(
 
 /// As [`start_robot_on`], continuing from `snapshot` when there is one: each child starts from
 /// its part, and the Tracker hands the restored map to the Matcher and Comms. Sequence numbers
-/// start above `sequence_floor`, the clock in microseconds and the snapshot's, whichever is
-/// highest (a node whose clock restarts at 0 passes the time it was started).
+/// start at `sequence_floor` or the clock in microseconds, whichever is higher (simulation: 0,
+/// so the counter of incarnation 0 follows its never-receding clock; a ROS node passes the first
+/// sequence of its fresh incarnation), and go on above the snapshot's within one incarnation.
 pub fn start_robot_restored(
     config: &RobotConfig,
     clock: Clock,

@@ -32,6 +32,7 @@ use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
 use sgm_actors::transport::Delivered;
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::scene_graph::{LabelledVoxels, SceneGraph};
+use sgm_model::wire::Sequence;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -238,12 +239,10 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             }),
             _ => None,
         };
-        // The clock follows sensor stamps from 0; sequence numbers must still never repeat
-        // across restarts: they start above the time the node started, in microseconds (read
-        // once here, never in a handler).
-        let started_us = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX));
+        // Sequence numbers must never repeat, whatever the clock did across a restart: every
+        // start is a new incarnation, drawn at random (`sgm_model::wire::replay`).
+        let incarnation = random_incarnation();
+        tracing::info!(robot = %robot_name, incarnation = format!("{incarnation:#08x}"), "incarnation");
         let mut comms_addr = None;
         let attach = |_, comms| comms_addr = Some(comms);
         let handle = start_robot_restored(
@@ -252,7 +251,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             Box::new(transport),
             attach,
             snapshot,
-            started_us,
+            Sequence::first(incarnation),
         )
         .map_err(NodeError::Config)?;
         let Some(comms) = comms_addr else { return Err(ros_error("the robot's Comms did not start")) };
@@ -377,6 +376,15 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         }
         Ok(())
     })
+}
+
+/// A random, non-zero incarnation (0 is simulation's): std's `RandomState` keys come from the
+/// operating system's entropy, different in every process.
+fn random_incarnation() -> u32 {
+    use std::hash::{BuildHasher, Hasher};
+    let bits = std::collections::hash_map::RandomState::new().build_hasher().finish();
+    let incarnation = (bits as u32) & ((1 << sgm_model::wire::replay::INCARNATION_BITS) - 1);
+    incarnation.max(1)
 }
 
 /// Freezes the robot and writes its snapshot; a failure is logged and the robot runs on (the

@@ -25,7 +25,7 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// also keeps its outlier decisions (a version-1 file is refused by name, not misread).
 /// Version 3: the scene graph's semantic layer is a bounded cloud store (each scan marked
 /// compacted or not, and the count evicted).
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).

@@ -29,7 +29,6 @@ use std::collections::BTreeSet;
 
 const WIRE: &str = include_str!("../../book/src/wire.md");
 const COMMS_SOURCE: &str = include_str!("../../actors/src/comms.rs");
-const ROS_TRANSPORT_SOURCE: &str = include_str!("../../bridge/src/transport.rs");
 
 /// The key of the chapter's examples: bytes 0x00, 0x01, …, 0x1f.
 const EXAMPLE_KEY: &str = "000102030405060708090a0b0c0d0e0f101112131415161718191a1b1c1d1e1f";
@@ -338,7 +337,12 @@ fn code_value(name: &str) -> Option<f64> {
         "Comms::receive" => {
             number_after(COMMS_SOURCE, "self.config.limits.max_ids * ", "actors/src/comms.rs") * limits.max_ids as f64
         }
-        "SEND_QUEUE" => number_after(ROS_TRANSPORT_SOURCE, "const SEND_QUEUE: usize = ", "bridge/src/transport.rs"),
+        "PeerConfig::queue" => sgm_bridge::transport::peer::PeerConfig::default().queue as f64,
+        "PeerConfig::call_timeout_s" => sgm_bridge::transport::peer::PeerConfig::default().call_timeout_s,
+        "call::MAX_HEADER_BYTES" => sgm_bridge::transport::call::MAX_HEADER_BYTES as f64,
+        "replay::MAX_INCARNATIONS" => sgm_model::wire::replay::MAX_INCARNATIONS as f64,
+        "replay::MAX_RETIRED" => sgm_model::wire::replay::MAX_RETIRED as f64,
+        "replay::MAX_JUMP" => sgm_model::wire::replay::MAX_JUMP as f64,
         "CommsConfig::max_keyframes_in_flight" => comms.max_keyframes_in_flight as f64,
         "CommsConfig::max_keyframes_waiting" => comms.max_keyframes_waiting as f64,
         "CommsConfig::max_keyframes_per_request" => comms.max_keyframes_per_request as f64,
@@ -351,7 +355,7 @@ fn code_value(name: &str) -> Option<f64> {
     })
 }
 
-const LIMIT_NAMES: [&str; 28] = [
+const LIMIT_NAMES: [&str; 33] = [
     "PROTOCOL_VERSION",
     "MAC_BYTES",
     "WireLimits::max_envelope_bytes",
@@ -371,7 +375,12 @@ const LIMIT_NAMES: [&str; 28] = [
     "SIZE_STEP_M",
     "DESCRIPTOR_HEIGHT_STEP_M",
     "Comms::receive",
-    "SEND_QUEUE",
+    "PeerConfig::queue",
+    "PeerConfig::call_timeout_s",
+    "call::MAX_HEADER_BYTES",
+    "replay::MAX_INCARNATIONS",
+    "replay::MAX_RETIRED",
+    "replay::MAX_JUMP",
     "CommsConfig::max_keyframes_in_flight",
     "CommsConfig::max_keyframes_waiting",
     "CommsConfig::max_keyframes_per_request",

@@ -18,6 +18,9 @@ use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
+/// Envelopes recorded off the team topic: (claimed sender, bytes).
+type Recorded = Vec<(u16, Vec<u8>)>;
+
 struct Options {
     robots: Vec<u16>,
     victim: u16,
@@ -75,7 +78,7 @@ fn run() -> Result<(), String> {
     let options = options()?;
     rosrust::try_init("sgm_rogue").map_err(|e| e.to_string())?;
     let started = Instant::now();
-    let recorded: Arc<Mutex<Vec<(u16, Vec<u8>)>>> = Arc::default();
+    let recorded: Arc<Mutex<Recorded>> = Arc::default();
     let sink = recorded.clone();
     let record_until = options.record;
     let _team_in = rosrust::subscribe("/sgm/team", 256, move |m: sgm_msgs::Envelope| {
