@@ -13,6 +13,7 @@
 use crate::clock::Clock;
 use crate::config::CommsConfig;
 use crate::containment::contained;
+use crate::journal::ReplayJournal;
 use crate::messages::*;
 use crate::protocol::Wait;
 use crate::transport::{Delivered, Transport};
@@ -25,8 +26,8 @@ use sgm_model::wire::messages::{
     WireDescriptor,
 };
 use sgm_model::wire::{
-    open, seal, Destination, Envelope, Message as WireMessage, RejectionCounts, ReplayGuard, Sequence, TeamKey,
-    TrafficAccount, PROTOCOL_VERSION,
+    open, seal, Accepted, Destination, Envelope, Message as WireMessage, RejectionCounts, ReplayGuard, Sequence,
+    TeamKey, TrafficAccount, PROTOCOL_VERSION,
 };
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 
@@ -153,6 +154,8 @@ pub struct Comms {
     // Scan Context descriptors not yet broadcast.
     descriptors: Vec<WireDescriptor>,
     last_descriptors: Option<Stamp>,
+    /// Where grown replay reservations go (the ROS node's journal file), if anywhere.
+    journal: Option<std::sync::Arc<dyn ReplayJournal>>,
     // Keyframes.
     requests: BTreeMap<RobotId, KeyframeRequests>,
     responses: VecDeque<Outgoing>,
@@ -193,6 +196,7 @@ impl Comms {
             last_broadcast: None,
             descriptors: Vec::new(),
             last_descriptors: None,
+            journal: None,
             requests: BTreeMap::new(),
             responses: VecDeque::new(),
             keyframes_sent: BTreeMap::new(),
@@ -470,9 +474,17 @@ impl Comms {
         if envelope.from == self.robot || !envelope.to.includes(self.robot) {
             return;
         }
-        if let Err(e) = self.replay.accept(envelope.from.0, envelope.sequence) {
-            self.status.rejected.record_replay(&e);
-            return;
+        match self.replay.accept(envelope.from.0, envelope.sequence) {
+            Err(e) => {
+                self.status.rejected.record_replay(&e);
+                return;
+            }
+            Ok(Accepted::ReservationGrew) => {
+                if let Some(journal) = &self.journal {
+                    journal.write(self.replay.reservations());
+                }
+            }
+            Ok(Accepted::Reserved) => {}
         }
         let from = envelope.from;
         self.status.received.record(envelope.message.kind(), bytes.len());
@@ -672,6 +684,19 @@ impl Handler<Tick> for Comms {
             self.flush_requests(msg.now);
             self.send_responses();
         });
+    }
+}
+
+/// Reports grown replay reservations to `journal` from now on (and the current ones at once).
+#[derive(Message)]
+#[rtype(result = "()")]
+pub struct AttachJournal(pub std::sync::Arc<dyn ReplayJournal>);
+
+impl Handler<AttachJournal> for Comms {
+    type Result = ();
+    fn handle(&mut self, msg: AttachJournal, _: &mut Context<Self>) {
+        msg.0.write(self.replay.reservations());
+        self.journal = Some(msg.0);
     }
 }
 

@@ -63,6 +63,7 @@ pub mod comms;
 pub mod config;
 pub mod containment;
 pub mod fusion;
+pub mod journal;
 pub mod matcher;
 pub mod messages;
 pub mod optimiser;

@@ -125,6 +125,15 @@ impl SnapshotStore {
         Ok(bytes.len() as u64)
     }
 
+    /// Creates the directory if needed and checks that a file can be written there, so that a
+    /// node refuses to start rather than run for an interval_s to find out.
+    pub fn check_writable(&self) -> Result<(), StoreError> {
+        fs::create_dir_all(&self.directory).map_err(io(&self.directory))?;
+        let probe = self.directory.join(format!(".{}.probe", self.name));
+        File::create(&probe).and_then(|mut f| f.write_all(b"sgm")).map_err(io(&probe))?;
+        fs::remove_file(&probe).map_err(io(&probe))
+    }
+
     fn read(&self, path: &Path) -> Result<RobotSnapshot, StoreError> {
         let bytes = fs::read(path).map_err(io(path))?;
         let snapshot: RobotSnapshot = snapshot::decode(&bytes, ROBOT_SNAPSHOT_KIND, self.max_bytes)
@@ -142,13 +151,21 @@ impl SnapshotStore {
     /// The latest whole snapshot: `None` when the robot has none (a first start); an error
     /// naming both files when neither can be used.
     pub fn load(&self) -> Result<Option<Loaded>, StoreError> {
+        // A directory that cannot be read is not a first start: starting empty would write over
+        // a map that is still there. Only "not found" means there is none.
+        let present = |path: &Path| path.try_exists().map_err(io(path));
+        match fs::read_dir(&self.directory) {
+            Ok(_) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(source) => return Err(StoreError::Io { path: self.directory.clone(), source }),
+        }
         let (current, previous) = (self.current(), self.previous());
-        if !current.exists() && !previous.exists() {
+        if !present(&current)? && !present(&previous)? {
             return Ok(None);
         }
         let mut skipped = Vec::new();
         for path in [current, previous] {
-            if !path.exists() {
+            if !present(&path)? {
                 continue;
             }
             match self.read(&path) {
@@ -243,6 +260,23 @@ mod tests {
         store.save(&snapshot("alpha", 7)).unwrap();
         assert_eq!(store.read(&store.previous()).unwrap().keyframe_count(), 3);
         assert_eq!(store.load().unwrap().unwrap().snapshot.keyframe_count(), 7);
+    }
+
+    /// A directory that exists but cannot be read (here: a file where the directory should be)
+    /// is an error naming it, never "no snapshot yet".
+    #[test]
+    fn a_directory_that_cannot_be_read_is_an_error_not_a_first_start() {
+        let dir = tempfile::tempdir().unwrap();
+        let not_a_directory = dir.path().join("snapshots");
+        fs::write(&not_a_directory, b"a file").unwrap();
+        let store = SnapshotStore::new(&not_a_directory, "alpha", 1 << 30);
+        let e = store.load().unwrap_err().to_string();
+        assert!(e.contains("snapshots"), "{e}");
+        assert!(store.check_writable().is_err());
+        // Missing altogether: a first start, and the directory is made.
+        let store = SnapshotStore::new(dir.path().join("new"), "alpha", 1 << 30);
+        assert!(store.load().unwrap().is_none());
+        store.check_writable().unwrap();
     }
 
     #[test]

@@ -8,10 +8,10 @@
 //! [`start_robot_restored`] continues.
 
 use crate::clock::Clock;
-use crate::comms::{Comms, CommsLinks};
+use crate::comms::{Comms, CommsLinks, CommsState};
 use crate::config::{Association, ConfigError, RobotConfig};
 use crate::fusion::Fusion;
-use crate::matcher::{Matcher, MatcherLinks};
+use crate::matcher::{Matcher, MatcherLinks, MatcherState};
 use crate::messages::{Connect, Freeze, Halt, Republish, SensorFrame, Tick};
 use crate::optimiser::{Optimiser, OptimiserLinks};
 use crate::sensor::Sensor;
@@ -21,7 +21,8 @@ use crate::transport::{InProcessRadio, Transport};
 use actix::{Actor, Addr, Context, Handler, Supervisor};
 use sgm_model::matching::{LabelSimilarity, MatcherConfig};
 use sgm_model::perception::classes::ClassTable;
-use sgm_model::scene_graph::{LabelId, RobotId};
+use sgm_model::scene_graph::{KeyframeId, LabelId, RobotId};
+use std::collections::{BTreeMap, BTreeSet};
 
 /// Addresses of one robot's actors (stable across restarts).
 #[derive(Clone)]
@@ -123,7 +124,11 @@ pub fn start_robot_restored(
             objects = s.object_count(), "continuing from a snapshot");
     }
     let (tracker_state, matcher_state, optimiser_state, comms_state) = match snapshot {
-        Some(s) => (Some(s.tracker), Some(s.matcher), Some(s.optimiser), Some(s.comms)),
+        Some(s) => {
+            let mut comms = s.comms;
+            reconcile_held(&mut comms, &s.matcher, robot);
+            (Some(s.tracker), Some(s.matcher), Some(s.optimiser), Some(comms))
+        }
         None => (None, None, None, None),
     };
     // `Supervisor::start` takes a closure it may call again: each state is taken once.
@@ -254,6 +259,24 @@ impl Handler<Tick> for RobotSupervisor {
     }
 }
 
+/// A snapshot's parts are frozen one after the other: Comms, frozen after the Matcher, may count
+/// as held a neighbour keyframe that reached the Matcher only after its part was taken. The
+/// Matcher's part decides: what it does not hold is not held, and is asked for again when
+/// wanted (never lost).
+fn reconcile_held(comms: &mut CommsState, matcher: &MatcherState, robot: RobotId) {
+    let matcher_held: BTreeMap<RobotId, BTreeSet<KeyframeId>> =
+        matcher.neighbours.iter().map(|n| (n.robot, n.keyframes.iter().map(|k| k.id).collect())).collect();
+    for (neighbour, held) in &mut comms.keyframes_held {
+        let kept: BTreeSet<KeyframeId> = matcher_held.get(neighbour).cloned().unwrap_or_default();
+        let lost = held.difference(&kept).count();
+        if lost > 0 {
+            tracing::info!(robot = %robot, neighbour = %neighbour, keyframes = lost,
+                "keyframes Comms took after the Matcher's part of the snapshot: asked for again when wanted");
+        }
+        held.retain(|id| kept.contains(id));
+    }
+}
+
 /// d_v's label table for the class table: `matcher.mislabel_similarity` between different
 /// classes, `matcher.label_confusion` overriding named pairs. A pair naming a class that
 /// `fusion.classes` does not have is a configuration error.
@@ -296,6 +319,38 @@ mod tests {
         assert_eq!(labels.get(chair, tree), 0.2);
         let hard = label_similarity(&classes, &MatcherConfig { mislabel_similarity: 0.0, ..MatcherConfig::default() });
         assert!(!hard.expect("valid").is_soft());
+    }
+
+    /// The field case: Comms took neighbour keyframe 3 after the Matcher's part of the snapshot
+    /// was frozen. Restored as they were, Comms would count 3 as held and never ask for it
+    /// again while the Matcher lacks it; reconciled, only what the Matcher holds is held.
+    #[test]
+    fn comms_holds_after_a_restore_only_what_the_matcher_holds() {
+        use crate::matcher::NeighbourMemory;
+        use crate::messages::NeighbourKeyframe;
+        let keyframe = |id| NeighbourKeyframe {
+            robot: RobotId(2),
+            id: KeyframeId(id),
+            world_from_body: sgm_model::geometry::Pose3::identity(),
+            covariance: nalgebra::Matrix6::identity(),
+            points_in_body: Vec::new(),
+        };
+        let matcher = MatcherState {
+            neighbours: vec![NeighbourMemory {
+                robot: RobotId(2),
+                protocol: None,
+                objects: None,
+                keyframes: vec![keyframe(1), keyframe(2)],
+                first_aligned: None,
+                refuted: Vec::new(),
+            }],
+        };
+        let mut comms = CommsState::default();
+        comms.keyframes_held.insert(RobotId(2), [1, 2, 3].map(KeyframeId).into());
+        comms.keyframes_held.insert(RobotId(5), [9].map(KeyframeId).into());
+        reconcile_held(&mut comms, &matcher, RobotId(1));
+        assert_eq!(comms.keyframes_held[&RobotId(2)], [1, 2].map(KeyframeId).into());
+        assert!(comms.keyframes_held[&RobotId(5)].is_empty());
     }
 
     #[test]

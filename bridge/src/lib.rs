@@ -11,6 +11,7 @@ pub mod error;
 pub mod inputs;
 pub mod msg;
 pub mod node;
+pub mod persist;
 pub mod sync;
 pub mod timeline;
 pub mod transport;

@@ -17,19 +17,21 @@ use crate::convert::time::Epoch;
 use crate::error::InputError;
 use crate::inputs::{Inputs, Payload};
 use crate::msg::{nav_msgs, sensor_msgs, sgm_msgs, std_msgs, tf2_msgs, visualization_msgs};
+use crate::persist::{Intake, Snapshots};
 use crate::sync::Synchroniser;
 use crate::transport::peers::MasterLocator;
 use crate::transport::{RosTransport, TransportCounts};
 use serde::{Deserialize, Serialize};
 use sgm_actors::clock::Clock;
+use sgm_actors::comms::AttachJournal;
 use sgm_actors::comms::GetCommsStatus;
 use sgm_actors::config::{ConfigError, RobotConfig};
+use sgm_actors::journal::JournalFile;
 use sgm_actors::matcher::GetNeighbours;
 use sgm_actors::messages::Tick;
 use sgm_actors::snapshot::SnapshotStore;
-use sgm_actors::supervisor::{start_robot_restored, RobotHandle};
+use sgm_actors::supervisor::start_robot_restored;
 use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
-use sgm_actors::transport::Delivered;
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::scene_graph::{LabelledVoxels, SceneGraph};
 use sgm_model::wire::Sequence;
@@ -130,7 +132,7 @@ struct SensorSide {
     sync: Mutex<Synchroniser>,
     inputs: Inputs,
     counts: InputCounts,
-    handle: RobotHandle,
+    intake: Arc<Intake>,
     epoch: Epoch,
 }
 
@@ -151,8 +153,7 @@ impl SensorSide {
         let mut sync = self.sync();
         sync.feed(self.epoch, payload);
         for frame in sync.ready() {
-            self.handle.clock.advance_to(frame.stamp);
-            self.handle.supervisor.do_send(frame);
+            self.intake.frame(frame);
         }
     }
 }
@@ -229,7 +230,10 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 persistence.max_snapshot_mib.saturating_mul(1 << 20),
             )
         });
-        let snapshot = match (&store, persistence.resume) {
+        if let Some(store) = &store {
+            store.check_writable().map_err(NodeError::Snapshot)?;
+        }
+        let mut snapshot = match (&store, persistence.resume) {
             (Some(store), true) => store.load().map_err(NodeError::Snapshot)?.map(|loaded| {
                 for skipped in &loaded.skipped {
                     tracing::warn!(robot = %robot_name, "snapshot skipped: {skipped}");
@@ -239,6 +243,18 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             }),
             _ => None,
         };
+        // What the robot may have accepted after its snapshot is never accepted again.
+        let journal_path = JournalFile::path_in(Path::new(&persistence.directory), &robot_name);
+        if let Some(snapshot) = &mut snapshot {
+            match sgm_actors::journal::apply(snapshot, &journal_path) {
+                Ok(0) => tracing::warn!(robot = %robot_name, path = %journal_path.display(),
+                    "no replay journal beside the snapshot: envelopes accepted after it could be replayed once"),
+                Ok(n) => tracing::info!(robot = %robot_name, windows = n,
+                    "replay windows raised to the journal's reservations"),
+                Err(e) => tracing::warn!(robot = %robot_name,
+                    "replay journal unusable ({e}): envelopes accepted after the snapshot could be replayed once"),
+            }
+        }
         // Sequence numbers must never repeat, whatever the clock did across a restart: every
         // start is a new incarnation, drawn at random (`sgm_model::wire::replay`).
         let incarnation = random_incarnation();
@@ -255,25 +271,30 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         )
         .map_err(NodeError::Config)?;
         let Some(comms) = comms_addr else { return Err(ros_error("the robot's Comms did not start")) };
+        if store.is_some() {
+            let journal = JournalFile::start(Path::new(&persistence.directory), &robot_name);
+            comms.do_send(AttachJournal(Arc::new(journal)));
+        }
+        let intake = Arc::new(Intake::new(handle.clone()));
 
         // Inter-robot traffic in: the team topic (others' broadcasts) and our Deliver service.
         let team_in = {
-            let (comms, counts) = (comms.clone(), counts.clone());
+            let (intake, counts) = (intake.clone(), counts.clone());
             rosrust::subscribe(&ros.topics.team, ros.queue_size.max(64), move |m: Bounded<sgm_msgs::Envelope>| {
                 let m = m.0;
                 if m.from_robot != id {
                     counts.received.fetch_add(1, Ordering::Relaxed);
-                    comms.do_send(Delivered { bytes: m.data });
+                    intake.envelope(m.data);
                 }
             })
             .map_err(ros_error)?
         };
         let deliver_name = RosConfig::resolve(&ros.topics.deliver, &robot_name, id);
         let deliver = {
-            let (comms, counts) = (comms.clone(), counts.clone());
+            let (intake, counts) = (intake.clone(), counts.clone());
             rosrust::service::<BoundedDeliver, _>(&deliver_name, move |request: BoundedDeliverReq| {
                 counts.received.fetch_add(1, Ordering::Relaxed);
-                comms.do_send(Delivered { bytes: request.0.data });
+                intake.envelope(request.0.data);
                 // Authentication and decoding happen in Comms; receipt is all we can vouch for.
                 Ok(BoundedDeliverRes(sgm_msgs::DeliverRes { accepted: true, reason: String::new() }))
             })
@@ -286,7 +307,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             ),
             inputs: Inputs::new(&ros, &robot_name, id),
             counts: InputCounts::new(&["points", "labels", "camera_info", "odometry"]),
-            handle: handle.clone(),
+            intake: intake.clone(),
             epoch: Epoch { sec: 0 },
         });
         let q = ros.queue_size;
@@ -304,13 +325,14 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         let publish_every = Duration::from_secs_f64(ros.publish_interval_s);
         let mut seq = 0u32;
         let mut last_snapshot = handle.clock.now();
+        let mut snapshots = store.clone().map(Snapshots::new);
         while rosrust::is_ok() {
             actix_rt::time::sleep(tick).await;
             handle.supervisor.do_send(Tick { now: handle.clock.now() });
-            if let Some(store) = &store {
+            if let Some(snapshots) = &mut snapshots {
                 if handle.clock.now() - last_snapshot >= persistence.interval_s {
                     last_snapshot = handle.clock.now();
-                    save_snapshot(&handle, store).await;
+                    snapshots.take(&handle, &intake).await;
                 }
             }
             since_publish += tick;
@@ -371,8 +393,9 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         }
         drop((team_in, deliver, points, labels, camera_info, odometry));
         // Shutdown (SIGINT, rosnode kill): one last snapshot.
-        if let Some(store) = &store {
-            save_snapshot(&handle, store).await;
+        if let Some(snapshots) = &mut snapshots {
+            snapshots.take(&handle, &intake).await;
+            snapshots.finish();
         }
         Ok(())
     })
@@ -385,21 +408,6 @@ fn random_incarnation() -> u32 {
     let bits = std::collections::hash_map::RandomState::new().build_hasher().finish();
     let incarnation = (bits as u32) & ((1 << sgm_model::wire::replay::INCARNATION_BITS) - 1);
     incarnation.max(1)
-}
-
-/// Freezes the robot and writes its snapshot; a failure is logged and the robot runs on (the
-/// previous snapshot stays in place).
-async fn save_snapshot(handle: &RobotHandle, store: &SnapshotStore) {
-    let saved = match handle.freeze().await {
-        Ok(snapshot) => store.save(&snapshot).map_err(|e| e.to_string()),
-        Err(e) => Err(e.to_string()),
-    };
-    match saved {
-        Ok(bytes) => {
-            tracing::debug!(robot = %handle.name, bytes, path = %store.current().display(), "snapshot written")
-        }
-        Err(e) => tracing::warn!(robot = %handle.name, "snapshot not written: {e}"),
-    }
 }
 
 struct Publishers {

@@ -13,5 +13,5 @@ mod varint;
 pub use accounting::{RejectionCounts, TrafficAccount, TrafficStats};
 pub use envelope::{open, seal, Destination, Envelope, WireError, WireLimits, MAC_BYTES, PROTOCOL_VERSION};
 pub use messages::{Message, MessageKind};
-pub use replay::{ReplayError, ReplayGuard, ReplayWindow, Sequence};
+pub use replay::{Accepted, ReplayError, ReplayGuard, ReplayWindow, Sequence};
 pub use team_key::TeamKey;

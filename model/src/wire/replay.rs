@@ -27,6 +27,9 @@ pub const MAX_JUMP: u64 = 1 << 32;
 pub const MAX_INCARNATIONS: usize = 4;
 /// Retired incarnations remembered (and refused), per sender.
 pub const MAX_RETIRED: usize = 64;
+/// Counters reserved ahead of the highest accepted, per (sender, incarnation): the journal a
+/// restored receiver reads is written at most every `RESERVE / 2` envelopes of a sender.
+pub const RESERVE: u64 = 64;
 
 /// A sequence number's two parts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -122,11 +125,23 @@ pub struct SenderWindows {
 pub struct ReplayGuard {
     senders: BTreeMap<u16, SenderWindows>,
     uses: u64,
+    /// Per (sender, incarnation): no counter above this has been accepted; grown by
+    /// [`RESERVE`] when the highest comes within `RESERVE / 2` of it.
+    reserved: BTreeMap<(u16, u32), u64>,
+}
+
+/// What an accepted envelope means for the journal.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Accepted {
+    /// Within the reservation already made.
+    Reserved,
+    /// The reservation grew: write [`ReplayGuard::reservations`] to the journal.
+    ReservationGrew,
 }
 
 impl ReplayGuard {
     /// Accepts `sequence` from `sender` once (see the module comment).
-    pub fn accept(&mut self, sender: u16, sequence: u64) -> Result<(), ReplayError> {
+    pub fn accept(&mut self, sender: u16, sequence: u64) -> Result<Accepted, ReplayError> {
         let Sequence { incarnation, counter } = Sequence::from_bits(sequence);
         self.uses += 1;
         let uses = self.uses;
@@ -150,6 +165,7 @@ impl ReplayGuard {
             if let Some(oldest) = s.windows.iter().min_by_key(|(_, (_, used))| *used).map(|(i, _)| *i) {
                 s.windows.remove(&oldest);
                 s.floors.remove(&oldest);
+                self.reserved.remove(&(sender, oldest));
                 if s.retired.len() >= MAX_RETIRED {
                     s.retired.pop_front();
                 }
@@ -159,7 +175,17 @@ impl ReplayGuard {
         let (window, used) = s.windows.entry(incarnation).or_default();
         window.accept(counter)?;
         *used = uses;
-        Ok(())
+        let reserved = self.reserved.entry((sender, incarnation)).or_default();
+        if counter + RESERVE / 2 > *reserved {
+            *reserved = counter + RESERVE;
+            return Ok(Accepted::ReservationGrew);
+        }
+        Ok(Accepted::Reserved)
+    }
+
+    /// Every (sender, incarnation, reserved counter): what a journal keeps.
+    pub fn reservations(&self) -> Vec<(u16, u32, u64)> {
+        self.reserved.iter().map(|((s, i), r)| (*s, *i, *r)).collect()
     }
 
     /// The highest counter accepted per (sender, incarnation).
@@ -252,6 +278,22 @@ mod tests {
         assert_eq!(g.accept(3, seq(2, 2)), Err(ReplayError::Retired(2)));
         g.accept(3, seq(1, 3)).unwrap();
         assert_eq!(g.highest().filter(|(s, _, _)| *s == 3).count(), MAX_INCARNATIONS);
+    }
+
+    #[test]
+    fn reservations_run_ahead_of_what_was_accepted() {
+        let mut g = ReplayGuard::default();
+        let mut grew = Vec::new();
+        for c in 1..=200 {
+            if g.accept(3, seq(9, c)).unwrap() == Accepted::ReservationGrew {
+                grew.push(c);
+            }
+            // The invariant a restored receiver relies on: nothing accepted above the reservation.
+            let reserved = g.reservations()[0].2;
+            assert!(c < reserved, "{c} accepted, {reserved} reserved");
+        }
+        // The journal is written every RESERVE / 2 envelopes, not on each one.
+        assert_eq!(grew, vec![1, 34, 67, 100, 133, 166, 199]);
     }
 
     #[test]

@@ -1,0 +1,97 @@
+//! A robot restored from its snapshot refuses what it may have accepted after the snapshot was
+//! taken: envelopes recorded between the snapshot and a crash, replayed to the restored robot,
+//! are all refused (the replay journal, `sgm_actors::journal`), while the sender's later ones
+//! go through. Without the journal the restored windows would accept every one of them again.
+
+mod common;
+
+use common::settle;
+use sgm_actors::clock::Clock;
+use sgm_actors::comms::{AttachJournal, GetCommsStatus};
+use sgm_actors::config::RobotConfig;
+use sgm_actors::journal::{self, JournalFile};
+use sgm_actors::supervisor::{start_robot, start_robot_restored};
+use sgm_actors::transport::{InProcessRadio, PerfectLinks, Transport};
+use sgm_model::scene_graph::{KeyframeId, RobotId};
+use sgm_model::wire::messages::KeyframeRefusal;
+use sgm_model::wire::messages::RefusalReason;
+use sgm_model::wire::{seal, Destination, Envelope, Message, Sequence, WireLimits, PROTOCOL_VERSION};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+fn config() -> RobotConfig {
+    let mut c = RobotConfig::default();
+    c.robot.id = 1;
+    c.robot.name = "alpha".into();
+    c
+}
+
+/// Robot 2's envelope number `counter` of incarnation 0x5EED: a refusal of nothing, which robot
+/// 1 accepts and counts without any other consequence.
+fn from_robot_2(counter: u64) -> Vec<u8> {
+    let key = config().comms.team_key().unwrap();
+    let envelope = Envelope {
+        version: PROTOCOL_VERSION,
+        from: RobotId(2),
+        to: Destination::Robot(RobotId(1)),
+        sequence: Sequence { incarnation: 0x5EED, counter }.to_bits(),
+        message: Message::KeyframeRefusal(KeyframeRefusal {
+            keyframes: vec![KeyframeId(0)],
+            reason: RefusalReason::Busy,
+        }),
+    };
+    seal(&envelope, &key, &WireLimits::default()).unwrap()
+}
+
+async fn deliver(radio: &InProcessRadio, counters: impl Iterator<Item = u64>) {
+    for c in counters {
+        radio.transmit(RobotId(2), Destination::Robot(RobotId(1)), from_robot_2(c), 0.0);
+    }
+    radio.deliver_due(0.0);
+    settle().await;
+}
+
+#[actix_rt::test]
+async fn envelopes_accepted_after_the_snapshot_are_refused_after_the_restore() {
+    let dir = tempfile::tempdir().unwrap();
+    let radio = InProcessRadio::new(Box::new(PerfectLinks));
+    let handle = start_robot(&config(), Clock::starting_at(0.0), &radio).unwrap();
+    let journal = JournalFile::start(dir.path(), "alpha");
+    let journal_path = journal.path().to_path_buf();
+    handle.comms.do_send(AttachJournal(Arc::new(journal)));
+    deliver(&radio, 1..=10).await;
+    let mut snapshot = handle.freeze().await.unwrap();
+    // After the snapshot: 50 more, recorded by an eavesdropper; then the robot crashes.
+    deliver(&radio, 11..=60).await;
+    let status = handle.comms.send(GetCommsStatus).await.unwrap();
+    assert_eq!(status.rejected.replayed, 0);
+    // The journal's writer has had time to land the reservation for counter 60.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while JournalFile::load(&journal_path).unwrap().is_none_or(|r| r.entries[0].2 <= 60) {
+        assert!(Instant::now() < deadline, "the journal never reserved past counter 60");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    handle.halt();
+    radio.detach(RobotId(1));
+
+    assert!(journal::apply(&mut snapshot, &journal_path).unwrap() > 0);
+    let restored = start_robot_restored(
+        &config(),
+        Clock::starting_at(0.0),
+        Box::new(radio.clone()),
+        |r, c| radio.attach(r, c.recipient()),
+        Some(snapshot),
+        0,
+    )
+    .unwrap();
+    settle().await;
+    let before = restored.comms.send(GetCommsStatus).await.unwrap().rejected.replayed;
+    deliver(&radio, 11..=60).await;
+    let status = restored.comms.send(GetCommsStatus).await.unwrap();
+    assert_eq!(status.rejected.replayed - before, 50, "every recorded envelope refused");
+    // The sender goes on (its counter past the reservation): heard again.
+    let received = status.received.bytes_total();
+    deliver(&radio, 200..=201).await;
+    let status = restored.comms.send(GetCommsStatus).await.unwrap();
+    assert!(status.received.bytes_total() > received, "the sender's later envelopes are accepted");
+}
