@@ -3,13 +3,11 @@
 //! are all refused (the replay journal, `sgm_actors::journal`), while the sender's later ones
 //! go through. Without the journal the restored windows would accept every one of them again.
 
-mod common;
-
-use common::settle;
 use sgm_actors::clock::Clock;
 use sgm_actors::comms::{AttachJournal, GetCommsStatus};
 use sgm_actors::config::RobotConfig;
 use sgm_actors::journal::{self, JournalFile};
+use sgm_actors::quiescence::until_quiet;
 use sgm_actors::supervisor::{start_robot, start_robot_restored};
 use sgm_actors::transport::{InProcessRadio, PerfectLinks, Transport};
 use sgm_model::scene_graph::{KeyframeId, RobotId};
@@ -48,7 +46,7 @@ async fn deliver(radio: &InProcessRadio, counters: impl Iterator<Item = u64>) {
         radio.transmit(RobotId(2), Destination::Robot(RobotId(1)), from_robot_2(c), 0.0);
     }
     radio.deliver_due(0.0);
-    settle().await;
+    until_quiet().await;
 }
 
 #[actix_rt::test]
@@ -84,7 +82,7 @@ async fn envelopes_accepted_after_the_snapshot_are_refused_after_the_restore() {
         0,
     )
     .unwrap();
-    settle().await;
+    until_quiet().await;
     let before = restored.comms.send(GetCommsStatus).await.unwrap().rejected.replayed;
     deliver(&radio, 11..=60).await;
     let status = restored.comms.send(GetCommsStatus).await.unwrap();
