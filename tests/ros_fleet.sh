@@ -14,7 +14,8 @@
 #        with them, and once the victim is down serves the victim's Deliver service itself,
 #        never answering.
 #      Every other robot must keep exchanging and align with every robot it aligned with in the
-#      first half of the clean run, within 2× the clean time (later pairs are reported); no frame of theirs may be lost (every cloud of their
+#      first half of the clean run, within 2× the clean time (pairs with robot 2, whose link was
+#      cut, in any time; later pairs are reported); no frame of theirs may be lost (every cloud of their
 #      bags assembled); the keyframe ledgers settle (nothing pending at the end); the victim's
 #      snapshot keyframes are all in its final map; everything the rogue sent is refused and
 #      counted (MAC or replay window), and its never-answering service was called.
@@ -108,7 +109,9 @@ bg() { local who=$1; shift; ROS_IP=$(ip_of "$who") exec ip netns exec "sf$$-$who
 
 # start_robot ROBOT RUN: `sgm ros` in its namespace, snapshots in $WORK/snapshots.
 start_robot() {
-  SGM__COMMS__TEAM_KEY_FILE=$WORK/team.key SGM__PERSISTENCE__DIRECTORY=$WORK/snapshots RUST_LOG=${FLEET_LOG:-info} NO_COLOR=1 \
+  # Status five times a second: the test reacts to what it says.
+  SGM__ROS__PUBLISH_INTERVAL_S=0.2 SGM__COMMS__TEAM_KEY_FILE=$WORK/team.key \
+    SGM__PERSISTENCE__DIRECTORY=$WORK/snapshots RUST_LOG=${FLEET_LOG:-info} NO_COLOR=1 \
     bg "$1" "$SGM" ros --robot "$1" --scenario "$SCENARIO" "__ns:=/$1" >"$WORK/$1.$2.log" 2>&1 &
   STARTED=$!; PIDS+=("$STARTED")
   for _ in $(seq 150); do rosnode list 2>/dev/null | grep -x "/$1/sgm_$1" >/dev/null && return 0; sleep 0.2; done
@@ -124,7 +127,8 @@ phase() {
   ss -ltn | grep -q '10.213.0.1:11311 ' && fail "port 11311 busy on the bridge"
   ROS_IP=10.213.0.1 rosmaster --core -p 11311 >"$WORK/master.$name.log" 2>&1 & PIDS+=($!)
   for _ in $(seq 100); do rosnode list >/dev/null 2>&1 && break; sleep 0.1; done
-  ROS_IP=10.213.0.1 $PY tests/ros_status.py "$out" "${ROBOTS[@]}" >"$WORK/status.$name.log" 2>&1 & PIDS+=($!)
+  TRIGGER_FILE=$out/exchanging TRIGGER_ID=$N ROS_IP=10.213.0.1 \
+    $PY tests/ros_status.py "$out" "${ROBOTS[@]}" >"$WORK/status.$name.log" 2>&1 & PIDS+=($!)
   declare -A NODE
   for r in "${ROBOTS[@]}"; do start_robot "$r" "$name"; NODE[$r]=$STARTED; done
   local rogue=""
@@ -142,27 +146,13 @@ phase() {
   if [ "$name" = faults ]; then
     # The victim hangs (SIGSTOP: connections are accepted, nothing is answered) while a robot
     # is exchanging with it (a neighbour sees it Matched or KeyframesRequested; at 30 s at the
-    # latest), so calls to it are outstanding and retried; 3 s later it dies (kill -9) and the
+    # latest; tests/ros_status.py watches), so calls to it are outstanding and retried; 3 s later it dies (kill -9) and the
     # rogue takes its Deliver service, never answering. 12 s later the victim starts again from
-    # its snapshot. Meanwhile, from 14 s to 24 s, robot 2's link is cut.
-    ( sleep 14; ip link set "sf$$h12" down; echo "  $(( SECONDS - started )) s: r2's link cut"
+    # its snapshot. Meanwhile, from 30 s to 40 s, robot 2's link is cut.
+    ( sleep 30; ip link set "sf$$h12" down; echo "  $(( SECONDS - started )) s: r2's link cut"
       sleep 10; ip link set "sf$$h12" up; echo "  $(( SECONDS - started )) s: r2's link back" ) &
     local cut=$!
-    for _ in $(seq 300); do
-      $PY - "$out" "$N" "${ROBOTS[@]}" <<'PY' && break
-import json, sys
-out, victim, robots = sys.argv[1], int(sys.argv[2]), sys.argv[3:]
-for r in robots[:-1]:
-    try:
-        s = json.load(open(f"{out}/{r}.json"))
-    except (OSError, ValueError):
-        continue
-    if any(n["robot"] == victim and n["state"] in ("Matched", "KeyframesRequested") for n in s["neighbours"]):
-        sys.exit(0)
-sys.exit(1)
-PY
-      sleep 0.1
-    done
+    for _ in $(seq 1500); do [ -e "$out/exchanging" ] && break; sleep 0.02; done
     kill -STOP "${NODE[$VICTIM]}"
     echo "  $(( SECONDS - started )) s: $VICTIM hangs (kill -STOP)"
     cp "$out/$VICTIM.json" "$out/$VICTIM.before_kill.json" 2>/dev/null || echo '{}' > "$out/$VICTIM.before_kill.json"
@@ -263,6 +253,9 @@ if faults:
                 print(f"    {r} ← r{n}: aligned at {t} s (clean {t_clean:.0f} s), not required")
             elif t is None:
                 problems.append(f"faults: {r} never aligned with r{n} (clean: {t_clean:.0f} s)")
+            elif "r2" in (r, f"r{n}"):
+                # Robot 2's link was cut for 10 s: it must align, in whatever time that takes.
+                print(f"    {r} ← r{n}: aligned at {t:.0f} s (clean {t_clean:.0f} s; r2's link was cut)")
             elif t > 2 * t_clean:
                 problems.append(f"faults: {r} aligned with r{n} at {t:.0f} s, more than 2 × the clean {t_clean:.0f} s")
         rej = row["rejected"]

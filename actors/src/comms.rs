@@ -140,6 +140,8 @@ pub struct Comms {
     sequence: u64,
     replay: ReplayGuard,
     last_heard: BTreeMap<RobotId, Stamp>,
+    /// Each neighbour's incarnation when last heard.
+    incarnations: BTreeMap<RobotId, u32>,
     links_down: BTreeSet<RobotId>,
     status: CommsStatus,
     // ObjectData broadcast (off when the Matcher associates by descriptors).
@@ -185,6 +187,7 @@ impl Comms {
             sequence: sequence_start,
             replay: ReplayGuard::default(),
             last_heard: BTreeMap::new(),
+            incarnations: BTreeMap::new(),
             links_down: BTreeSet::new(),
             status: CommsStatus::default(),
             object_data: true,
@@ -307,6 +310,19 @@ impl Comms {
 
     /// A neighbour was heard: a new one, or one back from silence, is sent our ObjectData soon;
     /// one back from silence has its unanswered keyframe requests asked for afresh.
+    /// A neighbour heard under a new incarnation has restarted, perhaps from a snapshot: its
+    /// replay windows then refuse our counters up to its journal's reservation, at most
+    /// `RESERVE` above the highest it accepted. Our counter skips `RESERVE` (skipping is
+    /// allowed; repeating is not) so that what we send next is heard at once.
+    fn note_incarnation(&mut self, from: RobotId, sequence: u64) {
+        let incarnation = Sequence::from_bits(sequence).incarnation;
+        if self.incarnations.insert(from, incarnation).is_some_and(|before| before != incarnation) {
+            self.sequence += sgm_model::wire::replay::RESERVE;
+            tracing::info!(robot = %self.robot, neighbour = %from,
+                "neighbour restarted (new incarnation): our counter skips past its replay reservation");
+        }
+    }
+
     fn heard(&mut self, from: RobotId, now: Stamp) {
         let first = self.last_heard.insert(from, now).is_none();
         if first {
@@ -488,6 +504,7 @@ impl Comms {
         }
         let from = envelope.from;
         self.status.received.record(envelope.message.kind(), bytes.len());
+        self.note_incarnation(from, envelope.sequence);
         self.heard(from, self.clock.now());
         let Some(links) = self.links.clone() else { return };
         match envelope.message {

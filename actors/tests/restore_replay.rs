@@ -93,3 +93,58 @@ async fn envelopes_accepted_after_the_snapshot_are_refused_after_the_restore() {
     let status = restored.comms.send(GetCommsStatus).await.unwrap();
     assert!(status.received.bytes_total() > received, "the sender's later envelopes are accepted");
 }
+
+/// Keeps what the robot sends.
+#[derive(Clone, Default)]
+struct Recorder(Arc<std::sync::Mutex<Vec<Vec<u8>>>>);
+
+impl Transport for Recorder {
+    fn transmit(&self, _: RobotId, _: Destination, bytes: Vec<u8>, _: f64) {
+        self.0.lock().unwrap().push(bytes);
+    }
+}
+
+/// A neighbour heard under a new incarnation may have been restored with a replay journal:
+/// what we send next skips past its reservation, so it is heard at once.
+#[actix_rt::test]
+async fn a_restarted_neighbour_makes_our_counter_skip_past_its_reservation() {
+    use sgm_model::wire::messages::KeyframeRequest;
+    use sgm_model::wire::replay::RESERVE;
+    let recorder = Recorder::default();
+    let mut comms = None;
+    let handle = sgm_actors::supervisor::start_robot_on(
+        &config(),
+        Clock::starting_at(0.0),
+        Box::new(recorder.clone()),
+        |_, c| comms = Some(c),
+    )
+    .unwrap();
+    let key = config().comms.team_key().unwrap();
+    let ask = |incarnation| {
+        let envelope = Envelope {
+            version: PROTOCOL_VERSION,
+            from: RobotId(2),
+            to: Destination::Robot(RobotId(1)),
+            sequence: Sequence { incarnation, counter: 1 }.to_bits(),
+            message: Message::KeyframeRequest(KeyframeRequest { keyframes: vec![KeyframeId(99)] }),
+        };
+        sgm_actors::transport::Delivered { bytes: seal(&envelope, &key, &WireLimits::default()).unwrap() }
+    };
+    let tick = |t| sgm_actors::messages::Tick { now: t };
+    let sent_counters = || -> Vec<u64> {
+        let limits = WireLimits::default();
+        recorder.0.lock().unwrap().iter().map(|b| sgm_model::wire::open(b, &key, &limits).unwrap().sequence).collect()
+    };
+    handle.comms.do_send(ask(0xA));
+    until_quiet().await;
+    handle.supervisor.do_send(tick(1.0));
+    until_quiet().await;
+    let before = *sent_counters().last().expect("robot 1 answered");
+    handle.comms.do_send(ask(0xB));
+    until_quiet().await;
+    handle.supervisor.do_send(tick(2.0));
+    until_quiet().await;
+    let after = *sent_counters().last().unwrap();
+    assert!(after > before + RESERVE, "{before} then {after}: no skip past the reservation");
+    drop(comms);
+}

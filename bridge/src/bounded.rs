@@ -10,7 +10,7 @@
 //! where its bytes do. A message that fails is dropped with rosrust's "Failed to decode message"
 //! error, naming the field; the subscriber goes on.
 
-use crate::msg::{nav_msgs, sensor_msgs, sgm_msgs, std_msgs};
+use crate::msg::{nav_msgs, rosgraph_msgs, sensor_msgs, sgm_msgs, std_msgs};
 use std::io;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -165,6 +165,12 @@ impl Layout for sgm_msgs::Envelope {
     fn walk(w: &mut Walker) -> Result<(), LayoutError> {
         w.skip("from_robot", 2)?;
         w.array("data", 1)
+    }
+}
+
+impl Layout for rosgraph_msgs::Clock {
+    fn walk(w: &mut Walker) -> Result<(), LayoutError> {
+        w.skip("clock", 8)
     }
 }
 

@@ -99,6 +99,9 @@ pub struct RosTopics {
     pub tf: String,
     /// sgm_msgs/Envelope broadcasts between robots (object data). Default `/sgm/team`.
     pub team: String,
+    /// rosgraph_msgs/Clock in, followed only when the parameter `/use_sim_time` is true.
+    /// Default `/clock`.
+    pub clock: String,
     /// sgm_msgs/Deliver service of each robot (requests and replies addressed to it).
     /// Default `/sgm/robot_{id}/deliver`.
     pub deliver: String,
@@ -118,6 +121,7 @@ impl Default for RosTopics {
             status: "sgm/status".into(),
             tf: "/tf".into(),
             team: "/sgm/team".into(),
+            clock: "/clock".into(),
             deliver: "/sgm/robot_{id}/deliver".into(),
         }
     }
@@ -238,6 +242,7 @@ impl RosConfig {
             ("status", &t.status),
             ("tf", &t.tf),
             ("team", &t.team),
+            ("clock", &t.clock),
             ("deliver", &t.deliver),
         ] {
             let bad = name.is_empty()

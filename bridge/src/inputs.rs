@@ -20,6 +20,8 @@ pub enum Payload {
     CameraInfo(CameraModel),
     Odometry(Time, Pose3),
     GroundTruth(Time, Pose3),
+    /// `/clock` (with `use_sim_time`): time passes, no data.
+    Clock(Time),
 }
 
 /// The checks of one robot's inputs, with its frame names resolved.

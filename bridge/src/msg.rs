@@ -26,6 +26,7 @@ rosrust::rosmsg_include!(
     visualization_msgs / Marker,
     visualization_msgs / MarkerArray,
     tf2_msgs / TFMessage,
+    rosgraph_msgs / Clock,
     sgm_msgs / Envelope,
     sgm_msgs / Deliver
 );

@@ -16,7 +16,7 @@ use crate::convert::markers::{keyframe_path, map_markers, neighbour_transforms};
 use crate::convert::time::Epoch;
 use crate::error::InputError;
 use crate::inputs::{Inputs, Payload};
-use crate::msg::{nav_msgs, sensor_msgs, sgm_msgs, std_msgs, tf2_msgs, visualization_msgs};
+use crate::msg::{nav_msgs, rosgraph_msgs, sensor_msgs, sgm_msgs, std_msgs, tf2_msgs, visualization_msgs};
 use crate::persist::{Intake, Snapshots};
 use crate::sync::Synchroniser;
 use crate::transport::peers::MasterLocator;
@@ -155,6 +155,9 @@ impl SensorSide {
         for frame in sync.ready() {
             self.intake.frame(frame);
         }
+        if let Some(t) = sync.clock() {
+            self.intake.advance_clock(t);
+        }
     }
 }
 
@@ -279,11 +282,12 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
 
         // Inter-robot traffic in: the team topic (others' broadcasts) and our Deliver service.
         let team_in = {
-            let (intake, counts) = (intake.clone(), counts.clone());
+            let (intake, counts, peers) = (intake.clone(), counts.clone(), peers.clone());
             rosrust::subscribe(&ros.topics.team, ros.queue_size.max(64), move |m: Bounded<sgm_msgs::Envelope>| {
                 let m = m.0;
                 if m.from_robot != id {
                     counts.received.fetch_add(1, Ordering::Relaxed);
+                    peers.heard(sgm_model::scene_graph::RobotId(m.from_robot));
                     intake.envelope(m.data);
                 }
             })
@@ -291,9 +295,10 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         };
         let deliver_name = RosConfig::resolve(&ros.topics.deliver, &robot_name, id);
         let deliver = {
-            let (intake, counts) = (intake.clone(), counts.clone());
+            let (intake, counts, peers) = (intake.clone(), counts.clone(), peers.clone());
             rosrust::service::<BoundedDeliver, _>(&deliver_name, move |request: BoundedDeliverReq| {
                 counts.received.fetch_add(1, Ordering::Relaxed);
+                peers.heard(sgm_model::scene_graph::RobotId(request.0.from_robot));
                 intake.envelope(request.0.data);
                 // Authentication and decoding happen in Comms; receipt is all we can vouch for.
                 Ok(BoundedDeliverRes(sgm_msgs::DeliverRes { accepted: true, reason: String::new() }))
@@ -306,7 +311,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 Synchroniser::new(ros.sync.clone(), ros.labels, camera_from_body).with_timeline(ros.timeline.clone()),
             ),
             inputs: Inputs::new(&ros, &robot_name, id),
-            counts: InputCounts::new(&["points", "labels", "camera_info", "odometry"]),
+            counts: InputCounts::new(&["points", "labels", "camera_info", "odometry", "clock"]),
             intake: intake.clone(),
             epoch: Epoch { sec: 0 },
         });
@@ -316,6 +321,15 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         let labels = subscribe(&t.labels, q, &side, "labels", Inputs::image)?;
         let camera_info = subscribe(&t.camera_info, q, &side, "camera_info", Inputs::camera_info)?;
         let odometry = subscribe(&t.odometry, q, &side, "odometry", Inputs::odometry)?;
+        // Simulated time (`rosbag play --clock`, a simulator): /clock moves the robot's clock
+        // between sensor frames too, through the same timeline checks as the sensors' stamps.
+        let sim_time = rosrust::param("/use_sim_time").and_then(|p| p.get::<bool>().ok()).unwrap_or(false);
+        let clock = if sim_time {
+            tracing::info!(robot = %robot_name, "use_sim_time: following /clock");
+            Some(subscribe(&t.clock, 1, &side, "clock", |_, m: &rosgraph_msgs::Clock| Ok(Payload::Clock(m.clock)))?)
+        } else {
+            None
+        };
 
         let publishers = Publishers::advertise(&ros).map_err(ros_error)?;
         tracing::info!(robot = %robot_name, id, service = %deliver_name, "sgm node up");
@@ -391,7 +405,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             });
             let _ = publishers.status.send(std_msgs::String { data: status.to_string() });
         }
-        drop((team_in, deliver, points, labels, camera_info, odometry));
+        drop((team_in, deliver, points, labels, camera_info, odometry, clock));
         // Shutdown (SIGINT, rosnode kill): one last snapshot.
         if let Some(snapshots) = &mut snapshots {
             snapshots.take(&handle, &intake).await;

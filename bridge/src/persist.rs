@@ -65,6 +65,11 @@ impl Intake {
         self.offer(Held::Frame(Box::new(frame)));
     }
 
+    /// Simulated time passed (`/clock`): the robot's clock moves on (never back).
+    pub fn advance_clock(&self, t: sgm_model::scene_graph::Stamp) {
+        self.handle.clock.advance_to(t);
+    }
+
     /// A sealed envelope from another robot: to Comms.
     pub fn envelope(&self, bytes: Vec<u8>) {
         self.offer(Held::Envelope(bytes));

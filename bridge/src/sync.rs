@@ -52,6 +52,8 @@ pub struct Synchroniser {
     /// No more input will come (a bag's end): nothing waits for a partner any longer.
     ended: bool,
     timeline: Timeline<Payload>,
+    /// Newest `/clock` time passed by the timeline (mission time).
+    clock: Option<Stamp>,
     pub counts: SyncCounts,
 }
 
@@ -86,6 +88,7 @@ impl Synchroniser {
             latest: f64::NEG_INFINITY,
             ended: false,
             timeline: Timeline::new(TimelineConfig::default()),
+            clock: None,
             counts: SyncCounts::default(),
         }
     }
@@ -113,6 +116,7 @@ impl Synchroniser {
         self.odometry.clear();
         self.images.clear();
         self.latest = f64::NEG_INFINITY;
+        self.clock = None;
     }
 
     fn saw(&mut self, t: Stamp) {
@@ -148,7 +152,7 @@ impl Synchroniser {
     /// synchroniser's business: it is handed back (stamped) to the caller.
     pub fn feed(&mut self, epoch: Epoch, payload: Payload) -> Option<(Stamp, Pose3)> {
         let stamp = match &payload {
-            Payload::Cloud(t, _) | Payload::Image(t, _) | Payload::Odometry(t, _) => *t,
+            Payload::Cloud(t, _) | Payload::Image(t, _) | Payload::Odometry(t, _) | Payload::Clock(t) => *t,
             Payload::CameraInfo(_) => {
                 self.feed_checked(epoch, payload);
                 return None;
@@ -180,8 +184,18 @@ impl Synchroniser {
             Payload::Image(t, image) => self.image(epoch.stamp(t), image),
             Payload::CameraInfo(camera) => self.camera_info(camera),
             Payload::Odometry(t, pose) => self.odometry(epoch.stamp(t), pose),
+            Payload::Clock(t) => {
+                let t = epoch.stamp(t);
+                self.clock = Some(self.clock.map_or(t, |c: Stamp| c.max(t)));
+            }
             Payload::GroundTruth(..) => {}
         }
+    }
+
+    /// The newest `/clock` time that passed the timeline, in mission time: the robot's clock
+    /// may move on to it even while no sensor frame comes.
+    pub fn clock(&self) -> Option<Stamp> {
+        self.clock
     }
 
     /// Clouds still waiting for a partner.
@@ -320,6 +334,7 @@ fn with_stamp(payload: Payload, t: rosrust::Time) -> Payload {
         Payload::Image(_, image) => Payload::Image(t, image),
         Payload::Odometry(_, pose) => Payload::Odometry(t, pose),
         Payload::GroundTruth(_, pose) => Payload::GroundTruth(t, pose),
+        Payload::Clock(_) => Payload::Clock(t),
         Payload::CameraInfo(c) => Payload::CameraInfo(c),
     }
 }

@@ -30,6 +30,7 @@ fn ours() -> Vec<(&'static str, String)> {
         ("visualization_msgs/Marker", visualization_msgs::Marker::md5sum()),
         ("visualization_msgs/MarkerArray", visualization_msgs::MarkerArray::md5sum()),
         ("tf2_msgs/TFMessage", tf2_msgs::TFMessage::md5sum()),
+        ("rosgraph_msgs/Clock", rosgraph_msgs::Clock::md5sum()),
     ]
 }
 
@@ -58,6 +59,7 @@ const DEBIAN: &[(&str, &str)] = &[
     ("visualization_msgs/Marker", "4048c9de2a16f4ae8e0538085ebf1b97"),
     ("visualization_msgs/MarkerArray", "d155b9ce5188fbaf89745847fd5882d7"),
     ("tf2_msgs/TFMessage", "94810edda583a504dfda3829e70d7eec"),
+    ("rosgraph_msgs/Clock", "a9c97c1d230cfc112e270351a944ee47"),
 ];
 
 #[test]

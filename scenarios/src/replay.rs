@@ -92,9 +92,11 @@ impl BagRobot {
         while self.next_time()?.is_some_and(|t| t <= limit) {
             let Some(BagItem::Message { payload, .. }) = self.stream.next() else { break };
             let stamped = match &payload {
-                Payload::Cloud(t, _) | Payload::Image(t, _) | Payload::Odometry(t, _) | Payload::GroundTruth(t, _) => {
-                    Some(*t)
-                }
+                Payload::Cloud(t, _)
+                | Payload::Image(t, _)
+                | Payload::Odometry(t, _)
+                | Payload::GroundTruth(t, _)
+                | Payload::Clock(t) => Some(*t),
                 Payload::CameraInfo(_) => None,
             };
             // Only a stamped message sets the epoch (camera info may come first and has none).

@@ -143,6 +143,14 @@ impl PeerLink {
         }
     }
 
+    /// Something arrived from the peer (it may be back): a down peer is probed at once, its
+    /// back-off kept for the probes after.
+    pub fn heard(&mut self, now: Duration) {
+        if let LinkState::Down { retry_at, .. } = &mut self.state {
+            *retry_at = (*retry_at).min(now);
+        }
+    }
+
     /// The call with the envelope `next` gave succeeded: the peer is up.
     pub fn succeeded(&mut self) {
         self.in_call = false;
@@ -228,6 +236,17 @@ mod tests {
         assert_eq!(p.next(s(at)), Next::Send(vec![2]));
         p.succeeded();
         assert_eq!((p.counts.sent, p.counts.dropped), (3, 0));
+    }
+
+    #[test]
+    fn a_peer_heard_from_is_probed_at_once() {
+        let mut p = link(8);
+        p.push(vec![1]);
+        let Next::Send(e) = p.next(s(0.0)) else { panic!("a call") };
+        p.failed(e, s(0.0));
+        assert_eq!(p.next(s(0.2)), Next::Wait(s(0.8)));
+        p.heard(s(0.3));
+        assert_eq!(p.next(s(0.3)), Next::Send(vec![1]));
     }
 
     #[test]

@@ -137,6 +137,16 @@ impl Peers {
         peer.wake.notify_one();
     }
 
+    /// An envelope arrived claiming to be from `from`: if its link is down, probe it now (the
+    /// claim is not authenticated; a false one costs one probe).
+    pub fn heard(&self, from: RobotId) {
+        let peer = lock(&self.peers).get(&from.0).cloned();
+        if let Some(peer) = peer {
+            lock(&peer.link).heard(self.shared.origin.elapsed());
+            peer.wake.notify_one();
+        }
+    }
+
     /// Every peer's link, by robot id.
     pub fn status(&self) -> BTreeMap<u16, PeerStatus> {
         let now = self.shared.origin.elapsed();
