@@ -68,6 +68,7 @@ pub mod matcher;
 pub mod messages;
 pub mod optimiser;
 pub mod place_candidates;
+pub mod progress;
 pub mod protocol;
 pub mod quiescence;
 pub mod sensor;

@@ -14,6 +14,7 @@ use crate::fusion::Fusion;
 use crate::matcher::{Matcher, MatcherLinks, MatcherState};
 use crate::messages::{Connect, Freeze, Halt, Republish, SensorFrame, Tick};
 use crate::optimiser::{Optimiser, OptimiserLinks};
+use crate::progress::FrameProgress;
 use crate::sensor::Sensor;
 use crate::snapshot::RobotSnapshot;
 use crate::tracker::{Tracker, TrackerLinks};
@@ -37,6 +38,8 @@ pub struct RobotHandle {
     pub matcher: Addr<Matcher>,
     pub optimiser: Addr<Optimiser>,
     pub comms: Addr<Comms>,
+    /// The newest frame the Tracker has handled (latency measurement).
+    pub progress: FrameProgress,
 }
 
 pub struct RobotSupervisor {
@@ -146,9 +149,11 @@ pub fn start_robot_restored(
     });
     let tracker_config_classes = classes.clone();
     let tracker_config = (config.tracker.clone(), classes, config.optimiser.clone(), config.comms.cloud_resolution_m);
+    let progress = FrameProgress::default();
+    let tracker_progress = progress.clone();
     let tracker = Supervisor::start(move |_| {
         let (t, classes, o, r) = tracker_config;
-        let tracker = Tracker::new(robot, t, classes, &o, r);
+        let tracker = Tracker::new(robot, t, classes, &o, r).with_progress(tracker_progress.clone());
         match tracker_state {
             Some(state) => tracker.thawed(state),
             None => tracker,
@@ -229,6 +234,7 @@ pub fn start_robot_restored(
         matcher,
         optimiser,
         comms,
+        progress,
     })
 }
 

@@ -107,6 +107,8 @@ pub struct Tracker {
     covariances: BTreeMap<KeyframeId, [f32; 21]>,
     /// Stamp of the latest loop-closure attempt.
     last_loop_attempt: Option<f64>,
+    /// The newest frame handled, for latency measurement outside the robot.
+    progress: crate::progress::FrameProgress,
 }
 
 impl Tracker {
@@ -133,6 +135,7 @@ impl Tracker {
             last_odometry: None,
             covariances: BTreeMap::new(),
             last_loop_attempt: None,
+            progress: crate::progress::FrameProgress::default(),
         }
     }
 
@@ -149,6 +152,12 @@ impl Tracker {
     }
 
     /// Continues from `state` (see [`KEYFRAME_ID_EPOCH`]).
+    /// Reports each handled frame's stamp to `progress`.
+    pub fn with_progress(mut self, progress: crate::progress::FrameProgress) -> Self {
+        self.progress = progress;
+        self
+    }
+
     pub fn thawed(mut self, state: TrackerState) -> Self {
         let epoch = state.next_keyframe.div_ceil(KEYFRAME_ID_EPOCH).saturating_add(1);
         self.next_keyframe = epoch.saturating_mul(KEYFRAME_ID_EPOCH);
@@ -310,13 +319,13 @@ impl Handler<LabelledScan> for Tracker {
     fn handle(&mut self, scan: LabelledScan, ctx: &mut Context<Self>) {
         contained(ctx, "tracker", || {
             let last = self.last_odometry.map(|(_, p)| p);
-            if !is_keyframe(last.as_ref(), &scan.world_from_body, &self.config.keyframes) {
-                return;
+            if is_keyframe(last.as_ref(), &scan.world_from_body, &self.config.keyframes) {
+                match self.add_keyframe(&scan) {
+                    Ok(_) => self.publish_objects(),
+                    Err(e) => tracing::warn!(robot = %self.robot, stamp = scan.stamp, "keyframe not added: {e}"),
+                }
             }
-            match self.add_keyframe(&scan) {
-                Ok(_) => self.publish_objects(),
-                Err(e) => tracing::warn!(robot = %self.robot, stamp = scan.stamp, "keyframe not added: {e}"),
-            }
+            self.progress.handled(scan.stamp);
         });
     }
 }

@@ -9,6 +9,7 @@ pub mod config;
 pub mod convert;
 pub mod error;
 pub mod inputs;
+pub mod latency;
 pub mod msg;
 pub mod node;
 pub mod persist;

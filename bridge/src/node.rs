@@ -391,6 +391,8 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 "refused": InputCounts::snapshot(&side.counts.refused),
                 "sync": sync_counts,
                 "timeline": timeline,
+                "latency_ms": side.intake.latency(),
+                "held_dropped": side.intake.dropped.load(Ordering::Relaxed),
                 "transport": crate::transport::status(&counts, &peers),
                 "comms": comms_status,
                 "neighbours": neighbours.iter().map(|n| serde_json::json!({

@@ -29,6 +29,7 @@ enum Held {
 /// Where the robot's inputs enter: straight to the robot, or held while a snapshot is taken.
 pub struct Intake {
     handle: RobotHandle,
+    latency: std::sync::Arc<crate::latency::Latency>,
     held: Mutex<Option<Vec<Held>>>,
     /// Inputs dropped because too many were held.
     pub dropped: AtomicU64,
@@ -36,13 +37,20 @@ pub struct Intake {
 
 impl Intake {
     pub fn new(handle: RobotHandle) -> Self {
-        Self { handle, held: Mutex::new(None), dropped: AtomicU64::new(0) }
+        let latency = crate::latency::Latency::start(handle.progress.clone());
+        Self { handle, latency, held: Mutex::new(None), dropped: AtomicU64::new(0) }
+    }
+
+    /// Latency per frame, handed to handled (`crate::latency`).
+    pub fn latency(&self) -> crate::latency::LatencySummary {
+        self.latency.summary()
     }
 
     fn pass(&self, input: Held) {
         match input {
             Held::Frame(frame) => {
                 self.handle.clock.advance_to(frame.stamp);
+                self.latency.handed(frame.stamp);
                 self.handle.supervisor.do_send(*frame);
             }
             Held::Envelope(bytes) => self.handle.comms.do_send(Delivered { bytes }),
