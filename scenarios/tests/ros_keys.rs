@@ -3,24 +3,13 @@
 //! unless `--development-key` is given, which starts the node with a loud warning; a key file
 //! open to others is refused; `sgm run` (in-process, no network) keeps the default silently.
 
+mod ros_common;
+
+use ros_common::{embedded_master, poll};
 use std::io::Write;
-use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
-use std::time::{Duration, Instant};
-
-/// Polls `found` every 20 ms until it gives a value; fails with `what()` after `secs`.
-fn poll<T>(secs: u64, what: impl Fn() -> String, mut found: impl FnMut() -> Option<T>) -> T {
-    let deadline = Instant::now() + Duration::from_secs(secs);
-    loop {
-        if let Some(value) = found() {
-            return value;
-        }
-        assert!(Instant::now() < deadline, "timed out: {}", what());
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
 
 /// `sgm ARGS` with `env` (and no SGM__ variables of the caller's), ROS pointed at `master`.
 fn sgm(args: &[&str], env: &[(&str, &str)], master: &str) -> Command {
@@ -95,17 +84,6 @@ fn public_keys_are_refused_with_what_to_do() {
         ("SGM__COMMS__TEAM_KEY", "a key set twice over"),
     ]);
     assert!(err.contains("comms.team_key is set too"), "{err}");
-}
-
-/// Starts a ROS master on a free loopback port, in a thread that lives as long as the test.
-fn embedded_master() -> SocketAddr {
-    let addr = TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).expect("a free port");
-    std::thread::spawn(move || {
-        let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
-        runtime.block_on(ros_core_rs::core::Master::new(&addr).serve())
-    });
-    poll(10, || format!("the embedded master did not come up on {addr}"), || TcpStream::connect(addr).ok());
-    addr
 }
 
 /// Kills the node if the test fails.

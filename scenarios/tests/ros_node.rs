@@ -17,6 +17,9 @@
 //!
 //! rosrust allows one node per process, so this file holds one test.
 
+mod ros_common;
+
+use ros_common::{embedded_master, poll};
 use rosrust::RosMsg;
 use serde_json::Value;
 use sgm_bridge::convert::cloud::read_cloud;
@@ -25,7 +28,7 @@ use sgm_model::perception::classes::ClassTable;
 use sgm_scenarios::runner::run_recording;
 use sgm_scenarios::scenario::Scenario;
 use std::collections::BTreeMap;
-use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
@@ -34,29 +37,6 @@ use std::time::{Duration, Instant};
 const ROBOTS: [&str; 2] = ["alpha", "bravo"];
 /// Bag time runs this many times faster than the wall clock.
 const RATE: f64 = 3.0;
-
-/// Polls `found` every 20 ms until it gives a value; fails with `what()` after `secs`.
-fn poll<T>(secs: u64, what: impl Fn() -> String, mut found: impl FnMut() -> Option<T>) -> T {
-    let deadline = Instant::now() + Duration::from_secs(secs);
-    loop {
-        if let Some(value) = found() {
-            return value;
-        }
-        assert!(Instant::now() < deadline, "timed out: {}", what());
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
-/// Starts a ROS master on a free loopback port, in a thread that lives as long as the test.
-fn embedded_master() -> SocketAddr {
-    let addr = TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).expect("a free port");
-    std::thread::spawn(move || {
-        let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
-        runtime.block_on(ros_core_rs::core::Master::new(&addr).serve())
-    });
-    poll(10, || format!("the embedded master did not come up on {addr}"), || TcpStream::connect(addr).ok());
-    addr
-}
 
 /// A fresh team key in `dir/team.key` (mode 600), as the book's command makes one.
 fn team_key_file(dir: &Path) -> PathBuf {

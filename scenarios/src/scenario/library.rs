@@ -15,6 +15,7 @@ const LIBRARY: &[(&str, &str)] = &[
     ("faults/crash_restart", include_str!("../../library/faults/crash_restart.toml")),
     ("faults/false_factors", include_str!("../../library/faults/false_factors.toml")),
     ("field/fleet_four", include_str!("../../library/field/fleet_four.toml")),
+    ("field/fleet_sixteen", include_str!("../../library/field/fleet_sixteen.toml")),
     ("endurance/team_of_eight_1h", include_str!("../../library/endurance/team_of_eight_1h.toml")),
 ];
 
