@@ -59,7 +59,7 @@ print(yaml.safe_load(sys.stdin.read().split("---")[0])["data"])' > "$WORK/$r.jso
   rosbag info --yaml --key=topics "$WORK/bags/$r.bag" | $PY -c '
 import sys, yaml
 print(next(t["messages"] for t in yaml.safe_load(sys.stdin) if t["topic"].endswith("/points")))' > "$WORK/$r.clouds"
-  kill -INT "${NODE[$r]}"
+  pkill -INT -P "${NODE[$r]}"   # the node under /usr/bin/time (time ignores SIGINT)
 done
 for r in "${ROBOTS[@]}"; do wait "${NODE[$r]}" || true; done
 $PY - "$WORK" "${ROBOTS[@]}" <<'PY'

@@ -343,6 +343,7 @@ fn code_value(name: &str) -> Option<f64> {
         "replay::MAX_INCARNATIONS" => sgm_model::wire::replay::MAX_INCARNATIONS as f64,
         "replay::MAX_RETIRED" => sgm_model::wire::replay::MAX_RETIRED as f64,
         "replay::MAX_JUMP" => sgm_model::wire::replay::MAX_JUMP as f64,
+        "replay::RESERVE" => sgm_model::wire::replay::RESERVE as f64,
         "CommsConfig::max_keyframes_in_flight" => comms.max_keyframes_in_flight as f64,
         "CommsConfig::max_keyframes_waiting" => comms.max_keyframes_waiting as f64,
         "CommsConfig::max_keyframes_per_request" => comms.max_keyframes_per_request as f64,
@@ -355,7 +356,7 @@ fn code_value(name: &str) -> Option<f64> {
     })
 }
 
-const LIMIT_NAMES: [&str; 33] = [
+const LIMIT_NAMES: [&str; 34] = [
     "PROTOCOL_VERSION",
     "MAC_BYTES",
     "WireLimits::max_envelope_bytes",
@@ -381,6 +382,7 @@ const LIMIT_NAMES: [&str; 33] = [
     "replay::MAX_INCARNATIONS",
     "replay::MAX_RETIRED",
     "replay::MAX_JUMP",
+    "replay::RESERVE",
     "CommsConfig::max_keyframes_in_flight",
     "CommsConfig::max_keyframes_waiting",
     "CommsConfig::max_keyframes_per_request",
