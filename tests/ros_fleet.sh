@@ -133,7 +133,9 @@ phase() {
   for r in "${ROBOTS[@]}"; do start_robot "$r" "$name"; NODE[$r]=$STARTED; done
   local rogue=""
   if [ "$name" = faults ]; then
-    bg rogue "$ROGUE" --robots "$(seq -s, "$N")" --victim "$N" --record-s 6 --attack-s 40 --takeover-when "$out/victim_down" \
+    # It records 12 s of mission and attacks for 80 s of mission, whatever the rate.
+    bg rogue "$ROGUE" --robots "$(seq -s, "$N")" --victim "$N" --record-s "$($PY -c "print(12 / $RATE)")" \
+      --attack-s "$($PY -c "print(80 / $RATE)")" --takeover-when "$out/victim_down" \
       --out "$out/rogue.json" >"$WORK/rogue.log" 2>&1 & rogue=$!; PIDS+=("$rogue")
   fi
   local plays=()
