@@ -1,8 +1,5 @@
-//! PCD files (ascii, binary, binary_compressed): `pcd::read_pcd` never panics.
+//! PCD files (ascii, binary, binary_compressed): `pcd::read_pcd`. The body, and what must hold,
+//! is `sgm_tests::fuzz_bodies::pcd` (`tests/src/fuzz_bodies.rs`).
 #![no_main]
 
-use libfuzzer_sys::fuzz_target;
-
-fuzz_target!(|data: &[u8]| {
-    let _ = sgm_model::pcd::read_pcd(data);
-});
+libfuzzer_sys::fuzz_target!(|data: &[u8]| sgm_tests::fuzz_bodies::pcd(data));

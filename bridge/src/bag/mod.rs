@@ -1,5 +1,7 @@
-//! ROS 1 bags (format 2.0): our writer (no maintained one exists on crates.io) and the reader
-//! the replay uses (the `rosbag` crate: uncompressed, bz2 and lz4 chunks).
+//! ROS 1 bags (format 2.0): our writer (no maintained one exists on crates.io), the record
+//! reader (`records`: uncompressed, bz2 and lz4 chunks, every declared length bounded) and the
+//! replay's reader on top of it.
 
 pub mod reader;
+pub mod records;
 pub mod writer;

@@ -1,19 +1,23 @@
 //! Reads one robot's bag for the replay: the topics of the `[ros]` section (a bag topic matches
 //! a configured name equal to it or ending it: `points` matches `/points` and `/alpha/points`),
 //! each message decoded and checked by [`Inputs`]. A reader thread per bag decodes ahead into a
-//! bounded channel, so bags decode in parallel and memory stays bounded.
+//! bounded channel, so bags decode in parallel and memory stays bounded. The bag's records are
+//! read by [`super::records`], one chunk at a time and within bounds; [`decode_bag`] reads a bag
+//! from any `Read` on the caller's thread (the `rosbag` fuzz target feeds it bytes).
 
+use super::records::{BagLimits, ChunkRecord, ChunkSection, RecordError};
 use crate::bounded::{check_within, Layout};
 use crate::config::RosConfig;
 use crate::error::InputError;
 use crate::inputs::Inputs;
 pub use crate::inputs::Payload;
 use crate::msg::{nav_msgs, sensor_msgs};
-use rosbag::{ChunkRecord, MessageRecord, RosBag};
 use rosrust::{Message, RosMsg};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::fs::File;
+use std::io::{BufReader, Read};
+use std::path::Path;
+use std::sync::mpsc::{sync_channel, Receiver};
 
 /// What the reader thread sends: messages in record-time order (nanoseconds since 1970), a
 /// message refused (its topic and why), or the end.
@@ -58,10 +62,6 @@ pub fn topic_matches(topic: &str, name: &str) -> bool {
     topic == name || topic.strip_suffix(name).is_some_and(|rest| rest.ends_with('/'))
 }
 
-fn hex(md5: &[u8; 16]) -> String {
-    md5.iter().map(|b| format!("{b:02x}")).collect()
-}
-
 /// Decodes a bag's message within the live node's bounds (`bounded`): its bytes walked against
 /// M's layout and `ros.max_message_bytes` before rosrust reserves what a length prefix declares.
 fn decode<M: RosMsg + Layout>(data: &[u8], max_bytes: usize) -> Result<M, InputError> {
@@ -79,16 +79,16 @@ struct Decoder {
 }
 
 impl Decoder {
-    fn connection(&mut self, id: u32, topic: &str, msg_type: &str, md5: &[u8; 16]) -> Result<(), BagError> {
+    fn connection(&mut self, id: u32, topic: &str, msg_type: &str, md5: &str) -> Result<(), BagError> {
         let kind = self.topics.iter().find(|(name, _)| topic_matches(topic, name)).map(|(_, k)| *k);
         if let Some(kind) = kind {
             let (expected, expected_md5) = kind.expected();
-            if msg_type != expected || hex(md5) != expected_md5 {
+            if msg_type != expected || md5 != expected_md5 {
                 return Err(BagError::WrongType {
                     path: self.path.clone(),
                     topic: topic.into(),
                     found: msg_type.into(),
-                    md5: hex(md5),
+                    md5: md5.into(),
                     expected,
                 });
             }
@@ -107,18 +107,23 @@ impl Decoder {
         }
     }
 
-    /// Decodes the bag into `out`; returns early if the receiver is gone.
-    fn run(mut self, bag: &RosBag, out: &SyncSender<BagItem>) -> Result<(), BagError> {
-        let read_error = |path: &str, e: rosbag::Error| BagError::Read { path: path.into(), message: e.to_string() };
-        for record in bag.chunk_records() {
-            let ChunkRecord::Chunk(chunk) = record.map_err(|e| read_error(&self.path, e))? else { continue };
+    /// Decodes the bag in `section` into `out`; returns early once `out` returns false.
+    fn run<R: Read>(
+        mut self,
+        mut section: ChunkSection<R>,
+        out: &mut impl FnMut(BagItem) -> bool,
+    ) -> Result<(), BagError> {
+        let read_error = |path: &str, e: RecordError| BagError::Read { path: path.into(), message: e.to_string() };
+        while let Some(chunk) = section.next_chunk().map_err(|e| read_error(&self.path, e))? {
             let mut messages = Vec::new();
-            for message in chunk.messages() {
-                match message.map_err(|e| read_error(&self.path, e))? {
-                    MessageRecord::Connection(c) => self.connection(c.id, c.topic, c.tp, &c.md5sum)?,
-                    MessageRecord::MessageData(m) => {
-                        if let Some(Some((topic, kind))) = self.connections.get(&m.conn_id) {
-                            messages.push((m.time, topic.clone(), *kind, m.data));
+            for record in chunk.records() {
+                match record.map_err(|e| read_error(&self.path, e))? {
+                    ChunkRecord::Connection { id, topic, msg_type, md5sum } => {
+                        self.connection(id, &topic, &msg_type, &md5sum)?
+                    }
+                    ChunkRecord::Message { conn, time_nanos, data } => {
+                        if let Some(Some((topic, kind))) = self.connections.get(&conn) {
+                            messages.push((time_nanos, topic.clone(), *kind, data));
                         }
                     }
                 }
@@ -130,7 +135,7 @@ impl Decoder {
                     Ok(payload) => BagItem::Message { time_nanos, payload },
                     Err(error) => BagItem::Refused { topic, error },
                 };
-                if out.send(item).is_err() {
+                if !out(item) {
                     return Ok(());
                 }
             }
@@ -139,9 +144,18 @@ impl Decoder {
     }
 }
 
-/// Starts reading `path` as robot `robot` (id `id`) on its own thread.
-pub fn read_bag(path: &Path, config: &RosConfig, robot: &str, id: u16) -> Receiver<BagItem> {
-    let (sender, receiver) = sync_channel(64);
+/// Reads a bag of `len` bytes from `bag` as robot `robot` (id `id`) on this thread, handing
+/// each item to `out` until it returns false; a bag that cannot be read ends with one
+/// [`BagItem::Failed`] (`name` names the bag in it). What [`read_bag`]'s thread runs.
+pub fn decode_bag(
+    bag: impl Read,
+    len: u64,
+    name: &str,
+    config: &RosConfig,
+    robot: &str,
+    id: u16,
+    mut out: impl FnMut(BagItem) -> bool,
+) {
     let t = &config.topics;
     let topics = vec![
         (RosConfig::resolve(&t.points, robot, id), Kind::Cloud),
@@ -151,19 +165,34 @@ pub fn read_bag(path: &Path, config: &RosConfig, robot: &str, id: u16) -> Receiv
         (RosConfig::resolve(&t.ground_truth, robot, id), Kind::GroundTruth),
     ];
     let decoder = Decoder {
-        path: path.display().to_string(),
+        path: name.to_string(),
         topics,
         inputs: Inputs::new(config, robot, id),
         connections: BTreeMap::new(),
         max_bytes: config.max_message_bytes,
     };
-    let path: PathBuf = path.to_path_buf();
+    let result = ChunkSection::open(bag, len, BagLimits::for_messages(config.max_message_bytes))
+        .map_err(|e| BagError::Read { path: name.to_string(), message: e.to_string() })
+        .and_then(|section| decoder.run(section, &mut out));
+    if let Err(e) = result {
+        out(BagItem::Failed(e));
+    }
+}
+
+/// Starts reading `path` as robot `robot` (id `id`) on its own thread.
+pub fn read_bag(path: &Path, config: &RosConfig, robot: &str, id: u16) -> Receiver<BagItem> {
+    let (sender, receiver) = sync_channel(64);
+    let (path, config, robot) = (path.to_path_buf(), config.clone(), robot.to_string());
     std::thread::spawn(move || {
-        let result = RosBag::new(&path)
-            .map_err(|e| BagError::Read { path: path.display().to_string(), message: e.to_string() })
-            .and_then(|bag| decoder.run(&bag, &sender));
-        if let Err(e) = result {
-            let _ = sender.send(BagItem::Failed(e));
+        let name = path.display().to_string();
+        let opened = File::open(&path).and_then(|file| Ok((file.metadata()?.len(), file)));
+        match opened {
+            Ok((len, file)) => {
+                decode_bag(BufReader::new(file), len, &name, &config, &robot, id, |item| sender.send(item).is_ok())
+            }
+            Err(e) => {
+                let _ = sender.send(BagItem::Failed(BagError::Read { path: name, message: e.to_string() }));
+            }
         }
     });
     receiver

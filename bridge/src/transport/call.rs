@@ -68,11 +68,6 @@ struct Bounded<'a> {
 }
 
 impl Bounded<'_> {
-    fn arm_read(&self) -> Result<(), CallError> {
-        self.stream.set_read_timeout(Some(self.deadline.left()?))?;
-        Ok(())
-    }
-
     fn write_all(&mut self, bytes: &[u8]) -> Result<(), CallError> {
         let mut at = 0;
         while at < bytes.len() {
@@ -86,37 +81,38 @@ impl Bounded<'_> {
         }
         Ok(())
     }
+}
 
-    fn read_exact(&mut self, buffer: &mut [u8]) -> Result<(), CallError> {
-        let mut at = 0;
-        while at < buffer.len() {
-            self.arm_read()?;
-            match self.stream.read(&mut buffer[at..]) {
-                Ok(0) => return Err(CallError::Io(io::ErrorKind::UnexpectedEof.into())),
-                Ok(n) => at += n,
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(CallError::io(e, self.deadline.total)),
-            }
-        }
-        Ok(())
+/// Each read waits at most what is left of the deadline; past it, `TimedOut`.
+impl Read for Bounded<'_> {
+    fn read(&mut self, buffer: &mut [u8]) -> io::Result<usize> {
+        let left = self.deadline.left().map_err(|_| io::Error::from(io::ErrorKind::TimedOut))?;
+        self.stream.set_read_timeout(Some(left))?;
+        self.stream.read(buffer)
     }
+}
 
-    fn read_u32(&mut self) -> Result<u32, CallError> {
-        let mut b = [0u8; 4];
-        self.read_exact(&mut b)?;
-        Ok(u32::from_le_bytes(b))
-    }
+fn read_u32(stream: &mut impl Read) -> Result<u32, CallError> {
+    let mut b = [0u8; 4];
+    stream.read_exact(&mut b)?;
+    Ok(u32::from_le_bytes(b))
+}
 
-    /// A u32 length, then that many bytes: at most `max`, refused before reading otherwise.
-    fn read_counted(&mut self, what: &'static str, max: usize) -> Result<Vec<u8>, CallError> {
-        let len = usize::try_from(self.read_u32()?).unwrap_or(usize::MAX);
-        if len > max {
-            return Err(CallError::TooLarge { what, len, max });
-        }
-        let mut bytes = vec![0u8; len];
-        self.read_exact(&mut bytes)?;
-        Ok(bytes)
+/// A u32 length, then that many bytes: at most `max`, refused before reading otherwise. The
+/// buffer grows as the bytes arrive (the `tcpros_reply` fuzz target found a 110-byte reply
+/// that declared 117 MB, reserved before reading), so a peer costs what it sent.
+fn read_counted(stream: &mut impl Read, what: &'static str, max: usize) -> Result<Vec<u8>, CallError> {
+    let declared = read_u32(stream)?;
+    let len = usize::try_from(declared).unwrap_or(usize::MAX);
+    if len > max {
+        return Err(CallError::TooLarge { what, len, max });
     }
+    let mut bytes = Vec::new();
+    stream.by_ref().take(u64::from(declared)).read_to_end(&mut bytes)?;
+    if bytes.len() < len {
+        return Err(CallError::Io(io::ErrorKind::UnexpectedEof.into()));
+    }
+    Ok(bytes)
 }
 
 /// A TCPROS connection header: `u32 total ‖ (u32 len ‖ "key=value")*`.
@@ -196,13 +192,23 @@ pub fn deliver(target: &CallTarget, request: &sgm_msgs::DeliverReq) -> Result<sg
     bytes.extend_from_slice(&body);
     stream.write_all(&bytes)?;
 
-    let fields = decode_header(&stream.read_counted("connection header", MAX_HEADER_BYTES)?)?;
+    read_reply(&mut stream, target.max_reply).map_err(|e| match e {
+        CallError::Io(e) => CallError::io(e, target.timeout),
+        e => e,
+    })
+}
+
+/// What the peer sends back, read off `stream`: its connection header (refused if it names an
+/// error), then `u8 ok ‖ u32 length ‖ reply`, a reply of at most `max_reply` bytes. Everything a
+/// hostile peer controls is here (the `tcpros_reply` fuzz target feeds it bytes).
+pub fn read_reply(stream: &mut impl Read, max_reply: usize) -> Result<sgm_msgs::DeliverRes, CallError> {
+    let fields = decode_header(&read_counted(stream, "connection header", MAX_HEADER_BYTES)?)?;
     if let Some((_, error)) = fields.iter().find(|(k, _)| k == "error") {
         return Err(CallError::Refused(error.clone()));
     }
     let mut ok = [0u8; 1];
     stream.read_exact(&mut ok)?;
-    let reply = stream.read_counted("reply", target.max_reply)?;
+    let reply = read_counted(stream, "reply", max_reply)?;
     if ok[0] == 0 {
         // A failed call's reply is the bare error string.
         return Err(CallError::Refused(String::from_utf8_lossy(&reply).into_owned()));
