@@ -138,7 +138,7 @@ fn the_rosbag_crates(path: &std::path::Path) -> Contents {
 
 /// Our record reader (`bag::records`) reads what the `rosbag` crate reads, record for record:
 /// a bag of ours with several chunks, and the `rosbag` fuzz target's seeds, which include bz2
-/// and lz4 chunks written by Debian's `rosbag compress`.
+/// and lz4 chunks written by Debian's `rosbag compress` (kept in `tests/bags/`, as cmin renames the corpus).
 #[test]
 fn our_records_are_the_rosbag_crates() {
     let dir = tempfile::tempdir().unwrap();
@@ -153,7 +153,7 @@ fn our_records_are_the_rosbag_crates() {
         bag.write("/alpha/odometry", SCENARIO_EPOCH.time(t), &odometry_msg(header(t, "odom"), "base", &pose)).unwrap();
     }
     bag.finish().unwrap();
-    let seeds = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus/rosbag");
+    let seeds = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/bags");
     let mut bags = vec![path];
     bags.extend(["three_frames.bag", "three_frames_bz2.bag", "labels_in_cloud_lz4.bag"].map(|name| seeds.join(name)));
     for path in bags {
