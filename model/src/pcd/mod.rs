@@ -196,6 +196,10 @@ fn parse_header(bytes: &[u8]) -> Result<Header, PcdError> {
                 let names = names.ok_or(header_error(line, "no FIELDS before DATA"))?;
                 let sizes = sizes.ok_or(header_error(line, "no SIZE before DATA"))?;
                 let kinds = kinds.ok_or(header_error(line, "no TYPE before DATA"))?;
+                if names.is_empty() {
+                    // A point of no field has no bytes: the data could not be walked point by point.
+                    return Err(header_error(line, "FIELDS names no field: a point needs at least 1 value"));
+                }
                 let counts = counts.unwrap_or_else(|| vec![1; names.len()]);
                 if sizes.len() != names.len() || kinds.len() != names.len() || counts.len() != names.len() {
                     return Err(header_error(
