@@ -1,4 +1,4 @@
-//! The class table (section `[[classes]]` of a robot configuration): every semantic class the
+//! The class table (section `[[fusion.classes]]` of a robot configuration): every semantic class the
 //! segmenter emits, by id, with a display colour, whether its objects are matchable (the paper
 //! matches only selected classes: large objects' centroids move with the viewpoint), and the
 //! plausible size range of one object.
