@@ -157,7 +157,7 @@ status alpha > "$WORK/alpha.status2.json"
 /usr/bin/python3 - "$WORK/alpha.status2.json" <<'PY' || fail "refusals not counted"
 import json, sys
 s = json.load(open(sys.argv[1]))
-assert s["refused"] == {"camera_info": 0, "labels": 1, "odometry": 1, "points": 1}, s["refused"]
+assert s["refused"] == {"camera_info": 0, "clock": 0, "labels": 1, "odometry": 1, "points": 1}, s["refused"]
 print("  alpha refused", s["refused"], "and kept running")
 PY
 # Ctrl-C on roslaunch stops its node (SIGINT) and roslaunch exits 0.

@@ -21,9 +21,15 @@ pub struct RosConfig {
     pub labels: LabelSource,
     /// The cloud's label field when `labels = "cloud"`. Default `label`.
     pub label_field: String,
-    /// `camera_from_body` as [x, y, z, qx, qy, qz, qw]; unset: a camera at the body origin
-    /// looking along +x (optical frame: z forward, x right, y down).
+    /// `camera_from_body` as [x, y, z, qx, qy, qz, qw]: it takes a point of the body frame into
+    /// the camera's optical frame (z forward, x right, y down), `p_camera = camera_from_body ·
+    /// p_body`. Unset (and `body_from_camera` unset): a camera at the body origin looking along
+    /// +x, `[0, 0, 0, 0.5, -0.5, 0.5, 0.5]`.
     pub camera_from_body: Option<[f64; 7]>,
+    /// The same mounting the other way round, as tf and a URDF give it: the camera's optical
+    /// frame's pose in the body frame, `body_from_camera = camera_from_body⁻¹`. Set one of the
+    /// two, not both.
+    pub body_from_camera: Option<[f64; 7]>,
     pub sync: SyncConfig,
     /// Markers, path, map, tf and status are published every this many seconds. Default 1.
     pub publish_interval_s: f64,
@@ -54,6 +60,7 @@ impl Default for RosConfig {
             labels: LabelSource::Image,
             label_field: "label".into(),
             camera_from_body: None,
+            body_from_camera: None,
             sync: SyncConfig::default(),
             publish_interval_s: 1.0,
             map_voxel_m: 0.25,
@@ -172,23 +179,33 @@ impl Default for SyncConfig {
     }
 }
 
+/// A pose key's [x, y, z, qx, qy, qz, qw], checked; errors name `ros.KEY`.
+fn pose_key([x, y, z, qx, qy, qz, qw]: [f64; 7], key: &str) -> Result<Pose3, InputError> {
+    let pose = crate::msg::geometry_msgs::Pose {
+        position: crate::msg::geometry_msgs::Point { x, y, z },
+        orientation: crate::msg::geometry_msgs::Quaternion { x: qx, y: qy, z: qz, w: qw },
+    };
+    crate::convert::geometry::pose_from_msg(&pose).map_err(|e| InputError::invalid(format!("ros.{key}: {e}")))
+}
+
 impl RosConfig {
     /// `template` with `{robot}` and `{id}` filled in.
     pub fn resolve(template: &str, robot: &str, id: u16) -> String {
         template.replace("{robot}", robot).replace("{id}", &id.to_string())
     }
 
-    /// The camera extrinsic (checked: finite, unit quaternion).
+    /// The camera extrinsic, from `camera_from_body` or the inverse of `body_from_camera`
+    /// (checked: finite, unit quaternion, not both set).
     pub fn camera_from_body(&self) -> Result<Pose3, InputError> {
-        let Some([x, y, z, qx, qy, qz, qw]) = self.camera_from_body else {
-            return Ok(sgm_model::perception::projection::optical_from_forward_body());
-        };
-        let pose = crate::msg::geometry_msgs::Pose {
-            position: crate::msg::geometry_msgs::Point { x, y, z },
-            orientation: crate::msg::geometry_msgs::Quaternion { x: qx, y: qy, z: qz, w: qw },
-        };
-        crate::convert::geometry::pose_from_msg(&pose)
-            .map_err(|e| InputError::invalid(format!("ros.camera_from_body: {e}")))
+        match (self.camera_from_body, self.body_from_camera) {
+            (Some(_), Some(_)) => Err(InputError::invalid(
+                "ros.camera_from_body and ros.body_from_camera are both set: they are one mounting \
+                 (one the inverse of the other), set one",
+            )),
+            (Some(values), None) => pose_key(values, "camera_from_body"),
+            (None, Some(values)) => pose_key(values, "body_from_camera").map(|body_from_camera| body_from_camera.inverse()),
+            (None, None) => Ok(sgm_model::perception::projection::optical_from_forward_body()),
+        }
     }
 
     /// Checks every key; errors name the key.
@@ -256,5 +273,57 @@ impl RosConfig {
             return Err(InputError::invalid("ros.topics.deliver must contain {id}: one service per robot"));
         }
         self.camera_from_body().map(|_| ())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point3;
+
+    fn close(a: Point3<f64>, b: [f64; 3]) -> bool {
+        (a - Point3::from(b)).norm() < 1e-12
+    }
+
+    /// The default mounting, closed form: a point 5 m ahead of the body (+x) is 5 m down the
+    /// camera's optical axis (+z); one to the body's left (+y) is to the image's left (−x).
+    #[test]
+    fn the_default_camera_looks_along_the_body_x_axis() {
+        let c = RosConfig::default().camera_from_body().unwrap();
+        assert!(close(c * Point3::new(5.0, 0.0, 0.0), [0.0, 0.0, 5.0]));
+        assert!(close(c * Point3::new(0.0, 1.0, 0.0), [-1.0, 0.0, 0.0]));
+        assert!(close(c * Point3::new(0.0, 0.0, 1.0), [0.0, -1.0, 0.0]));
+    }
+
+    /// A camera 0.2 m ahead of and 0.1 m above the body origin, given as tf gives it: its
+    /// origin maps to the camera's origin and a point 5 m further ahead to 5 m down its axis;
+    /// the same mounting as `camera_from_body` (the inverse) gives the same transform.
+    #[test]
+    fn body_from_camera_is_the_inverse_mounting() {
+        let tf_pose = [0.2, 0.0, 0.1, -0.5, 0.5, -0.5, 0.5];
+        let from_tf = RosConfig { body_from_camera: Some(tf_pose), ..Default::default() }.camera_from_body().unwrap();
+        assert!(close(from_tf * Point3::new(0.2, 0.0, 0.1), [0.0, 0.0, 0.0]));
+        assert!(close(from_tf * Point3::new(5.2, 0.0, 0.1), [0.0, 0.0, 5.0]));
+        let inverse = from_tf;
+        let t = inverse.translation.vector;
+        let q = inverse.rotation.coords;
+        let direct = RosConfig { camera_from_body: Some([t.x, t.y, t.z, q.x, q.y, q.z, q.w]), ..Default::default() }
+            .camera_from_body()
+            .unwrap();
+        assert!((direct.to_homogeneous() - from_tf.to_homogeneous()).norm() < 1e-12);
+    }
+
+    #[test]
+    fn both_mountings_or_a_bad_quaternion_are_refused_by_name() {
+        let both = RosConfig {
+            camera_from_body: Some([0.0, 0.0, 0.0, 0.5, -0.5, 0.5, 0.5]),
+            body_from_camera: Some([0.0, 0.0, 0.0, -0.5, 0.5, -0.5, 0.5]),
+            ..Default::default()
+        };
+        let e = both.validate().unwrap_err().to_string();
+        assert!(e.contains("ros.camera_from_body") && e.contains("ros.body_from_camera"), "{e}");
+        let bad = RosConfig { body_from_camera: Some([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]), ..Default::default() };
+        let e = bad.validate().unwrap_err().to_string();
+        assert!(e.contains("ros.body_from_camera") && e.contains("norm"), "{e}");
     }
 }
