@@ -163,8 +163,15 @@ impl Default for RosFrames {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SyncConfig {
-    /// A label image within this of the cloud's stamp labels it, s. Default 0.05.
+    /// A label image within this of the cloud's stamp labels it as it is, s. Default 0.05.
     pub image_tolerance_s: f64,
+    /// A label image farther than `image_tolerance_s` but within this of the cloud labels it
+    /// with the body's motion in between compensated (the odometry at both stamps), s: a
+    /// segmenter slower than the LiDAR is normal. Default 0.5.
+    pub max_label_skew_s: f64,
+    /// What becomes of a cloud with no label image within `max_label_skew_s`: `keep` (default:
+    /// assembled without labels, so it still feeds keyframes and the map's geometry) or `drop`.
+    pub unlabelled: Unlabelled,
     /// The odometry poses bracketing a cloud may be at most this far apart to interpolate, s.
     /// Default 0.5.
     pub max_odometry_gap_s: f64,
@@ -175,8 +182,24 @@ pub struct SyncConfig {
 
 impl Default for SyncConfig {
     fn default() -> Self {
-        Self { image_tolerance_s: 0.05, max_odometry_gap_s: 0.5, max_wait_s: 1.0 }
+        Self {
+            image_tolerance_s: 0.05,
+            max_label_skew_s: 0.5,
+            unlabelled: Unlabelled::Keep,
+            max_odometry_gap_s: 0.5,
+            max_wait_s: 1.0,
+        }
     }
+}
+
+/// `ros.sync.unlabelled`: a cloud no label image reaches.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Unlabelled {
+    /// Assembled without labels (counted as `unlabelled`).
+    Keep,
+    /// Dropped (counted as `no_image`).
+    Drop,
 }
 
 /// A pose key's [x, y, z, qx, qy, qz, qw], checked; errors name `ros.KEY`.
@@ -203,7 +226,9 @@ impl RosConfig {
                  (one the inverse of the other), set one",
             )),
             (Some(values), None) => pose_key(values, "camera_from_body"),
-            (None, Some(values)) => pose_key(values, "body_from_camera").map(|body_from_camera| body_from_camera.inverse()),
+            (None, Some(values)) => {
+                pose_key(values, "body_from_camera").map(|body_from_camera| body_from_camera.inverse())
+            }
             (None, None) => Ok(sgm_model::perception::projection::optical_from_forward_body()),
         }
     }
@@ -218,6 +243,13 @@ impl RosConfig {
             }
         };
         positive(self.sync.image_tolerance_s, "sync.image_tolerance_s")?;
+        positive(self.sync.max_label_skew_s, "sync.max_label_skew_s")?;
+        if self.sync.max_label_skew_s < self.sync.image_tolerance_s {
+            return Err(InputError::invalid(format!(
+                "ros.sync.max_label_skew_s = {} is below ros.sync.image_tolerance_s = {}: at least that expected",
+                self.sync.max_label_skew_s, self.sync.image_tolerance_s
+            )));
+        }
         positive(self.sync.max_odometry_gap_s, "sync.max_odometry_gap_s")?;
         positive(self.sync.max_wait_s, "sync.max_wait_s")?;
         positive(self.publish_interval_s, "publish_interval_s")?;

@@ -2,16 +2,26 @@
 //! [`SensorFrame`]s out — the same code for the live node and the bag replay. A cloud gets the
 //! odometry pose at its stamp (the pose stamped exactly then, else interpolated between the two
 //! bracketing poses — linear in translation, slerp in rotation — if they are at most
-//! `max_odometry_gap_s` apart) and the label image nearest its stamp within `image_tolerance_s`.
-//! A cloud waits while its partners may still come; once the streams are `max_wait_s` past it,
-//! it is dropped and counted. Time here is the streams' own (header stamps), never the wall
+//! `max_odometry_gap_s` apart) and the label image nearest its stamp. An image within
+//! `image_tolerance_s` labels it as it is; one farther but within `max_label_skew_s` (a
+//! segmenter slower than the LiDAR) labels it with the body's motion in between compensated:
+//!
+//! ```text
+//! camera(t_img)_from_body(t) = camera_from_body · world_from_body(t_img)⁻¹ · world_from_body(t)
+//! ```
+//!
+//! (what moves in the scene meanwhile is not compensated). A cloud no image reaches is
+//! assembled without labels (`unlabelled = "keep"`) or dropped. Images come in stamp order, so
+//! once one at or after the cloud's stamp is in, no later one can be nearer. A cloud waits
+//! while its partners may still come; once the streams are `max_wait_s` past it, it takes what
+//! there is, or is dropped and counted. Time here is the streams' own (header stamps), never the wall
 //! clock, so a replay is deterministic. Every buffer is bounded.
 //!
 //! Stamps are checked first by the [`Timeline`]: a stamp far from its stream waits until others
 //! confirm it (a jump: the timeline restarts, the buffers start afresh and mission time goes on)
 //! or is dropped as an outlier (a glitch), so one bad stamp never stops the streams.
 
-use crate::config::{LabelSource, SyncConfig};
+use crate::config::{LabelSource, SyncConfig, Unlabelled};
 use crate::convert::cloud::{Scan, NO_LABEL};
 use crate::convert::time::Epoch;
 use crate::inputs::Payload;
@@ -38,6 +48,15 @@ pub struct SyncCounts {
     pub overflow: u64,
     /// Clouds still waiting for partners when the timeline restarted (dropped).
     pub at_restart: u64,
+    /// Frames labelled by an image farther than `image_tolerance_s`, motion-compensated.
+    pub compensated: u64,
+    /// Frames assembled without labels: no image within `max_label_skew_s`, or no odometry at
+    /// the image's stamp to compensate with (`unlabelled = "keep"`).
+    pub unlabelled: u64,
+    /// The largest |image stamp − cloud stamp| of a labelled frame, ms (rounded up).
+    pub label_skew_max_ms: u64,
+    /// Sum of |image stamp − cloud stamp| over labelled frames, ms (mean = sum / labelled).
+    pub label_skew_sum_ms: u64,
 }
 
 pub struct Synchroniser {
@@ -216,28 +235,43 @@ impl Synchroniser {
         }
     }
 
-    fn image_at(&self, t: Stamp) -> Outcome<LabelImage> {
-        let tolerance = self.config.image_tolerance_s;
-        let nearest = self
-            .images
-            .iter()
-            .filter(|(s, _)| (s - t).abs() <= tolerance)
+    /// The label image nearest `t` within `max_label_skew_s`, with its stamp; `Ready(None)`
+    /// when none is or will be; `Wait` while a nearer one may still come (never once `stale`).
+    fn image_near(&self, t: Stamp, stale: bool) -> Outcome<Option<(Stamp, LabelImage)>> {
+        let reach = self.config.max_label_skew_s.max(self.config.image_tolerance_s);
+        let after = self.images.partition_point(|(s, _)| *s < t);
+        let next = self.images.get(after);
+        let previous = after.checked_sub(1).and_then(|k| self.images.get(k));
+        let nearest = [previous, next]
+            .into_iter()
+            .flatten()
+            .filter(|(s, _)| (s - t).abs() <= reach)
             .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()));
+        // Images come in stamp order: one at or after t settles it, as does the input's end.
+        let settled = next.is_some() || self.ended || stale;
         match nearest {
-            // An image exactly at t cannot be beaten; otherwise a closer one may still come,
-            // unless the input has ended.
-            Some((s, image))
-                if *s == t || self.ended || self.images.back().is_some_and(|(last, _)| *last >= t + tolerance) =>
-            {
-                Outcome::Ready(image.clone())
-            }
+            Some((s, image)) if settled => Outcome::Ready(Some((*s, image.clone()))),
             Some(_) => Outcome::Wait,
-            None if self.images.back().is_some_and(|(last, _)| *last > t + tolerance) => Outcome::Drop,
+            None if settled => Outcome::Ready(None),
             None => Outcome::Wait,
         }
     }
 
-    fn labels_for(&mut self, t: Stamp, scan: &Scan) -> Outcome<FrameLabels> {
+    /// A cloud no image labels: assembled without labels, or dropped, as configured.
+    fn without_image(&mut self, scan: &Scan) -> Outcome<FrameLabels> {
+        match self.config.unlabelled {
+            Unlabelled::Keep => {
+                self.counts.unlabelled += 1;
+                Outcome::Ready(FrameLabels::PerPoint(vec![None; scan.points.len()]))
+            }
+            Unlabelled::Drop => {
+                self.counts.no_image += 1;
+                Outcome::Drop
+            }
+        }
+    }
+
+    fn labels_for(&mut self, t: Stamp, world_from_body: &Pose3, scan: &Scan, stale: bool) -> Outcome<FrameLabels> {
         match self.labels {
             LabelSource::Cloud => match &scan.labels {
                 Some(labels) => Outcome::Ready(FrameLabels::PerPoint(
@@ -250,16 +284,30 @@ impl Synchroniser {
             },
             LabelSource::Image => {
                 let Some(camera) = self.camera.clone() else { return Outcome::Wait };
-                match self.image_at(t) {
-                    Outcome::Ready(image) => {
-                        Outcome::Ready(FrameLabels::Image { image, camera, camera_from_body: self.camera_from_body })
+                let (t_image, image) = match self.image_near(t, stale) {
+                    Outcome::Ready(Some(found)) => found,
+                    Outcome::Ready(None) => return self.without_image(scan),
+                    Outcome::Wait => return Outcome::Wait,
+                    Outcome::Drop => return Outcome::Drop,
+                };
+                let skew = (t_image - t).abs();
+                let camera_from_body = if skew <= self.config.image_tolerance_s {
+                    self.camera_from_body
+                } else {
+                    match self.pose_at(t_image) {
+                        Outcome::Ready(world_from_body_at_image) => {
+                            self.counts.compensated += 1;
+                            self.camera_from_body * world_from_body_at_image.inverse() * world_from_body
+                        }
+                        Outcome::Wait if !stale => return Outcome::Wait,
+                        // No odometry at the image's stamp: its labels cannot be placed.
+                        _ => return self.without_image(scan),
                     }
-                    Outcome::Wait => Outcome::Wait,
-                    Outcome::Drop => {
-                        self.counts.no_image += 1;
-                        Outcome::Drop
-                    }
-                }
+                };
+                let skew_ms = (skew * 1000.0).ceil() as u64;
+                self.counts.label_skew_max_ms = self.counts.label_skew_max_ms.max(skew_ms);
+                self.counts.label_skew_sum_ms = self.counts.label_skew_sum_ms.saturating_add(skew_ms);
+                Outcome::Ready(FrameLabels::Image { image, camera, camera_from_body })
             }
         }
     }
@@ -280,7 +328,7 @@ impl Synchroniser {
                 }
             };
             let Some((_, scan)) = self.clouds.pop_front() else { break };
-            match self.labels_for(t, &scan) {
+            match self.labels_for(t, &pose, &scan, stale) {
                 Outcome::Ready(labels) => {
                     self.counts.frames += 1;
                     frames.push(SensorFrame { stamp: t, world_from_body: pose, points_in_body: scan.points, labels });
@@ -316,8 +364,11 @@ impl Synchroniser {
 
     /// Forgets odometry and images no waiting or future cloud can use.
     fn prune(&mut self) {
+        // A waiting cloud may take an image up to max_label_skew_s before it, and needs the
+        // odometry around that image to compensate.
+        let reach = self.config.max_label_skew_s.max(self.config.image_tolerance_s);
         let horizon = self.clouds.front().map_or(self.latest - self.config.max_wait_s, |(t, _)| *t)
-            - self.config.max_odometry_gap_s.max(self.config.image_tolerance_s);
+            - self.config.max_odometry_gap_s.max(reach);
         while self.odometry.len() > 1 && self.odometry.get(1).is_some_and(|(t, _)| *t < horizon) {
             self.odometry.pop_front();
         }
@@ -372,18 +423,19 @@ mod tests {
         assert!(s.finish(Epoch { sec: 0 }).is_empty());
         assert_eq!((s.pending(), s.counts.no_odometry, s.counts.frames), (0, 1, 1));
 
-        // The only image is 10 ms after the cloud, in tolerance: a closer one might have come,
-        // but the bag has ended, so the cloud takes it.
+        // The only image is 10 ms before the cloud, in tolerance: a closer one might still come
+        // after it, but the bag has ended, so the cloud takes it.
         let mut s = Synchroniser::new(SyncConfig::default(), LabelSource::Image, Pose3::identity());
         s.camera_info(camera());
         s.odometry(0.0, pose);
         s.odometry(0.4, pose);
+        s.image(0.19, image());
         s.cloud(0.2, scan(3));
-        s.image(0.21, image());
         assert!(s.ready().is_empty());
         assert_eq!(s.pending(), 1);
         let frames = s.finish(Epoch { sec: 0 });
         assert_eq!((frames.len(), s.pending(), s.counts.no_image), (1, 0, 0));
+        assert!(matches!(frames[0].labels, FrameLabels::Image { .. }));
     }
 
     #[test]
@@ -408,7 +460,7 @@ mod tests {
 
     #[test]
     fn clouds_without_partners_are_dropped_once_stale() {
-        let config = SyncConfig { max_wait_s: 1.0, max_odometry_gap_s: 0.5, image_tolerance_s: 0.05 };
+        let config = SyncConfig { unlabelled: Unlabelled::Drop, ..SyncConfig::default() };
         let mut s = Synchroniser::new(config, LabelSource::Image, Pose3::identity());
         s.odometry(0.0, Pose3::identity());
         s.odometry(2.0, Pose3::identity());
@@ -424,19 +476,78 @@ mod tests {
         assert_eq!(s.counts.no_camera_info, 1);
         s.camera_info(camera());
         s.odometry(3.6, Pose3::identity());
-        s.image(3.58, image());
-        s.cloud(3.55, scan(1)); // image 0.03 s later: within tolerance, but a closer one may come
+        s.image(3.52, image());
+        s.cloud(3.55, scan(1)); // image 0.03 s before: within tolerance, but a closer one may come
         assert!(s.ready().is_empty());
-        s.image(3.62, image()); // the stream is past 3.55 + 0.05
+        s.image(3.62, image()); // an image after the cloud: nothing nearer can come now
         s.odometry(3.7, Pose3::identity());
         assert_eq!(s.ready().len(), 1);
         s.cloud(3.65, scan(1));
         s.image(3.9, image()); // nearest images 3.62 (0.03 off) and 3.9: 3.62 wins
         assert_eq!(s.ready().len(), 1);
-        s.cloud(3.68, scan(1)); // no image within 0.05 and the image stream has passed: dropped
+        s.odometry(4.4, Pose3::identity());
+        s.odometry(4.6, Pose3::identity());
+        s.cloud(4.5, scan(1)); // images at 3.9 and 5.2: both beyond max_label_skew_s (0.5)
+        s.image(5.2, image());
         assert!(s.ready().is_empty());
         assert_eq!((s.counts.no_image, s.pending()), (1, 0));
-        assert_eq!(s.counts.frames, 2);
+        assert_eq!((s.counts.frames, s.counts.compensated, s.counts.unlabelled), (2, 0, 0));
+    }
+
+    /// A segmenter at 2 Hz beside a LiDAR at 10 Hz: every cloud is assembled. Those within
+    /// `image_tolerance_s` of an image take it as it is, those within `max_label_skew_s` take
+    /// the nearest with the motion compensated, and the skew is counted.
+    #[test]
+    fn a_slow_segmenter_labels_every_cloud_with_the_motion_compensated() {
+        let mut s = Synchroniser::new(SyncConfig::default(), LabelSource::Image, Pose3::identity());
+        s.camera_info(camera());
+        // The body moves along x at 1 m/s.
+        let at = |t: f64| Pose3::from_parts(Vector3::new(t, 0.0, 0.0).into(), UnitQuaternion::identity());
+        let mut frames = Vec::new();
+        for k in 0..=20 {
+            let t = k as f64 * 0.1;
+            s.odometry(t, at(t));
+            if k % 5 == 0 {
+                s.image(t, image());
+            }
+            s.cloud(t, scan(2));
+            frames.extend(s.ready());
+        }
+        frames.extend(s.finish(Epoch { sec: 0 }));
+        assert_eq!(frames.len(), 21);
+        assert_eq!((s.counts.frames, s.counts.compensated, s.counts.unlabelled, s.counts.no_image), (21, 16, 0, 0));
+        assert_eq!(s.counts.label_skew_max_ms, 201); // 0.2 s, rounded up through the float
+                                                     // The cloud at 0.3 s takes the image at 0.5 s: the body moves 0.2 m forward (+x) in
+                                                     // between, so a body point at the cloud's time is 0.2 m nearer along the optical axis
+                                                     // (camera_from_body is the identity here): x_camera = x_body(0.3) − 0.2 (closed form).
+        let FrameLabels::Image { camera_from_body, .. } = &frames[3].labels else { panic!("labelled") };
+        assert!((frames[3].stamp - 0.3).abs() < 1e-12);
+        let p = camera_from_body * Point3::new(1.0, 0.0, 0.0);
+        assert!((p.x - 0.8).abs() < 1e-9, "{p}");
+        // The cloud at 0.5 s is the image's own: as it is.
+        let FrameLabels::Image { camera_from_body, .. } = &frames[5].labels else { panic!("labelled") };
+        assert_eq!(*camera_from_body, Pose3::identity());
+    }
+
+    /// No image within reach: the cloud still feeds the map, without labels; with no odometry
+    /// at the image's stamp to compensate with, the same.
+    #[test]
+    fn a_cloud_no_image_reaches_is_kept_without_labels() {
+        let mut s = Synchroniser::new(SyncConfig::default(), LabelSource::Image, Pose3::identity());
+        s.camera_info(camera());
+        s.odometry(0.0, Pose3::identity());
+        s.odometry(0.2, Pose3::identity());
+        s.image(0.0, image());
+        s.cloud(0.1, scan(3)); // the image 0.1 s before; odometry brackets it: compensated
+        s.odometry(2.0, Pose3::identity());
+        s.cloud(1.5, scan(3)); // the odometry gap (0.2 → 2.0) is too wide: no pose, dropped
+        s.odometry(2.1, Pose3::identity());
+        s.cloud(2.05, scan(3)); // the last image is 2.05 s before: unlabelled
+        s.image(3.0, image());
+        let frames = s.ready();
+        assert_eq!(frames.len(), 2);
+        assert!(matches!(&frames[1].labels, FrameLabels::PerPoint(l) if l == &vec![None; 3]));
+        assert_eq!((s.counts.compensated, s.counts.unlabelled, s.counts.no_odometry), (1, 1, 1));
     }
 
     fn ros(s: f64) -> rosrust::Time {

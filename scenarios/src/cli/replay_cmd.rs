@@ -54,6 +54,19 @@ pub fn execute(options: Options) -> Result<()> {
             b.sync.no_odometry,
             b.sync.no_image + b.sync.no_camera_info
         );
+        let s = &b.sync;
+        if s.compensated > 0 || s.unlabelled > 0 {
+            let labelled = s.frames - s.unlabelled;
+            println!(
+                "  {}: {} frames labelled by an image up to {} ms away ({} motion-compensated, mean skew {} ms), {} without labels",
+                b.robot,
+                labelled,
+                s.label_skew_max_ms,
+                s.compensated,
+                s.label_skew_sum_ms.checked_div(labelled).unwrap_or(0),
+                s.unlabelled
+            );
+        }
         let t = &b.timeline;
         if t.restarts > 0 || t.outliers > 0 {
             println!(
