@@ -2,6 +2,10 @@
 //! subcommand, flags and enumerated values exist. Each is run as `sgm ARGS --help`, which makes
 //! clap check everything before it and then print help instead of running; ROS remappings
 //! (`__ns:=/alpha`) are left out, as they are for rosrust, not clap.
+//!
+//! The prose's inline `sgm …` spans are synopses (`[--json FILE]`, `ascii|binary`): each
+//! subcommand in one must exist, and each flag and enumerated value must be in that
+//! subcommand's `--help`.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -151,6 +155,118 @@ fn every_sgm_command_in_the_book_and_readme_parses() {
     }
     assert!(checked >= 10, "only {checked} sgm commands found in the book and README");
     assert!(failures.is_empty(), "commands that do not parse:\n{}", failures.join("\n"));
+}
+
+/// `sgm SUBCOMMAND… --help`: the help text, or None when the path is not a command.
+fn help(path: &[String]) -> Option<String> {
+    let out = Command::new(env!("CARGO_BIN_EXE_sgm")).args(path).arg("--help").output().expect("sgm starts");
+    out.status.success().then(|| String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// The subcommands a help text lists under `Commands:`.
+fn subcommands(help: &str) -> Vec<String> {
+    help.lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .collect()
+}
+
+/// Every inline code span of `text` that starts with `sgm `, outside fenced blocks.
+fn inline_spans(text: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut fenced = false;
+    for line in text.lines() {
+        if line.trim_start().starts_with("```") {
+            fenced = !fenced;
+            continue;
+        }
+        if fenced {
+            continue;
+        }
+        // Odd pieces between backticks are code spans.
+        for (k, piece) in line.split('`').enumerate() {
+            if k % 2 == 1 && piece.starts_with("sgm ") {
+                out.push(piece.to_string());
+            }
+        }
+    }
+    out
+}
+
+/// What is wrong with the synopsis `span` (`sgm bench messages [--duration S] [--json FILE]`),
+/// if anything: an unknown subcommand, or a flag or value its `--help` does not list. A span
+/// that names no subcommand first (`sgm node up`, a log line) or holds a placeholder for one
+/// (`sgm bench <name>`, `sgm bench …`) is not a command and is skipped.
+fn synopsis_problem(span: &str, top: &[String]) -> Option<String> {
+    let words: Vec<String> =
+        span.split_whitespace().skip(1).map(|w| w.trim_matches(|c| c == '[' || c == ']').to_string()).collect();
+    let first = words.first()?;
+    if !top.contains(first) {
+        return None;
+    }
+    let mut path = vec![first.clone()];
+    let mut text = help(&path)?;
+    for w in &words[1..] {
+        let subs = subcommands(&text);
+        if subs.is_empty() {
+            break;
+        }
+        if w.starts_with('<') || w.contains('…') {
+            return None;
+        }
+        if !subs.contains(w) {
+            return Some(format!("`sgm {}` has no subcommand `{w}`", path.join(" ")));
+        }
+        path.push(w.clone());
+        text = help(&path)?;
+    }
+    let mut after_flag = false;
+    for w in words.iter().skip(path.len()) {
+        if w.starts_with("--") {
+            let flag = w.split('=').next().unwrap_or(w);
+            if !text.contains(&format!("{flag} ")) && !text.contains(&format!("{flag}\n")) && !text.ends_with(flag) {
+                return Some(format!("`sgm {}` has no flag `{flag}`", path.join(" ")));
+            }
+            after_flag = true;
+        } else if after_flag && w.contains('|') {
+            // Enumerated values: each must be a possible value.
+            for value in w.split('|').filter(|v| !v.is_empty()) {
+                if !text.contains(value) {
+                    return Some(format!("`sgm {}` does not list the value `{value}`", path.join(" ")));
+                }
+            }
+            after_flag = false;
+        } else {
+            after_flag = false;
+        }
+    }
+    None
+}
+
+#[test]
+fn every_sgm_synopsis_in_the_prose_names_real_subcommands_and_flags() {
+    let top = subcommands(&help(&[]).expect("sgm --help"));
+    assert!(top.contains(&"run".to_string()), "{top:?}");
+    let (mut checked, mut failures) = (0, Vec::new());
+    for document in documents() {
+        let text = std::fs::read_to_string(&document).unwrap_or_else(|e| panic!("{}: {e}", document.display()));
+        let name = document.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        for span in inline_spans(&text) {
+            checked += 1;
+            if let Some(problem) = synopsis_problem(&span, &top) {
+                failures.push(format!("{name}: `{span}`: {problem}"));
+            }
+        }
+    }
+    assert!(checked >= 20, "only {checked} inline sgm spans found");
+    assert!(failures.is_empty(), "synopses the binary rejects:\n{}", failures.join("\n"));
+    // The check can fail: a flag and a value the binary does not have.
+    assert!(synopsis_problem("sgm bench matching --duration 20", &top).is_some_and(|p| p.contains("--duration")));
+    assert!(synopsis_problem("sgm pcd-convert A B --format ascii|xml", &top).is_some_and(|p| p.contains("xml")));
+    assert!(synopsis_problem("sgm bench nope", &top).is_some());
+    assert!(synopsis_problem("sgm node up", &top).is_none());
 }
 
 /// `--help` after the arguments does not hide a wrong flag, subcommand or value.
