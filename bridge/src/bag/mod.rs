@@ -2,6 +2,7 @@
 //! reader (`records`: uncompressed, bz2 and lz4 chunks, every declared length bounded) and the
 //! replay's reader on top of it.
 
+mod format;
 pub mod reader;
 pub mod records;
 pub mod writer;

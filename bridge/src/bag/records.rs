@@ -21,12 +21,7 @@
 
 use std::io::{self, Read};
 
-const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
-const OP_MESSAGE_DATA: u8 = 0x02;
-const OP_BAG_HEADER: u8 = 0x03;
-const OP_INDEX_DATA: u8 = 0x04;
-const OP_CHUNK: u8 = 0x05;
-const OP_CONNECTION: u8 = 0x07;
+use super::format::{MAGIC, OP_BAG_HEADER, OP_CHUNK, OP_CONNECTION, OP_INDEX_DATA, OP_MESSAGE_DATA};
 /// Largest record header accepted, bytes. The headers of a bag's records hold a few short
 /// fields (a connection's topic is the longest); rosbag writes them well under 1 KiB.
 pub const MAX_RECORD_HEADER_BYTES: u32 = 1 << 20;

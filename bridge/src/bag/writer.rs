@@ -19,13 +19,7 @@ use std::fs::File;
 use std::io::{self, BufWriter, Seek, SeekFrom, Write};
 use std::path::Path;
 
-const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
-const OP_MESSAGE_DATA: u8 = 0x02;
-const OP_BAG_HEADER: u8 = 0x03;
-const OP_INDEX_DATA: u8 = 0x04;
-const OP_CHUNK: u8 = 0x05;
-const OP_CHUNK_INFO: u8 = 0x06;
-const OP_CONNECTION: u8 = 0x07;
+use super::format::{MAGIC, OP_BAG_HEADER, OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION, OP_INDEX_DATA, OP_MESSAGE_DATA};
 /// The bag header record's total size (the `rosbag` crate insists on it).
 const BAG_HEADER_SIZE: usize = 4096;
 /// A chunk is closed once its data passes this many bytes (rosbag's default is 768 KiB).
