@@ -4,6 +4,7 @@
 //! Relative topic names resolve in the node's namespace (`__ns`, `ROS_NAMESPACE`).
 
 use crate::error::InputError;
+use crate::health::HealthConfig;
 use crate::timeline::TimelineConfig;
 use crate::transport::peer::PeerConfig;
 use serde::{Deserialize, Serialize};
@@ -46,6 +47,8 @@ pub struct RosConfig {
     pub peers: PeerConfig,
     /// When a sensor stamp is believed: jumps confirmed before the timeline restarts.
     pub timeline: TimelineConfig,
+    /// Health checks: conditions said once in the log and listed in the status.
+    pub health: HealthConfig,
 }
 
 /// Default of `ros.max_message_bytes`: 2 000 000 points of 64 bytes fit.
@@ -69,6 +72,7 @@ impl Default for RosConfig {
             max_message_bytes: DEFAULT_MAX_MESSAGE_BYTES,
             peers: PeerConfig::default(),
             timeline: TimelineConfig::default(),
+            health: HealthConfig::default(),
         }
     }
 }
@@ -258,6 +262,7 @@ impl RosConfig {
         positive(self.peers.backoff_initial_s, "peers.backoff_initial_s")?;
         positive(self.peers.backoff_max_s, "peers.backoff_max_s")?;
         positive(self.timeline.max_jump_s, "timeline.max_jump_s")?;
+        self.health.validate().map_err(InputError::invalid)?;
         if self.timeline.confirm_messages == 0 {
             return Err(InputError::invalid("ros.timeline.confirm_messages = 0: ≥ 1 expected"));
         }

@@ -8,6 +8,7 @@ pub mod bounded_deliver;
 pub mod config;
 pub mod convert;
 pub mod error;
+pub mod health;
 pub mod inputs;
 pub mod latency;
 pub mod msg;

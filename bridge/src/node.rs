@@ -334,6 +334,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         let publishers = Publishers::advertise(&ros).map_err(ros_error)?;
         tracing::info!(robot = %robot_name, id, service = %deliver_name, "sgm node up");
         let world_frame = side.inputs.world_frame().to_string();
+        let mut health = crate::health::Health::new(ros.health.clone());
         let mut since_publish = Duration::ZERO;
         let tick = Duration::from_millis(100);
         let publish_every = Duration::from_secs_f64(ros.publish_interval_s);
@@ -381,6 +382,8 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 let sync = side.sync();
                 (sync.counts.clone(), sync.timeline().clone())
             };
+            let confirmed = map.objects.iter().filter(|o| o.confirmed).count();
+            let findings = health.update(handle.clock.now(), &sync_counts, confirmed);
             let status = serde_json::json!({
                 "robot": robot_name,
                 "id": id,
@@ -391,6 +394,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 "refused": InputCounts::snapshot(&side.counts.refused),
                 "sync": sync_counts,
                 "timeline": timeline,
+                "health": findings,
                 "latency_ms": side.intake.latency(),
                 "held_dropped": side.intake.dropped.load(Ordering::Relaxed),
                 "transport": crate::transport::status(&counts, &peers),

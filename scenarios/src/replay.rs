@@ -18,6 +18,7 @@ use sgm_actors::transport::InProcessRadio;
 use sgm_bridge::bag::reader::{read_bag, BagItem, Payload};
 use sgm_bridge::config::LabelSource;
 use sgm_bridge::convert::time::Epoch;
+use sgm_bridge::health::{Health, HealthConfig};
 use sgm_bridge::sync::{SyncCounts, Synchroniser};
 use sgm_bridge::timeline::TimelineCounts;
 use sgm_model::geometry::Pose3;
@@ -38,6 +39,8 @@ pub struct BagStats {
     pub sync: SyncCounts,
     /// Stamps checked against the stream: outliers dropped, jumps that restarted the timeline.
     pub timeline: TimelineCounts,
+    /// What the health checks found over the whole bag (`[ros.health]`; also logged).
+    pub health: Vec<sgm_bridge::health::Finding>,
 }
 
 /// A finished replay: the run and what the bags held.
@@ -270,7 +273,21 @@ pub async fn replay(
             raw_bytes: r.raw_bytes,
             raw_max_bytes: r.raw_max_bytes,
         });
-        bag_stats.push(BagStats { sync: r.sync.counts.clone(), timeline: r.sync.timeline().clone(), ..r.stats });
+        // The checks over the whole bag, judged at its end (one window: every cloud).
+        let whole_bag = HealthConfig { window_frames: 1, ..ros.health.clone() };
+        let confirmed = observations
+            .last()
+            .and_then(|o| o.maps.get(k))
+            .and_then(|m| m.as_ref())
+            .map_or(0, |(map, _, _)| map.objects.iter().filter(|o| o.confirmed).count());
+        // Mission time counts from the bags' epoch, the first message's whole second.
+        let health = Health::new(whole_bag).mapping_since(0.0).update(last_t, &r.sync.counts, confirmed);
+        bag_stats.push(BagStats {
+            sync: r.sync.counts.clone(),
+            timeline: r.sync.timeline().clone(),
+            health,
+            ..r.stats
+        });
     }
     let world = World {
         bounds,

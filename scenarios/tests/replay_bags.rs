@@ -52,10 +52,23 @@ fn a_scenario_replayed_from_its_bags_gives_the_same_run() {
     for b in &replayed.bags {
         assert!(b.refused.is_empty(), "{b:?}");
         assert_eq!(b.sync.frames, outcome.record.robots[0].frames, "{b:?}");
+        assert!(b.health.is_empty(), "a healthy bag: {:?}", b.health);
     }
     let again = report::compute(&replayed.run.record);
     let (ran, again) = (serde_json::to_value(&ran).unwrap(), serde_json::to_value(&again).unwrap());
     assert_eq!(without_world(ran), without_world(again));
+
+    // The camera mounting written the wrong way round (the pose tf gives, as camera_from_body):
+    // the same bags map geometry but never confirm an object, and the replay says so, naming
+    // the extrinsic, where it used to be silent.
+    let mut inverted = scenario.clone();
+    inverted.ros.camera_from_body = Some([0.0, 0.0, 0.0, -0.5, 0.5, -0.5, 0.5]);
+    let replayed = system.block_on(replay(&inverted, &bags, None)).unwrap();
+    for b in &replayed.bags {
+        let checks: Vec<_> = b.health.iter().map(|f| f.check).collect();
+        assert_eq!(checks, vec![sgm_bridge::health::Check::NoObjects], "{b:?}");
+        assert!(b.health[0].likely_cause.contains("camera_from_body"), "{:?}", b.health);
+    }
 }
 
 #[test]

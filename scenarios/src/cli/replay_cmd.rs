@@ -67,6 +67,9 @@ pub fn execute(options: Options) -> Result<()> {
                 s.unlabelled
             );
         }
+        for finding in &b.health {
+            println!("  {}: health: {}; likely cause: {}", b.robot, finding.detail, finding.likely_cause);
+        }
         let t = &b.timeline;
         if t.restarts > 0 || t.outliers > 0 {
             println!(
