@@ -203,7 +203,9 @@ impl RosConfig {
                  (one the inverse of the other), set one",
             )),
             (Some(values), None) => pose_key(values, "camera_from_body"),
-            (None, Some(values)) => pose_key(values, "body_from_camera").map(|body_from_camera| body_from_camera.inverse()),
+            (None, Some(values)) => {
+                pose_key(values, "body_from_camera").map(|body_from_camera| body_from_camera.inverse())
+            }
             (None, None) => Ok(sgm_model::perception::projection::optical_from_forward_body()),
         }
     }

@@ -26,6 +26,7 @@ use sgm_actors::clock::Clock;
 use sgm_actors::comms::AttachJournal;
 use sgm_actors::comms::GetCommsStatus;
 use sgm_actors::config::{ConfigError, RobotConfig};
+use sgm_actors::fusion::GetFusionStatus;
 use sgm_actors::journal::JournalFile;
 use sgm_actors::matcher::GetNeighbours;
 use sgm_actors::messages::Tick;
@@ -357,10 +358,11 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             seq = seq.wrapping_add(1);
             let header =
                 std_msgs::Header { seq, stamp: side.ros_time(handle.clock.now()), frame_id: world_frame.clone() };
-            let (Ok(map), Ok(neighbours), Ok(comms_status)) = (
+            let (Ok(map), Ok(neighbours), Ok(comms_status), Ok(fusion_status)) = (
                 handle.tracker.send(GetMapSummary).await,
                 handle.matcher.send(GetNeighbours).await,
                 handle.comms.send(GetCommsStatus).await,
+                handle.fusion.send(GetFusionStatus).await,
             ) else {
                 continue;
             };
@@ -395,6 +397,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 "held_dropped": side.intake.dropped.load(Ordering::Relaxed),
                 "transport": crate::transport::status(&counts, &peers),
                 "comms": comms_status,
+                "fusion": fusion_status,
                 "neighbours": neighbours.iter().map(|n| serde_json::json!({
                     "robot": n.robot.0,
                     "state": n.state,
