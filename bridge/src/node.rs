@@ -470,3 +470,23 @@ fn semantic_map(
     let colour = |l: u16| classes.get(sgm_model::scene_graph::LabelId(l)).map_or([128, 128, 128], |c| c.colour);
     cloud_msg(header.clone(), &points, Some(&labels), colour)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `NodeConfig` flattens `RobotConfig`: a node's file sets `[classes]` beside `[ros]`, and a
+    /// wrong entry is refused by name.
+    #[test]
+    fn a_node_file_sets_classes() {
+        let file = tempfile::Builder::new().suffix(".toml").tempfile().unwrap();
+        let text = "[classes]\nsegmenter = \"ade20k_150\"\n[classes.map]\nchair = [\"chair\", 30]\n[ros]\nlabels = \"image\"\n";
+        std::fs::write(file.path(), text).unwrap();
+        let config = NodeConfig::load(Some(file.path())).unwrap();
+        assert_eq!(config.robot.classes.segmenter, "ade20k_150");
+        assert_eq!(config.robot.classes.map["chair"].len(), 2);
+        std::fs::write(file.path(), "[classes]\nsegmenter = \"ade20k_150\"\n[classes.map]\nsofa = [23]\n").unwrap();
+        let error = NodeConfig::load(Some(file.path())).unwrap_err().to_string();
+        assert!(error.contains("classes.map.sofa: no class \"sofa\" in fusion.classes"), "{error}");
+    }
+}
