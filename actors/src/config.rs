@@ -10,6 +10,7 @@ use sgm_model::matching::MatcherConfig;
 use sgm_model::perception::classes::{ClassSpec, ClassTable};
 use sgm_model::perception::icp::IcpConfig;
 use sgm_model::perception::keyframes::KeyframeConfig;
+use sgm_model::perception::label_map::{LabelMap, LabelMapError, LabelMapSpec};
 use sgm_model::perception::label_vote::LabelVote;
 use sgm_model::perception::loop_closure::LoopClosureConfig;
 use sgm_model::perception::structure_check::StructureCheck;
@@ -19,13 +20,16 @@ use sgm_model::wire::team_key::{TeamKeyError, MIN_SALT_BYTES};
 use sgm_model::wire::{TeamKey, WireLimits};
 use std::path::{Path, PathBuf};
 
-/// Everything one robot needs; `[robot]`, `[fusion]`, `[tracker]`, `[matcher]`, `[optimiser]`,
-/// `[comms]`, `[persistence]`.
+/// Everything one robot needs; `[robot]`, `[fusion]`, `[classes]`, `[tracker]`, `[matcher]`,
+/// `[optimiser]`, `[comms]`, `[persistence]`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RobotConfig {
     pub robot: RobotSection,
     pub fusion: FusionConfig,
+    /// Which segmenter's pixel values the label images carry, and how they group onto
+    /// `fusion.classes` (`model::perception::label_map`). Default: `identity`.
+    pub classes: LabelMapSpec,
     pub tracker: TrackerSection,
     pub matcher: MatcherSection,
     pub optimiser: OptimiserConfig,
@@ -501,6 +505,9 @@ pub enum ConfigError {
     Invalid { key: String, value: String, allowed: String },
     #[error("comms.team_key_file = {path}: {problem}")]
     KeyFile { path: String, problem: String },
+    /// `[classes]`: the message names the key (`classes.map.chair: …`).
+    #[error(transparent)]
+    Classes(#[from] LabelMapError),
 }
 
 fn check(ok: bool, key: &str, value: impl ToString, allowed: &str) -> Result<(), ConfigError> {
@@ -562,6 +569,18 @@ impl RobotConfig {
         Ok(config)
     }
 
+    /// The validated class table (`fusion.classes`) and the map of the segmenter's pixel values
+    /// onto it (`[classes]`).
+    pub fn class_tables(&self) -> Result<(ClassTable, LabelMap), ConfigError> {
+        let classes = ClassTable::new(self.fusion.classes.clone()).map_err(|e| ConfigError::Invalid {
+            key: "fusion.classes".into(),
+            value: "(table)".into(),
+            allowed: e.to_string(),
+        })?;
+        let map = LabelMap::new(&self.classes, &classes)?;
+        Ok((classes, map))
+    }
+
     /// Checks every key against its allowed range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.matcher.matching.validate().map_err(|e| ConfigError::Invalid {
@@ -569,11 +588,7 @@ impl RobotConfig {
             value: e.value,
             allowed: e.allowed.into(),
         })?;
-        ClassTable::new(self.fusion.classes.clone()).map_err(|e| ConfigError::Invalid {
-            key: "fusion.classes".into(),
-            value: "(table)".into(),
-            allowed: e.to_string(),
-        })?;
+        self.class_tables()?;
         let f = &self.fusion;
         check(positive(f.cluster_tolerance_m), "fusion.cluster_tolerance_m", f.cluster_tolerance_m, "finite and > 0")?;
         check(positive(f.max_range_m), "fusion.max_range_m", f.max_range_m, "finite and > 0")?;

@@ -109,11 +109,7 @@ pub fn start_robot_restored(
     config.validate()?;
     let robot = RobotId(config.robot.id);
     let key = config.comms.team_key()?;
-    let classes = ClassTable::new(config.fusion.classes.clone()).map_err(|e| ConfigError::Invalid {
-        key: "fusion.classes".into(),
-        value: "(table)".into(),
-        allowed: e.to_string(),
-    })?;
+    let (classes, label_map) = config.class_tables()?;
     let labels = label_similarity(&classes, &config.matcher.matching)?;
 
     // Sequence numbers start at the clock in microseconds: a restarted robot never reuses one.
@@ -177,7 +173,7 @@ pub fn start_robot_restored(
     });
     let (fusion_config, fusion_classes) = (config.fusion.clone(), tracker_config_classes);
     let tracker_in = tracker.clone().recipient();
-    let fusion = Supervisor::start(move |_| Fusion::new(&fusion_config, fusion_classes, tracker_in));
+    let fusion = Supervisor::start(move |_| Fusion::new(&fusion_config, fusion_classes, label_map, tracker_in));
     let fusion_in = fusion.clone().recipient();
     let sensor = Supervisor::start(move |_| Sensor::new(fusion_in));
 

@@ -26,6 +26,7 @@ use sgm_actors::clock::Clock;
 use sgm_actors::comms::AttachJournal;
 use sgm_actors::comms::GetCommsStatus;
 use sgm_actors::config::{ConfigError, RobotConfig};
+use sgm_actors::fusion::GetFusionStatus;
 use sgm_actors::journal::JournalFile;
 use sgm_actors::matcher::GetNeighbours;
 use sgm_actors::messages::Tick;
@@ -358,10 +359,11 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             seq = seq.wrapping_add(1);
             let header =
                 std_msgs::Header { seq, stamp: side.ros_time(handle.clock.now()), frame_id: world_frame.clone() };
-            let (Ok(map), Ok(neighbours), Ok(comms_status)) = (
+            let (Ok(map), Ok(neighbours), Ok(comms_status), Ok(fusion_status)) = (
                 handle.tracker.send(GetMapSummary).await,
                 handle.matcher.send(GetNeighbours).await,
                 handle.comms.send(GetCommsStatus).await,
+                handle.fusion.send(GetFusionStatus).await,
             ) else {
                 continue;
             };
@@ -399,6 +401,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 "held_dropped": side.intake.dropped.load(Ordering::Relaxed),
                 "transport": crate::transport::status(&counts, &peers),
                 "comms": comms_status,
+                "fusion": fusion_status,
                 "neighbours": neighbours.iter().map(|n| serde_json::json!({
                     "robot": n.robot.0,
                     "state": n.state,
@@ -470,4 +473,24 @@ fn semantic_map(
     let (points, labels): (Vec<_>, Vec<_>) = voxels.points().map(|(p, l)| (p.cast::<f32>(), l.0)).unzip();
     let colour = |l: u16| classes.get(sgm_model::scene_graph::LabelId(l)).map_or([128, 128, 128], |c| c.colour);
     cloud_msg(header.clone(), &points, Some(&labels), colour)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `NodeConfig` flattens `RobotConfig`: a node's file sets `[classes]` beside `[ros]`, and a
+    /// wrong entry is refused by name.
+    #[test]
+    fn a_node_file_sets_classes() {
+        let file = tempfile::Builder::new().suffix(".toml").tempfile().unwrap();
+        let text = "[classes]\nsegmenter = \"ade20k_150\"\n[classes.map]\nchair = [\"chair\", 30]\n[ros]\nlabels = \"image\"\n";
+        std::fs::write(file.path(), text).unwrap();
+        let config = NodeConfig::load(Some(file.path())).unwrap();
+        assert_eq!(config.robot.classes.segmenter, "ade20k_150");
+        assert_eq!(config.robot.classes.map["chair"].len(), 2);
+        std::fs::write(file.path(), "[classes]\nsegmenter = \"ade20k_150\"\n[classes.map]\nsofa = [23]\n").unwrap();
+        let error = NodeConfig::load(Some(file.path())).unwrap_err().to_string();
+        assert!(error.contains("classes.map.sofa: no class \"sofa\" in fusion.classes"), "{error}");
+    }
 }

@@ -11,7 +11,7 @@
 use crate::bag_out::{BagRecorder, RecordedFrame};
 use crate::report::{series_point, Observation, RobotTruth, RunRecord, TruthTrack};
 use crate::scenario::Scenario;
-use crate::sim::camera::{camera_from_body, camera_model, mislabels, noisy_labels, render};
+use crate::sim::camera::{camera_from_body, camera_model, mislabels, noisy_labels, render, segmenter_ids};
 use crate::sim::false_factors::FalseFactors;
 use crate::sim::lidar::Lidar;
 use crate::sim::odometry::Odometry;
@@ -86,6 +86,10 @@ pub async fn run_recording(
     };
     let camera = camera_model(&scenario.camera);
     let splat = splat_px(scenario, camera.fx);
+    let (_, label_map) = scenario.robot_config(0).class_tables().map_err(|e| RunError::Input(e.to_string()))?;
+    // The camera speaks the configured segmenter's ids (`[classes]`); None: they are ours.
+    let pixel_values = segmenter_ids(&scenario.classes, &label_map);
+    let as_pixel = |id: u16| pixel_values.as_ref().map_or(id, |v| v.get(usize::from(id)).copied().unwrap_or(NO_LABEL));
 
     let mut robots: Vec<SimRobot> = routes
         .into_iter()
@@ -146,10 +150,13 @@ pub async fn run_recording(
             let frame = robot.lidar.scan(&world, &truth, &mut robot.rng);
             let wrong = mislabels(&frame, scenario.camera.mislabel_rate, &world.matchable_labels, &mut robot.rng);
             let (labels, recorded_labels) = if scenario.camera.enabled {
-                let image = render(&scenario.camera, &frame, &wrong, splat, &mut robot.rng);
+                let mut image = render(&scenario.camera, &frame, &wrong, splat, &mut robot.rng);
+                if pixel_values.is_some() {
+                    image.labels.iter_mut().for_each(|l| *l = as_pixel(*l));
+                }
                 (FrameLabels::Image { image, camera: camera.clone(), camera_from_body: camera_from_body() }, None)
             } else {
-                let labels = noisy_labels(&frame, &wrong);
+                let labels: Vec<u16> = noisy_labels(&frame, &wrong).into_iter().map(as_pixel).collect();
                 let per_point = labels.iter().map(|&l| (l != NO_LABEL).then_some(LabelId(l))).collect();
                 (FrameLabels::PerPoint(per_point), Some(labels))
             };

@@ -379,6 +379,9 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
         assert!(Statuses::aligned(&s), "{robot} did not align after {sent} frames: {s}");
         assert!(count(&s, "transport", "sent") > 0 && count(&s, "transport", "received") > 0, "{robot}: {s}");
         assert!(s["comms"]["sent"]["by_kind"]["ObjectData"]["count"].as_u64() > Some(0), "{robot}: {s}");
+        // The simulator's label ids are fusion.classes ids (segmenter identity): none unknown.
+        assert_eq!(s["fusion"]["segmenter"], "identity", "{robot}: {s}");
+        assert_eq!(count(&s, "fusion", "unknown_label_points"), 0, "{robot}: {s}");
         assert!(nodes.log(robot).contains("sgm node up"), "{robot}'s log");
         eprintln!("{robot}: {sent}/{sent} frames, aligned with {}", s["neighbours"]);
     }

@@ -1,17 +1,20 @@
 //! Perception (paper §IV-A, §IV-D): what a robot does to its own scans — voxel downsampling,
-//! kd-tree, normals, ICP, camera projection (semantic fusion), class table, clustering, keyframe
-//! selection, object tracking, intra-robot loop closure.
+//! kd-tree, normals, ICP, camera projection (semantic fusion), class table, segmenter tables and
+//! the map from their pixel values to classes, clustering, keyframe selection, object tracking,
+//! intra-robot loop closure.
 
 pub mod classes;
 pub mod clustering;
 pub mod icp;
 pub mod keyframes;
+pub mod label_map;
 pub mod label_vote;
 pub mod loop_closure;
 pub mod normals;
 pub mod object_cloud;
 pub mod point_tree;
 pub mod projection;
+pub mod segmenters;
 pub mod structure_check;
 pub mod tracker;
 pub mod voxel;

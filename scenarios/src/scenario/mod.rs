@@ -13,6 +13,7 @@ use sgm_actors::config::{
     environment, CommsConfig, ConfigError, FusionConfig, MatcherSection, OptimiserConfig, PersistenceConfig,
     RobotConfig, RobotSection, TrackerSection,
 };
+use sgm_model::perception::label_map::LabelMapSpec;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -40,9 +41,10 @@ pub struct Scenario {
     pub odometry: OdometrySpec,
     pub radio: RadioSpec,
     pub robots: Vec<RobotSpec>,
-    /// The robot configuration every robot shares (`[fusion]`, `[tracker]`, `[matcher]`,
-    /// `[optimiser]`, `[comms]`, `[persistence]`, as in a robot configuration file).
+    /// The robot configuration every robot shares (`[fusion]`, `[classes]`, `[tracker]`,
+    /// `[matcher]`, `[optimiser]`, `[comms]`, `[persistence]`, as in a robot configuration file).
     pub fusion: FusionConfig,
+    pub classes: LabelMapSpec,
     pub tracker: TrackerSection,
     pub matcher: MatcherSection,
     pub optimiser: OptimiserConfig,
@@ -68,6 +70,7 @@ impl Default for Scenario {
             radio: RadioSpec::default(),
             robots: Vec::new(),
             fusion: robot.fusion,
+            classes: robot.classes,
             tracker: robot.tracker,
             matcher: robot.matcher,
             optimiser: robot.optimiser,
@@ -438,6 +441,7 @@ impl Scenario {
         RobotConfig {
             robot: RobotSection { id: k as u16 + 1, name: self.robot_name(k) },
             fusion: self.fusion.clone(),
+            classes: self.classes.clone(),
             tracker: self.tracker.clone(),
             matcher: self.matcher.clone(),
             optimiser: self.optimiser.clone(),

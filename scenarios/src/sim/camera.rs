@@ -3,7 +3,8 @@
 //! kinds of error a real network makes — whole objects given a wrong class (`mislabel_rate`,
 //! per object and frame) and labels bleeding across object boundaries (`boundary_noise_px`,
 //! Gaussian jitter of each splat). Fusion then labels the LiDAR points by projecting them into
-//! this image, exactly as on a robot.
+//! this image, exactly as on a robot. Its pixel values are the configured segmenter's
+//! (`[classes]`, [`segmenter_ids`]): `fusion.classes` ids by default.
 
 use crate::scenario::CameraSpec;
 use crate::sim::lidar::LidarFrame;
@@ -12,7 +13,9 @@ use nalgebra::Point3;
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use sgm_model::geometry::Pose3;
+use sgm_model::perception::label_map::{LabelMap, LabelMapSpec};
 use sgm_model::perception::projection::{CameraModel, LabelImage};
+use sgm_model::scene_graph::LabelId;
 use std::collections::BTreeMap;
 
 /// The camera looks along the body's x axis: camera z = body x, camera x = −body y,
@@ -56,6 +59,21 @@ pub fn mislabels(frame: &LidarFrame, rate: f64, matchable: &[u16], rng: &mut imp
 /// The label of each return as the network would see it (per-point mode).
 pub fn noisy_labels(frame: &LidarFrame, wrong: &BTreeMap<u32, u16>) -> Vec<u16> {
     frame.labels.iter().zip(&frame.instances).map(|(l, i)| wrong.get(i).copied().unwrap_or(*l)).collect()
+}
+
+/// The simulator's class ids (those of `fusion.classes`) as the pixel values of the configured
+/// segmenter (`[classes]`): `ids[sgm id]`, the smallest pixel value of the class's group, or
+/// [`NO_LABEL`] for a class the segmenter cannot express (COCO has no lamp post). `None` for the
+/// default `identity` with no groups of its own (nothing to translate).
+pub fn segmenter_ids(spec: &LabelMapSpec, map: &LabelMap) -> Option<Vec<u16>> {
+    if *spec == LabelMapSpec::default() {
+        return None;
+    }
+    Some(
+        (0..=u16::MAX)
+            .map(|id| if id == NO_LABEL { NO_LABEL } else { map.pixel_of(LabelId(id)).unwrap_or(NO_LABEL) })
+            .collect(),
+    )
 }
 
 /// Renders the segmentation image of a frame. `splat_px`: half-size of the square each return
