@@ -12,6 +12,7 @@ pub mod label_vote;
 pub mod loop_closure;
 pub mod normals;
 pub mod object_cloud;
+pub mod palettes;
 pub mod point_tree;
 pub mod projection;
 pub mod segmenters;
