@@ -10,7 +10,7 @@
 //! where its bytes do. A message that fails is dropped with rosrust's "Failed to decode message"
 //! error, naming the field; the subscriber goes on.
 
-use crate::msg::{nav_msgs, rosgraph_msgs, sensor_msgs, sgm_msgs, std_msgs};
+use crate::msg::{nav_msgs, rosgraph_msgs, sensor_msgs, sgm_msgs, std_msgs, tf2_msgs};
 use std::io;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -174,6 +174,16 @@ impl Layout for rosgraph_msgs::Clock {
     }
 }
 
+impl Layout for tf2_msgs::TFMessage {
+    fn walk(w: &mut Walker) -> Result<(), LayoutError> {
+        w.list("transforms", |w| {
+            header(w)?;
+            w.array("transforms[].child_frame_id", 1)?;
+            w.skip("transforms[].transform", 7 * 8)
+        })
+    }
+}
+
 impl Layout for std_msgs::Header {
     fn walk(w: &mut Walker) -> Result<(), LayoutError> {
         header(w)
@@ -238,6 +248,7 @@ impl<M: rosrust::Message + Layout> rosrust::Message for Bounded<M> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::msg::geometry_msgs;
     use rosrust::RosMsg;
 
     fn cloud() -> sensor_msgs::PointCloud2 {
@@ -274,6 +285,12 @@ mod tests {
         });
         round_trip(nav_msgs::Odometry { child_frame_id: "alpha/base_link".into(), ..Default::default() });
         round_trip(sgm_msgs::Envelope { from_robot: 2, data: vec![1; 40] });
+        let transform = geometry_msgs::TransformStamped {
+            header: std_msgs::Header { frame_id: "base_link".into(), ..Default::default() },
+            child_frame_id: "camera".into(),
+            ..Default::default()
+        };
+        round_trip(tf2_msgs::TFMessage { transforms: vec![transform.clone(), transform] });
     }
 
     #[test]

@@ -5,10 +5,12 @@
 
 use crate::error::InputError;
 use crate::health::HealthConfig;
+use crate::tf::TfConfig;
 use crate::timeline::TimelineConfig;
 use crate::transport::peer::PeerConfig;
 use serde::{Deserialize, Serialize};
 use sgm_model::geometry::Pose3;
+use std::collections::BTreeMap;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -31,6 +33,10 @@ pub struct RosConfig {
     /// frame's pose in the body frame, `body_from_camera = camera_from_body⁻¹`. Set one of the
     /// two, not both.
     pub body_from_camera: Option<[f64; 7]>,
+    /// The LiDAR's mounting, as tf and a URDF give it: the clouds' frame's pose in the body
+    /// frame, `p_body = body_from_lidar · p_lidar`. Unset: tf's transform between
+    /// `frames.body` and `frames.lidar` (the identity when they are one frame).
+    pub body_from_lidar: Option<[f64; 7]>,
     pub sync: SyncConfig,
     /// Markers, path, map, tf and status are published every this many seconds. Default 1.
     pub publish_interval_s: f64,
@@ -49,6 +55,8 @@ pub struct RosConfig {
     pub timeline: TimelineConfig,
     /// Health checks: conditions said once in the log and listed in the status.
     pub health: HealthConfig,
+    /// tf in: mounts not pinned here are read from it, pinned ones checked against it.
+    pub tf: TfConfig,
 }
 
 /// Default of `ros.max_message_bytes`: 2 000 000 points of 64 bytes fit.
@@ -64,6 +72,7 @@ impl Default for RosConfig {
             label_field: "label".into(),
             camera_from_body: None,
             body_from_camera: None,
+            body_from_lidar: None,
             sync: SyncConfig::default(),
             publish_interval_s: 1.0,
             map_voxel_m: 0.25,
@@ -73,6 +82,7 @@ impl Default for RosConfig {
             peers: PeerConfig::default(),
             timeline: TimelineConfig::default(),
             health: HealthConfig::default(),
+            tf: TfConfig::default(),
         }
     }
 }
@@ -150,6 +160,11 @@ pub struct RosFrames {
     pub lidar: String,
     /// The label image's and camera info's frame. Default `{robot}/camera`.
     pub camera: String,
+    /// Frame ids renamed as they come in (messages' headers and tf), before any check: input
+    /// name → SGM's name (`{robot}` and `{id}` allowed). For odometry with hard-coded frames on a
+    /// one-master fleet: `camera_init = "{robot}/odom"`, `body = "{robot}/base_link"`. The keys
+    /// above name frames after renaming. Default none.
+    pub aliases: BTreeMap<String, String>,
 }
 
 impl Default for RosFrames {
@@ -159,6 +174,7 @@ impl Default for RosFrames {
             body: "{robot}/base_link".into(),
             lidar: "{robot}/base_link".into(),
             camera: "{robot}/camera".into(),
+            aliases: BTreeMap::new(),
         }
     }
 }
@@ -221,20 +237,24 @@ impl RosConfig {
         template.replace("{robot}", robot).replace("{id}", &id.to_string())
     }
 
-    /// The camera extrinsic, from `camera_from_body` or the inverse of `body_from_camera`
-    /// (checked: finite, unit quaternion, not both set).
-    pub fn camera_from_body(&self) -> Result<Pose3, InputError> {
+    /// The camera mounting pinned by configuration, as `body_from_camera`: `body_from_camera`,
+    /// or the inverse of `camera_from_body` (checked: finite, unit quaternion, not both set).
+    /// `None`: read from tf.
+    pub fn camera_pin(&self) -> Result<Option<Pose3>, InputError> {
         match (self.camera_from_body, self.body_from_camera) {
             (Some(_), Some(_)) => Err(InputError::invalid(
                 "ros.camera_from_body and ros.body_from_camera are both set: they are one mounting \
                  (one the inverse of the other), set one",
             )),
-            (Some(values), None) => pose_key(values, "camera_from_body"),
-            (None, Some(values)) => {
-                pose_key(values, "body_from_camera").map(|body_from_camera| body_from_camera.inverse())
-            }
-            (None, None) => Ok(sgm_model::perception::projection::optical_from_forward_body()),
+            (Some(values), None) => pose_key(values, "camera_from_body").map(|c| Some(c.inverse())),
+            (None, Some(values)) => pose_key(values, "body_from_camera").map(Some),
+            (None, None) => Ok(None),
         }
+    }
+
+    /// The LiDAR mounting pinned by configuration (`body_from_lidar`); `None`: from tf.
+    pub fn lidar_pin(&self) -> Result<Option<Pose3>, InputError> {
+        self.body_from_lidar.map(|values| pose_key(values, "body_from_lidar")).transpose()
     }
 
     /// Checks every key; errors name the key.
@@ -263,6 +283,7 @@ impl RosConfig {
         positive(self.peers.backoff_max_s, "peers.backoff_max_s")?;
         positive(self.timeline.max_jump_s, "timeline.max_jump_s")?;
         self.health.validate().map_err(InputError::invalid)?;
+        self.tf.validate().map_err(InputError::invalid)?;
         if self.timeline.confirm_messages == 0 {
             return Err(InputError::invalid("ros.timeline.confirm_messages = 0: ≥ 1 expected"));
         }
@@ -298,18 +319,29 @@ impl RosConfig {
             ("team", &t.team),
             ("clock", &t.clock),
             ("deliver", &t.deliver),
+            ("tf.topic", &self.tf.topic),
+            ("tf.static_topic", &self.tf.static_topic),
         ] {
             let bad = name.is_empty()
                 || !name.chars().all(|c| c.is_ascii_alphanumeric() || "_/{}~".contains(c))
                 || name.contains("//");
             if bad {
-                return Err(InputError::invalid(format!("ros.topics.{key} = {name:?}: not a valid ROS name")));
+                let key = if key.starts_with("tf.") { key.to_string() } else { format!("topics.{key}") };
+                return Err(InputError::invalid(format!("ros.{key} = {name:?}: not a valid ROS name")));
             }
         }
         if !t.deliver.contains("{id}") {
             return Err(InputError::invalid("ros.topics.deliver must contain {id}: one service per robot"));
         }
-        self.camera_from_body().map(|_| ())
+        for (from, to) in &self.frames.aliases {
+            if from.trim_start_matches('/').is_empty() || to.trim_start_matches('/').is_empty() {
+                return Err(InputError::invalid(format!(
+                    "ros.frames.aliases: {from:?} = {to:?}: both frame names must be non-empty"
+                )));
+            }
+        }
+        self.camera_pin()?;
+        self.lidar_pin().map(|_| ())
     }
 }
 
@@ -322,30 +354,40 @@ mod tests {
         (a - Point3::from(b)).norm() < 1e-12
     }
 
-    /// The default mounting, closed form: a point 5 m ahead of the body (+x) is 5 m down the
-    /// camera's optical axis (+z); one to the body's left (+y) is to the image's left (−x).
+    /// Unset, the camera's mounting comes from tf; the optical frame of a camera at the body
+    /// origin looking along +x, as tf gives it (`[0, 0, 0, -0.5, 0.5, -0.5, 0.5]`), closed form:
+    /// a point 5 m ahead of the body (+x) is 5 m down the optical axis (+z); one to the body's
+    /// left (+y) is to the image's left (−x); one above (+z) is up in the image (−y).
     #[test]
-    fn the_default_camera_looks_along_the_body_x_axis() {
-        let c = RosConfig::default().camera_from_body().unwrap();
+    fn body_from_camera_is_the_optical_frames_pose() {
+        assert_eq!(RosConfig::default().camera_pin(), Ok(None));
+        let tf_pose = [0.0, 0.0, 0.0, -0.5, 0.5, -0.5, 0.5];
+        let body_from_camera =
+            RosConfig { body_from_camera: Some(tf_pose), ..Default::default() }.camera_pin().unwrap().unwrap();
+        let c = body_from_camera.inverse();
         assert!(close(c * Point3::new(5.0, 0.0, 0.0), [0.0, 0.0, 5.0]));
         assert!(close(c * Point3::new(0.0, 1.0, 0.0), [-1.0, 0.0, 0.0]));
         assert!(close(c * Point3::new(0.0, 0.0, 1.0), [0.0, -1.0, 0.0]));
+        let optical = sgm_model::perception::projection::optical_from_forward_body();
+        assert!((c.to_homogeneous() - optical.to_homogeneous()).norm() < 1e-12);
     }
 
     /// A camera 0.2 m ahead of and 0.1 m above the body origin, given as tf gives it: its
     /// origin maps to the camera's origin and a point 5 m further ahead to 5 m down its axis;
     /// the same mounting as `camera_from_body` (the inverse) gives the same transform.
     #[test]
-    fn body_from_camera_is_the_inverse_mounting() {
+    fn camera_from_body_is_the_inverse_mounting() {
         let tf_pose = [0.2, 0.0, 0.1, -0.5, 0.5, -0.5, 0.5];
-        let from_tf = RosConfig { body_from_camera: Some(tf_pose), ..Default::default() }.camera_from_body().unwrap();
-        assert!(close(from_tf * Point3::new(0.2, 0.0, 0.1), [0.0, 0.0, 0.0]));
-        assert!(close(from_tf * Point3::new(5.2, 0.0, 0.1), [0.0, 0.0, 5.0]));
-        let inverse = from_tf;
-        let t = inverse.translation.vector;
-        let q = inverse.rotation.coords;
+        let from_tf =
+            RosConfig { body_from_camera: Some(tf_pose), ..Default::default() }.camera_pin().unwrap().unwrap();
+        let camera_from_body = from_tf.inverse();
+        assert!(close(camera_from_body * Point3::new(0.2, 0.0, 0.1), [0.0, 0.0, 0.0]));
+        assert!(close(camera_from_body * Point3::new(5.2, 0.0, 0.1), [0.0, 0.0, 5.0]));
+        let t = camera_from_body.translation.vector;
+        let q = camera_from_body.rotation.coords;
         let direct = RosConfig { camera_from_body: Some([t.x, t.y, t.z, q.x, q.y, q.z, q.w]), ..Default::default() }
-            .camera_from_body()
+            .camera_pin()
+            .unwrap()
             .unwrap();
         assert!((direct.to_homogeneous() - from_tf.to_homogeneous()).norm() < 1e-12);
     }
@@ -362,5 +404,16 @@ mod tests {
         let bad = RosConfig { body_from_camera: Some([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]), ..Default::default() };
         let e = bad.validate().unwrap_err().to_string();
         assert!(e.contains("ros.body_from_camera") && e.contains("norm"), "{e}");
+        let bad = RosConfig { body_from_lidar: Some([0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0, 1.0]), ..Default::default() };
+        let e = bad.validate().unwrap_err().to_string();
+        assert!(e.contains("ros.body_from_lidar") && e.contains("non-finite"), "{e}");
+        let mut bad = RosConfig::default();
+        bad.frames.aliases.insert("camera_init".into(), "".into());
+        assert!(bad.validate().unwrap_err().to_string().contains("ros.frames.aliases"));
+        let bad = RosConfig {
+            tf: crate::tf::TfConfig { topic: "/tf two".into(), ..Default::default() },
+            ..Default::default()
+        };
+        assert_eq!(bad.validate().unwrap_err().to_string(), "ros.tf.topic = \"/tf two\": not a valid ROS name");
     }
 }

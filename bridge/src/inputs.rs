@@ -4,13 +4,15 @@
 
 use crate::config::RosConfig;
 use crate::convert::cloud::{read_cloud, Scan};
-use crate::convert::geometry::{check_frame, pose_from_msg, pose_from_odometry};
+use crate::convert::geometry::{check_frame, pose_from_msg};
 use crate::convert::image::{read_camera_info, read_label_image};
 use crate::error::InputError;
-use crate::msg::{nav_msgs, sensor_msgs};
+use crate::msg::{nav_msgs, sensor_msgs, tf2_msgs};
+use crate::tf::{TfBatch, TfTransform};
 use rosrust::Time;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
+use std::collections::BTreeMap;
 
 /// A decoded, checked input message (header stamps in ROS time).
 #[derive(Clone, Debug)]
@@ -22,6 +24,24 @@ pub enum Payload {
     GroundTruth(Time, Pose3),
     /// `/clock` (with `use_sim_time`): time passes, no data.
     Clock(Time),
+    /// A TFMessage from `/tf` or `/tf_static` (its own stamps; not checked by the timeline).
+    Tf(TfBatch),
+}
+
+impl Payload {
+    /// The input it came on, as the status and the health checks name it.
+    pub fn input_name(&self) -> &'static str {
+        match self {
+            Payload::Cloud(..) => "points",
+            Payload::Image(..) => "labels",
+            Payload::CameraInfo(_) => "camera_info",
+            Payload::Odometry(..) => "odometry",
+            Payload::GroundTruth(..) => "ground_truth",
+            Payload::Clock(_) => "clock",
+            Payload::Tf(batch) if batch.is_static => "tf_static",
+            Payload::Tf(_) => "tf",
+        }
+    }
 }
 
 /// The checks of one robot's inputs, with its frame names resolved.
@@ -34,6 +54,8 @@ pub struct Inputs {
     label_field: String,
     max_cloud_points: usize,
     max_image_pixels: usize,
+    /// `ros.frames.aliases`, resolved: input frame (no leading `/`) → SGM's name.
+    aliases: BTreeMap<String, String>,
 }
 
 impl Inputs {
@@ -51,11 +73,22 @@ impl Inputs {
             },
             max_cloud_points: config.max_cloud_points,
             max_image_pixels: config.max_image_pixels,
+            aliases: config
+                .frames
+                .aliases
+                .iter()
+                .map(|(from, to)| (from.trim_start_matches('/').to_string(), frame(to)))
+                .collect(),
         }
     }
 
+    /// A frame id as SGM names it: its alias, if it has one.
+    pub fn frame<'a>(&'a self, id: &'a str) -> &'a str {
+        self.aliases.get(id.trim_start_matches('/')).map_or(id, String::as_str)
+    }
+
     pub fn cloud(&self, msg: &sensor_msgs::PointCloud2) -> Result<Payload, InputError> {
-        check_frame(&msg.header.frame_id, &self.lidar_frame)?;
+        check_frame(self.frame(&msg.header.frame_id), &self.lidar_frame)?;
         let count = u64::from(msg.width) * u64::from(msg.height);
         if count > self.max_cloud_points as u64 {
             return Err(InputError::invalid(format!("{count} points, at most {} accepted", self.max_cloud_points)));
@@ -64,7 +97,7 @@ impl Inputs {
     }
 
     pub fn image(&self, msg: &sensor_msgs::Image) -> Result<Payload, InputError> {
-        check_frame(&msg.header.frame_id, &self.camera_frame)?;
+        check_frame(self.frame(&msg.header.frame_id), &self.camera_frame)?;
         let pixels = u64::from(msg.width) * u64::from(msg.height);
         if pixels > self.max_image_pixels as u64 {
             return Err(InputError::invalid(format!("{pixels} pixels, at most {} accepted", self.max_image_pixels)));
@@ -73,12 +106,46 @@ impl Inputs {
     }
 
     pub fn camera_info(&self, msg: &sensor_msgs::CameraInfo) -> Result<Payload, InputError> {
-        check_frame(&msg.header.frame_id, &self.camera_frame)?;
+        check_frame(self.frame(&msg.header.frame_id), &self.camera_frame)?;
         Ok(Payload::CameraInfo(read_camera_info(msg)?))
     }
 
     pub fn odometry(&self, msg: &nav_msgs::Odometry) -> Result<Payload, InputError> {
-        Ok(Payload::Odometry(msg.header.stamp, pose_from_odometry(msg, &self.world_frame, &self.body_frame)?))
+        check_frame(self.frame(&msg.header.frame_id), &self.world_frame)?;
+        check_frame(self.frame(&msg.child_frame_id), &self.body_frame)?;
+        Ok(Payload::Odometry(msg.header.stamp, pose_from_msg(&msg.pose.pose)?))
+    }
+
+    /// A TFMessage: each transform checked on its own (a bad one is refused, naming its
+    /// frames, and the others kept), frames aliased. Refused whole only when none passes.
+    pub fn tf(&self, msg: &tf2_msgs::TFMessage, is_static: bool) -> Result<Payload, InputError> {
+        let mut batch =
+            TfBatch { is_static, transforms: Vec::with_capacity(msg.transforms.len()), refused: Vec::new() };
+        for t in &msg.transforms {
+            let (parent, child) = (self.frame(&t.header.frame_id), self.frame(&t.child_frame_id));
+            let r = &t.transform;
+            let pose = crate::msg::geometry_msgs::Pose {
+                position: crate::msg::geometry_msgs::Point {
+                    x: r.translation.x,
+                    y: r.translation.y,
+                    z: r.translation.z,
+                },
+                orientation: r.rotation.clone(),
+            };
+            match pose_from_msg(&pose) {
+                Ok(parent_from_child) => batch.transforms.push(TfTransform {
+                    stamp: t.header.stamp,
+                    parent: parent.trim_start_matches('/').to_string(),
+                    child: child.trim_start_matches('/').to_string(),
+                    parent_from_child,
+                }),
+                Err(e) => batch.refused.push(format!("`{parent}` → `{child}`: {e}")),
+            }
+        }
+        if batch.transforms.is_empty() && !batch.refused.is_empty() {
+            return Err(InputError::invalid(batch.refused.join("; ")));
+        }
+        Ok(Payload::Tf(batch))
     }
 
     /// A true pose (frames are the simulator's, not checked).

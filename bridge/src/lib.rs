@@ -15,5 +15,6 @@ pub mod msg;
 pub mod node;
 pub mod persist;
 pub mod sync;
+pub mod tf;
 pub mod timeline;
 pub mod transport;

@@ -94,11 +94,12 @@ fn ros_error(e: impl std::fmt::Display) -> NodeError {
     NodeError::Ros1(e.to_string())
 }
 
-/// Per input topic: messages accepted and refused.
+/// Per input topic: messages accepted and refused, and why the latest was refused.
 #[derive(Default)]
 struct InputCounts {
     accepted: BTreeMap<&'static str, AtomicU64>,
     refused: BTreeMap<&'static str, AtomicU64>,
+    last_refusal: Mutex<BTreeMap<&'static str, String>>,
 }
 
 impl InputCounts {
@@ -106,7 +107,24 @@ impl InputCounts {
         Self {
             accepted: topics.iter().map(|t| (*t, AtomicU64::new(0))).collect(),
             refused: topics.iter().map(|t| (*t, AtomicU64::new(0))).collect(),
+            last_refusal: Mutex::default(),
         }
+    }
+
+    /// The health checks' view.
+    fn tallies(&self) -> BTreeMap<String, crate::health::TopicTally> {
+        let last = self.last_refusal.lock().unwrap_or_else(PoisonError::into_inner);
+        self.accepted
+            .iter()
+            .map(|(topic, accepted)| {
+                let tally = crate::health::TopicTally {
+                    accepted: accepted.load(Ordering::Relaxed),
+                    refused: self.refused.get(topic).map_or(0, |r| r.load(Ordering::Relaxed)),
+                    last_refusal: last.get(topic).cloned(),
+                };
+                (topic.to_string(), tally)
+            })
+            .collect()
     }
 
     fn count<T>(&self, topic: &'static str, result: Result<T, InputError>) -> Option<T> {
@@ -114,6 +132,7 @@ impl InputCounts {
             Ok(v) => (&self.accepted, Some(v)),
             Err(e) => {
                 tracing::warn!(topic, "message refused: {e}");
+                self.last_refusal.lock().unwrap_or_else(PoisonError::into_inner).insert(topic, e.to_string());
                 (&self.refused, None)
             }
         };
@@ -216,7 +235,6 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
     crate::bounded::set_max_message_bytes(ros.max_message_bytes);
     let classes = ClassTable::new(config.robot.fusion.classes.clone())
         .map_err(|e| NodeError::Ros(InputError::invalid(format!("fusion.classes: {e}"))))?;
-    let camera_from_body = ros.camera_from_body().map_err(NodeError::Ros)?;
     let system = actix_rt::System::new();
     system.block_on(async move {
         let counts = Arc::new(TransportCounts::default());
@@ -307,12 +325,11 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             .map_err(ros_error)?
         };
 
+        let inputs = Inputs::new(&ros, &robot_name, id);
         let side = Arc::new(SensorSide {
-            sync: Mutex::new(
-                Synchroniser::new(ros.sync.clone(), ros.labels, camera_from_body).with_timeline(ros.timeline.clone()),
-            ),
-            inputs: Inputs::new(&ros, &robot_name, id),
-            counts: InputCounts::new(&["points", "labels", "camera_info", "odometry", "clock"]),
+            sync: Mutex::new(Synchroniser::for_robot(&ros, &inputs).map_err(NodeError::Ros)?),
+            inputs,
+            counts: InputCounts::new(&["points", "labels", "camera_info", "odometry", "clock", "tf", "tf_static"]),
             intake: intake.clone(),
             epoch: Epoch { sec: 0 },
         });
@@ -322,6 +339,14 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         let labels = subscribe(&t.labels, q, &side, "labels", Inputs::image)?;
         let camera_info = subscribe(&t.camera_info, q, &side, "camera_info", Inputs::camera_info)?;
         let odometry = subscribe(&t.odometry, q, &side, "odometry", Inputs::odometry)?;
+        // tf: the sensors' mounts when [ros] does not pin them, and tf's view of the odometry.
+        let tf = if ros.tf.listen {
+            let dynamic = subscribe(&ros.tf.topic, q.max(100), &side, "tf", |i, m| i.tf(m, false))?;
+            let fixed = subscribe(&ros.tf.static_topic, q.max(100), &side, "tf_static", |i, m| i.tf(m, true))?;
+            Some((dynamic, fixed))
+        } else {
+            None
+        };
         // Simulated time (`rosbag play --clock`, a simulator): /clock moves the robot's clock
         // between sensor frames too, through the same timeline checks as the sensors' stamps.
         let sim_time = rosrust::param("/use_sim_time").and_then(|p| p.get::<bool>().ok()).unwrap_or(false);
@@ -380,12 +405,22 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                     let _ = publishers.map.send(semantic_map(&header, &graph, &classes, ros.map_voxel_m));
                 }
             }
-            let (sync_counts, timeline) = {
+            let (sync_counts, timeline, tf_status, missing_mount) = {
                 let sync = side.sync();
-                (sync.counts.clone(), sync.timeline().clone())
+                (sync.counts.clone(), sync.timeline().clone(), sync.tf(), sync.missing_mount())
             };
             let confirmed = map.objects.iter().filter(|o| o.confirmed).count();
-            let findings = health.update(handle.clock.now(), &sync_counts, confirmed);
+            let inputs = side.counts.tallies();
+            let findings = health.update(
+                handle.clock.now(),
+                &crate::health::Observed {
+                    sync: &sync_counts,
+                    inputs: &inputs,
+                    tf: &tf_status,
+                    missing_mount: missing_mount.as_deref(),
+                    objects: confirmed,
+                },
+            );
             let status = serde_json::json!({
                 "robot": robot_name,
                 "id": id,
@@ -396,6 +431,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 "refused": InputCounts::snapshot(&side.counts.refused),
                 "sync": sync_counts,
                 "timeline": timeline,
+                "tf": tf_status,
                 "health": findings,
                 "latency_ms": side.intake.latency(),
                 "held_dropped": side.intake.dropped.load(Ordering::Relaxed),
@@ -414,7 +450,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             });
             let _ = publishers.status.send(std_msgs::String { data: status.to_string() });
         }
-        drop((team_in, deliver, points, labels, camera_info, odometry, clock));
+        drop((team_in, deliver, points, labels, camera_info, odometry, clock, tf));
         // Shutdown (SIGINT, rosnode kill): one last snapshot.
         if let Some(snapshots) = &mut snapshots {
             snapshots.take(&handle, &intake).await;

@@ -24,7 +24,9 @@
 use crate::config::{LabelSource, SyncConfig, Unlabelled};
 use crate::convert::cloud::{Scan, NO_LABEL};
 use crate::convert::time::Epoch;
-use crate::inputs::Payload;
+use crate::inputs::{Inputs, Payload};
+use crate::tf::listener::{TfListener, TfStatus};
+use crate::tf::mounts::Mount;
 use crate::timeline::{Timeline, TimelineConfig, TimelineCounts};
 use serde::Serialize;
 use sgm_actors::messages::{FrameLabels, SensorFrame};
@@ -57,12 +59,21 @@ pub struct SyncCounts {
     pub label_skew_max_ms: u64,
     /// Sum of |image stamp − cloud stamp| over labelled frames, ms (mean = sum / labelled).
     pub label_skew_sum_ms: u64,
+    /// Clouds dropped because the LiDAR's mount is unknown (not pinned, not in tf).
+    pub no_lidar_mount: u64,
+    /// Clouds that found their image but not the camera's mount (then kept unlabelled or
+    /// dropped as `unlabelled` says; counted there too).
+    pub no_camera_mount: u64,
+    /// Points of labelled frames, and those of them that project into the label image.
+    pub points_labelled: u64,
+    pub points_in_image: u64,
 }
 
 pub struct Synchroniser {
     config: SyncConfig,
     labels: LabelSource,
-    camera_from_body: Pose3,
+    /// The sensors' mounts (pinned or from tf) and tf's view of the odometry.
+    tf: TfListener,
     odometry: VecDeque<(Stamp, Pose3)>,
     images: VecDeque<(Stamp, LabelImage)>,
     camera: Option<CameraModel>,
@@ -95,11 +106,26 @@ fn push_bounded<T>(queue: &mut VecDeque<(Stamp, T)>, t: Stamp, value: T, overflo
 }
 
 impl Synchroniser {
+    /// Clouds in the body frame and the camera pinned at `camera_from_body` (tf unused).
     pub fn new(config: SyncConfig, labels: LabelSource, camera_from_body: Pose3) -> Self {
+        Self::with_mounts(config, labels, TfListener::pinned(camera_from_body))
+    }
+
+    /// A robot's synchroniser as its `[ros]` section says: mounts pinned there or read from tf
+    /// between the frames `inputs` resolved, stamps checked by `ros.timeline`.
+    pub fn for_robot(ros: &crate::config::RosConfig, inputs: &Inputs) -> Result<Self, crate::error::InputError> {
+        let body = inputs.body_frame();
+        let camera = Mount::new("camera", "ros.body_from_camera", body, inputs.camera_frame(), ros.camera_pin()?);
+        let lidar = Mount::new("lidar", "ros.body_from_lidar", body, inputs.lidar_frame(), ros.lidar_pin()?);
+        let tf = TfListener::new(ros.tf.clone(), inputs.world_frame(), body, camera, lidar);
+        Ok(Self::with_mounts(ros.sync.clone(), ros.labels, tf).with_timeline(ros.timeline.clone()))
+    }
+
+    fn with_mounts(config: SyncConfig, labels: LabelSource, tf: TfListener) -> Self {
         Self {
             config,
             labels,
-            camera_from_body,
+            tf,
             odometry: VecDeque::new(),
             images: VecDeque::new(),
             camera: None,
@@ -121,6 +147,16 @@ impl Synchroniser {
     /// What the timeline did: restarts, outliers, messages waiting.
     pub fn timeline(&self) -> &TimelineCounts {
         &self.timeline.counts
+    }
+
+    /// What tf gave: mounts, refusals, the odometry compared with tf.
+    pub fn tf(&self) -> TfStatus {
+        self.tf.status()
+    }
+
+    /// Why a mount the frames need is unknown (naming the frames), if one is.
+    pub fn missing_mount(&self) -> Option<String> {
+        self.tf.missing(self.labels == LabelSource::Image)
     }
 
     /// The ROS time of mission time `t` (for outputs), given the epoch stamps are counted from.
@@ -146,6 +182,17 @@ impl Synchroniser {
         self.saw(t);
         if !push_bounded(&mut self.odometry, t, world_from_body, &mut self.counts.overflow) {
             self.counts.out_of_order += 1;
+        }
+        self.compare_odometry_with_tf();
+    }
+
+    /// tf's world → body samples the odometry now reaches, compared with its pose then.
+    fn compare_odometry_with_tf(&mut self) {
+        let Some(&(latest, _)) = self.odometry.back() else { return };
+        for (t, tf_pose) in self.tf.odometry_samples_until(latest) {
+            if let Outcome::Ready(pose) = self.pose_at(t) {
+                self.tf.compared(&tf_pose, &pose);
+            }
         }
     }
 
@@ -179,6 +226,14 @@ impl Synchroniser {
             Payload::GroundTruth(t, pose) => {
                 return Some((epoch.stamp(self.timeline.to_mission(*t)), *pose));
             }
+            // tf carries its own stamps (static ones are often 0): not the timeline's business.
+            Payload::Tf(_) => {
+                let Payload::Tf(batch) = payload else { return None };
+                let timeline = &self.timeline;
+                self.tf.feed(batch, |t| epoch.stamp(timeline.to_mission(t)));
+                self.compare_odometry_with_tf();
+                return None;
+            }
         };
         let admitted = self.timeline.admit(stamp, payload);
         if let Some(restart) = admitted.restart {
@@ -207,7 +262,7 @@ impl Synchroniser {
                 let t = epoch.stamp(t);
                 self.clock = Some(self.clock.map_or(t, |c: Stamp| c.max(t)));
             }
-            Payload::GroundTruth(..) => {}
+            Payload::GroundTruth(..) | Payload::Tf(_) => {}
         }
     }
 
@@ -271,7 +326,15 @@ impl Synchroniser {
         }
     }
 
-    fn labels_for(&mut self, t: Stamp, world_from_body: &Pose3, scan: &Scan, stale: bool) -> Outcome<FrameLabels> {
+    /// The labels of `scan` (points still in the LiDAR's frame, `body_from_lidar` away).
+    fn labels_for(
+        &mut self,
+        t: Stamp,
+        world_from_body: &Pose3,
+        scan: &Scan,
+        body_from_lidar: &Pose3,
+        stale: bool,
+    ) -> Outcome<FrameLabels> {
         match self.labels {
             LabelSource::Cloud => match &scan.labels {
                 Some(labels) => Outcome::Ready(FrameLabels::PerPoint(
@@ -290,14 +353,21 @@ impl Synchroniser {
                     Outcome::Wait => return Outcome::Wait,
                     Outcome::Drop => return Outcome::Drop,
                 };
+                let Some(mounted) = self.tf.camera_from_body() else {
+                    if !stale {
+                        return Outcome::Wait;
+                    }
+                    self.counts.no_camera_mount += 1;
+                    return self.without_image(scan);
+                };
                 let skew = (t_image - t).abs();
                 let camera_from_body = if skew <= self.config.image_tolerance_s {
-                    self.camera_from_body
+                    mounted
                 } else {
                     match self.pose_at(t_image) {
                         Outcome::Ready(world_from_body_at_image) => {
                             self.counts.compensated += 1;
-                            self.camera_from_body * world_from_body_at_image.inverse() * world_from_body
+                            mounted * world_from_body_at_image.inverse() * world_from_body
                         }
                         Outcome::Wait if !stale => return Outcome::Wait,
                         // No odometry at the image's stamp: its labels cannot be placed.
@@ -307,6 +377,14 @@ impl Synchroniser {
                 let skew_ms = (skew * 1000.0).ceil() as u64;
                 self.counts.label_skew_max_ms = self.counts.label_skew_max_ms.max(skew_ms);
                 self.counts.label_skew_sum_ms = self.counts.label_skew_sum_ms.saturating_add(skew_ms);
+                let camera_from_lidar = camera_from_body * body_from_lidar;
+                let in_image = scan
+                    .points
+                    .iter()
+                    .filter(|p| camera.project(&(camera_from_lidar * *p)).and_then(|uv| camera.pixel(uv)).is_some())
+                    .count();
+                self.counts.points_labelled += scan.points.len() as u64;
+                self.counts.points_in_image += in_image as u64;
                 Outcome::Ready(FrameLabels::Image { image, camera, camera_from_body })
             }
         }
@@ -327,10 +405,24 @@ impl Synchroniser {
                     continue;
                 }
             };
-            let Some((_, scan)) = self.clouds.pop_front() else { break };
-            match self.labels_for(t, &pose, &scan, stale) {
+            let Some(body_from_lidar) = self.tf.body_from_lidar() else {
+                if !stale {
+                    break;
+                }
+                self.counts.no_lidar_mount += 1;
+                self.clouds.pop_front();
+                continue;
+            };
+            let Some((_, mut scan)) = self.clouds.pop_front() else { break };
+            match self.labels_for(t, &pose, &scan, &body_from_lidar, stale) {
                 Outcome::Ready(labels) => {
                     self.counts.frames += 1;
+                    // Points into the body frame (the labels stay with their points).
+                    if body_from_lidar != Pose3::identity() {
+                        for p in &mut scan.points {
+                            *p = body_from_lidar * *p;
+                        }
+                    }
                     frames.push(SensorFrame { stamp: t, world_from_body: pose, points_in_body: scan.points, labels });
                 }
                 Outcome::Wait if !stale => {
@@ -387,6 +479,7 @@ fn with_stamp(payload: Payload, t: rosrust::Time) -> Payload {
         Payload::GroundTruth(_, pose) => Payload::GroundTruth(t, pose),
         Payload::Clock(_) => Payload::Clock(t),
         Payload::CameraInfo(c) => Payload::CameraInfo(c),
+        Payload::Tf(batch) => Payload::Tf(batch),
     }
 }
 
@@ -595,5 +688,94 @@ mod tests {
         s.cloud(1.0, Scan { labels: None, ..scan(1) });
         assert!(s.ready().is_empty());
         assert_eq!((s.counts.out_of_order, s.counts.no_label_field), (1, 1));
+    }
+
+    /// A robot whose LiDAR sits 1 m ahead of the body and whose camera's mount comes from tf:
+    /// clouds wait for tf, then their points come out in the body frame (closed form: a point
+    /// 1 m ahead of the LiDAR is 2 m ahead of the body); the camera mount composes through its
+    /// chain. Without tf the clouds are dropped once stale and counted, and the reason names
+    /// the frames.
+    #[test]
+    fn mounts_come_from_tf_and_clouds_wait_for_them() {
+        use crate::config::RosConfig;
+        use crate::tf::{TfBatch, TfTransform};
+        let mut ros = RosConfig { labels: LabelSource::Cloud, ..RosConfig::default() };
+        ros.frames.lidar = "{robot}/velodyne".into();
+        ros.timeline.confirm_messages = 1;
+        let inputs = Inputs::new(&ros, "alpha", 1);
+        let mut s = Synchroniser::for_robot(&ros, &inputs).unwrap();
+        let epoch = Epoch { sec: 100 };
+        let at = |t: f64| epoch.time(t);
+        s.feed(epoch, Payload::Odometry(at(0.0), Pose3::identity()));
+        s.feed(epoch, Payload::Cloud(at(0.0), scan(2)));
+        s.feed(epoch, Payload::Odometry(at(0.5), Pose3::identity()));
+        assert!(s.ready().is_empty(), "waits for the LiDAR's mount");
+        assert!(s.missing_mount().unwrap().contains("`alpha/base_link` ← `alpha/velodyne`"));
+        let offset = Pose3::from_parts(Vector3::new(1.0, 0.0, 0.0).into(), UnitQuaternion::identity());
+        let mount = TfTransform {
+            stamp: rosrust::Time::default(),
+            parent: "alpha/base_link".into(),
+            child: "alpha/velodyne".into(),
+            parent_from_child: offset,
+        };
+        s.feed(epoch, Payload::Tf(TfBatch { is_static: true, transforms: vec![mount], refused: vec![] }));
+        let frames = s.ready();
+        assert_eq!(frames.len(), 1);
+        assert_eq!(frames[0].points_in_body[0], Point3::new(2.0, 0.0, 0.0));
+        assert_eq!(s.missing_mount(), None);
+
+        // No tf at all: dropped once stale, counted, the reason kept.
+        let mut s = Synchroniser::for_robot(&ros, &inputs).unwrap();
+        s.feed(epoch, Payload::Odometry(at(0.0), Pose3::identity()));
+        s.feed(epoch, Payload::Cloud(at(0.0), scan(2)));
+        s.feed(epoch, Payload::Odometry(at(2.0), Pose3::identity()));
+        assert!(s.ready().is_empty());
+        assert_eq!(s.counts.no_lidar_mount, 1);
+        assert_eq!(s.pending(), 0);
+    }
+
+    /// The camera's mount missing: a cloud with its image is kept without labels once stale
+    /// (counted as `no_camera_mount`); with tf it is labelled, and the share of its points
+    /// in the image is counted (closed form: the point 1 m ahead projects, the one behind not).
+    #[test]
+    fn a_missing_camera_mount_leaves_frames_unlabelled_and_projection_is_counted() {
+        use crate::config::RosConfig;
+        use crate::tf::{TfBatch, TfTransform};
+        let mut ros = RosConfig::default();
+        ros.timeline.confirm_messages = 1;
+        let inputs = Inputs::new(&ros, "alpha", 1);
+        let mut s = Synchroniser::for_robot(&ros, &inputs).unwrap();
+        let epoch = Epoch { sec: 100 };
+        let at = |t: f64| epoch.time(t);
+        let two_points = Scan {
+            points: vec![Point3::new(1.0, 0.0, 0.0), Point3::new(-1.0, 0.0, 0.0)],
+            labels: None,
+            dropped_non_finite: 0,
+        };
+        s.camera_info(camera());
+        s.feed(epoch, Payload::Odometry(at(0.0), Pose3::identity()));
+        s.feed(epoch, Payload::Image(at(0.0), image()));
+        s.feed(epoch, Payload::Cloud(at(0.0), two_points.clone()));
+        s.feed(epoch, Payload::Odometry(at(2.0), Pose3::identity()));
+        let frames = s.ready();
+        assert_eq!(frames.len(), 1);
+        assert!(matches!(frames[0].labels, FrameLabels::PerPoint(_)), "kept without labels");
+        assert_eq!((s.counts.no_camera_mount, s.counts.unlabelled), (1, 1));
+        assert!(s.missing_mount().unwrap().contains("camera mount `alpha/base_link` ← `alpha/camera`"));
+
+        let optical = sgm_model::perception::projection::optical_from_forward_body().inverse();
+        let mount = TfTransform {
+            stamp: rosrust::Time::default(),
+            parent: "alpha/base_link".into(),
+            child: "alpha/camera".into(),
+            parent_from_child: optical,
+        };
+        s.feed(epoch, Payload::Tf(TfBatch { is_static: true, transforms: vec![mount], refused: vec![] }));
+        s.feed(epoch, Payload::Image(at(2.0), image()));
+        s.feed(epoch, Payload::Cloud(at(2.0), two_points));
+        s.feed(epoch, Payload::Odometry(at(2.1), Pose3::identity()));
+        let frames = s.ready();
+        assert!(matches!(frames[0].labels, FrameLabels::Image { .. }), "labelled");
+        assert_eq!((s.counts.points_labelled, s.counts.points_in_image), (2, 1));
     }
 }

@@ -70,7 +70,7 @@ fn written_bags_read_back_in_time_order_across_chunks() {
                     assert_eq!(scan.points[7].y, f64::from(clouds));
                 }
             }
-            BagItem::Refused { topic, error } => refused.push(format!("{topic}: {error}")),
+            BagItem::Refused { topic, error, .. } => refused.push(format!("{topic}: {error}")),
             BagItem::Failed(e) => panic!("{e}"),
         }
     }

@@ -1,16 +1,20 @@
 //! `sgm run --bag-out DIR`: each robot's simulated sensor streams as a ROS 1 bag
 //! (`DIR/NAME.bag`), on the `[ros]` section's topics under the robot's namespace, stamped from
 //! [`SCENARIO_EPOCH`]: the LiDAR cloud (float32 x y z, plus the label field when the camera is
-//! off), the label image and camera info (camera on), the drifting odometry, and the true pose
-//! (`ground_truth`, for the replay's ATE). `sgm replay` of these bags gives the scenario's run.
+//! off), the label image and camera info (camera on), the drifting odometry, the true pose
+//! (`ground_truth`, for the replay's ATE), and the sensors' mounts on `/tf_static` (latched,
+//! once, before the first frame), as a robot's `robot_state_publisher` would publish them.
+//! `sgm replay` of these bags gives the scenario's run.
 
 use sgm_bridge::bag::writer::BagWriter;
 use sgm_bridge::config::RosConfig;
 use sgm_bridge::convert::cloud::cloud_msg;
-use sgm_bridge::convert::geometry::odometry_msg;
+use sgm_bridge::convert::geometry::{odometry_msg, transform_msg};
 use sgm_bridge::convert::image::{camera_info_msg, label_image_msg};
 use sgm_bridge::convert::time::SCENARIO_EPOCH;
+use sgm_bridge::msg::geometry_msgs::TransformStamped;
 use sgm_bridge::msg::std_msgs::Header;
+use sgm_bridge::msg::tf2_msgs::TFMessage;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
 use sgm_model::scene_graph::Stamp;
@@ -34,6 +38,10 @@ struct RobotBag {
     topics: [String; 5],
     /// world, body, lidar, camera.
     frames: [String; 4],
+    /// `ros.tf.static_topic`, resolved.
+    tf_static: String,
+    /// The mounts are written (once, before the first frame).
+    mounts_written: bool,
 }
 
 pub struct BagRecorder {
@@ -79,6 +87,8 @@ impl BagRecorder {
                 ],
                 frames: [inputs.world_frame(), inputs.body_frame(), inputs.lidar_frame(), inputs.camera_frame()]
                     .map(str::to_string),
+                tf_static: topic(&self.ros.tf.static_topic),
+                mounts_written: false,
             });
         }
         self.bags[k].as_mut().ok_or_else(|| format!("bag of {name} not open"))
@@ -91,8 +101,15 @@ impl BagRecorder {
         let header = |frame_id: &str| Header { seq: 0, stamp: time, frame_id: frame_id.to_string() };
         let [world, body, lidar, camera] = &bag.frames;
         let [points_topic, labels_topic, info_topic, odometry_topic, truth_topic] = &bag.topics;
-        let w = &mut bag.writer;
         let e = |e| io_error(&path, e);
+        if !bag.mounts_written {
+            bag.mounts_written = true;
+            let mounts = mounts(header(body), lidar, frame.image.is_some().then_some(camera.as_str()));
+            if !mounts.transforms.is_empty() {
+                bag.writer.write_latched(&bag.tf_static, time, &mounts).map_err(e)?;
+            }
+        }
+        let w = &mut bag.writer;
         // Camera info first, as a camera driver publishes it: a replay must not take its epoch
         // from a message without a stamp (regression: `replay_bags.rs`).
         if let Some((image, model)) = frame.image {
@@ -119,4 +136,24 @@ impl BagRecorder {
         }
         Ok(paths)
     }
+}
+
+/// The simulated sensors' mounts as tf gives them (`header` names the body frame): the LiDAR at
+/// the body origin (written only when its frame has another name), the camera's optical frame
+/// looking along the body's +x ([`crate::sim::camera::camera_from_body`], inverted).
+fn mounts(header: Header, lidar: &str, camera: Option<&str>) -> TFMessage {
+    let body = header.frame_id.clone();
+    let mount = |child: &str, body_from_child: &Pose3| TransformStamped {
+        header: header.clone(),
+        child_frame_id: child.to_string(),
+        transform: transform_msg(body_from_child),
+    };
+    let mut transforms = Vec::new();
+    if lidar.trim_start_matches('/') != body.trim_start_matches('/') {
+        transforms.push(mount(lidar, &Pose3::identity()));
+    }
+    if let Some(camera) = camera.filter(|c| c.trim_start_matches('/') != body.trim_start_matches('/')) {
+        transforms.push(mount(camera, &crate::sim::camera::camera_from_body().inverse()));
+    }
+    TFMessage { transforms }
 }

@@ -18,7 +18,7 @@ use sgm_actors::transport::InProcessRadio;
 use sgm_bridge::bag::reader::{read_bag, BagItem, Payload};
 use sgm_bridge::config::LabelSource;
 use sgm_bridge::convert::time::Epoch;
-use sgm_bridge::health::{Health, HealthConfig};
+use sgm_bridge::health::{Health, HealthConfig, Observed};
 use sgm_bridge::sync::{SyncCounts, Synchroniser};
 use sgm_bridge::timeline::TimelineCounts;
 use sgm_model::geometry::Pose3;
@@ -41,6 +41,8 @@ pub struct BagStats {
     pub timeline: TimelineCounts,
     /// What the health checks found over the whole bag (`[ros.health]`; also logged).
     pub health: Vec<sgm_bridge::health::Finding>,
+    /// The sensors' mounts (pinned or from the bag's tf), tf refusals, odometry against tf.
+    pub tf: Option<sgm_bridge::tf::listener::TfStatus>,
 }
 
 /// A finished replay: the run and what the bags held.
@@ -55,6 +57,8 @@ struct BagRobot {
     truth: Vec<(Stamp, Pose3)>,
     first_odometry: Option<(Stamp, Pose3)>,
     stats: BagStats,
+    /// Per input: accepted and refused, for the health checks.
+    inputs: BTreeMap<String, sgm_bridge::health::TopicTally>,
     frames: u64,
     raw_bytes: u64,
     raw_max_bytes: u64,
@@ -62,9 +66,12 @@ struct BagRobot {
 
 impl BagRobot {
     /// Logs and counts a refused message.
-    fn refused(&mut self, topic: String, error: &sgm_bridge::error::InputError) {
+    fn refused(&mut self, topic: String, input: &'static str, error: &sgm_bridge::error::InputError) {
         tracing::warn!(robot = %self.stats.robot, %topic, "message refused: {error}");
         *self.stats.refused.entry(topic).or_default() += 1;
+        let tally = self.inputs.entry(input.to_string()).or_default();
+        tally.refused += 1;
+        tally.last_refusal = Some(error.to_string());
     }
 
     /// Record time of the next message (refusals before it are counted and passed over).
@@ -74,7 +81,7 @@ impl BagRobot {
                 None => return Ok(None),
                 Some(BagItem::Message { time_nanos, .. }) => return Ok(Some(*time_nanos)),
                 Some(_) => match self.stream.next() {
-                    Some(BagItem::Refused { topic, error }) => self.refused(topic, &error),
+                    Some(BagItem::Refused { topic, input, error }) => self.refused(topic, input, &error),
                     Some(BagItem::Failed(e)) => return Err(RunError::Input(e.to_string())),
                     _ => {}
                 },
@@ -94,15 +101,16 @@ impl BagRobot {
     ) -> Result<(), RunError> {
         while self.next_time()?.is_some_and(|t| t <= limit) {
             let Some(BagItem::Message { payload, .. }) = self.stream.next() else { break };
+            self.inputs.entry(payload.input_name().to_string()).or_default().accepted += 1;
             let stamped = match &payload {
                 Payload::Cloud(t, _)
                 | Payload::Image(t, _)
                 | Payload::Odometry(t, _)
                 | Payload::GroundTruth(t, _)
                 | Payload::Clock(t) => Some(*t),
-                Payload::CameraInfo(_) => None,
+                Payload::CameraInfo(_) | Payload::Tf(_) => None,
             };
-            // Only a stamped message sets the epoch (camera info may come first and has none).
+            // Only a sensor's stamp sets the epoch (camera info has none; tf's may be anything).
             let epoch = match stamped {
                 Some(t) => *epoch.get_or_insert_with(|| Epoch::at(t)),
                 None => epoch.unwrap_or(Epoch { sec: 0 }),
@@ -149,22 +157,23 @@ pub async fn replay(
     if !scenario.camera.enabled {
         ros.labels = LabelSource::Cloud;
     }
-    let camera_from_body = ros.camera_from_body().map_err(|e| RunError::Input(e.to_string()))?;
     let names: Vec<String> = (0..bags.len()).map(|k| scenario.robot_name(k)).collect();
-    let mut robots: Vec<BagRobot> = bags
-        .iter()
-        .enumerate()
-        .map(|(k, path)| BagRobot {
-            stream: read_bag(path, &ros, &names[k], k as u16 + 1).into_iter().peekable(),
-            sync: Synchroniser::new(ros.sync.clone(), ros.labels, camera_from_body).with_timeline(ros.timeline.clone()),
+    let mut robots = Vec::with_capacity(bags.len());
+    for (k, path) in bags.iter().enumerate() {
+        let id = k as u16 + 1;
+        let inputs = sgm_bridge::inputs::Inputs::new(&ros, &names[k], id);
+        robots.push(BagRobot {
+            stream: read_bag(path, &ros, &names[k], id).into_iter().peekable(),
+            sync: Synchroniser::for_robot(&ros, &inputs).map_err(|e| RunError::Input(format!("[ros]: {e}")))?,
             truth: Vec::new(),
             first_odometry: None,
             stats: BagStats { robot: names[k].clone(), bag: path.display().to_string(), ..BagStats::default() },
+            inputs: BTreeMap::new(),
             frames: 0,
             raw_bytes: 0,
             raw_max_bytes: 0,
-        })
-        .collect();
+        });
+    }
     let mut first = None;
     for robot in &mut robots {
         if let Some(t) = robot.next_time()? {
@@ -281,10 +290,20 @@ pub async fn replay(
             .and_then(|m| m.as_ref())
             .map_or(0, |(map, _, _)| map.objects.iter().filter(|o| o.confirmed).count());
         // Mission time counts from the bags' epoch, the first message's whole second.
-        let health = Health::new(whole_bag).mapping_since(0.0).update(last_t, &r.sync.counts, confirmed);
+        let tf = r.sync.tf();
+        let missing_mount = r.sync.missing_mount();
+        let observed = Observed {
+            sync: &r.sync.counts,
+            inputs: &r.inputs,
+            tf: &tf,
+            missing_mount: missing_mount.as_deref(),
+            objects: confirmed,
+        };
+        let health = Health::new(whole_bag).mapping_since(0.0).update(last_t, &observed);
         bag_stats.push(BagStats {
             sync: r.sync.counts.clone(),
             timeline: r.sync.timeline().clone(),
+            tf: Some(tf),
             health,
             ..r.stats
         });

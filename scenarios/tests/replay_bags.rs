@@ -3,6 +3,7 @@
 //! Only what needs the simulated world differs (object quality, the world's object count, the
 //! start-frame error, which a bag can only estimate from its first poses).
 
+use sgm_bridge::health::Check;
 use sgm_scenarios::replay::replay;
 use sgm_scenarios::report;
 use sgm_scenarios::runner::run_recording;
@@ -59,15 +60,43 @@ fn a_scenario_replayed_from_its_bags_gives_the_same_run() {
     assert_eq!(without_world(ran), without_world(again));
 
     // The camera mounting written the wrong way round (the pose tf gives, as camera_from_body):
-    // the same bags map geometry but never confirm an object, and the replay says so, naming
-    // the extrinsic, where it used to be silent.
+    // the same bags map geometry but never confirm an object. With the bags' /tf_static the
+    // replay names the contradiction (120°); without tf it still says no object was found,
+    // naming the extrinsic, where it used to be silent.
     let mut inverted = scenario.clone();
     inverted.ros.camera_from_body = Some([0.0, 0.0, 0.0, -0.5, 0.5, -0.5, 0.5]);
     let replayed = system.block_on(replay(&inverted, &bags, None)).unwrap();
     for b in &replayed.bags {
         let checks: Vec<_> = b.health.iter().map(|f| f.check).collect();
-        assert_eq!(checks, vec![sgm_bridge::health::Check::NoObjects], "{b:?}");
-        assert!(b.health[0].likely_cause.contains("camera_from_body"), "{:?}", b.health);
+        assert_eq!(checks, vec![Check::MountDisagrees, Check::NoObjects], "{b:?}");
+        assert!(b.health[0].detail.contains("by 0.000 m and 120.00°"), "{:?}", b.health);
+        assert!(b.health[1].likely_cause.contains("camera_from_body"), "{:?}", b.health);
+    }
+    inverted.ros.tf.listen = false;
+    let replayed = system.block_on(replay(&inverted, &bags, None)).unwrap();
+    for b in &replayed.bags {
+        let checks: Vec<_> = b.health.iter().map(|f| f.check).collect();
+        assert_eq!(checks, vec![Check::NoObjects], "{b:?}");
+    }
+
+    // Nothing pins the camera and tf never gives it (tf read from a topic nobody publishes):
+    // every cloud is kept without labels, and the replay names the frames tf lacks.
+    let mut no_tf = scenario.clone();
+    no_tf.ros.tf.static_topic = "/nobody/tf_static".into();
+    let replayed = system.block_on(replay(&no_tf, &bags, None)).unwrap();
+    for b in &replayed.bags {
+        let checks: Vec<_> = b.health.iter().map(|f| f.check).collect();
+        assert_eq!(checks, vec![Check::NoMount, Check::NoObjects], "{b:?}");
+        assert_eq!(b.sync.unlabelled, b.sync.frames, "{b:?}");
+        let robot = &b.robot;
+        assert!(
+            b.health[0].detail.contains(&format!(
+                "the camera mount `{robot}/base_link` ← `{robot}/camera` is unknown: no frame `{robot}/camera` in tf"
+            )),
+            "{:?}",
+            b.health
+        );
+        assert!(b.health[0].detail.contains("pin ros.body_from_camera"), "{:?}", b.health);
     }
 }
 

@@ -178,6 +178,8 @@ enum Feed {
     Image(rosrust::Publisher<sensor_msgs::Image>),
     CameraInfo(rosrust::Publisher<sensor_msgs::CameraInfo>),
     Odometry(rosrust::Publisher<nav_msgs::Odometry>),
+    /// The mounts (`/tf_static`, latched as tf2's static broadcaster publishes them).
+    Tf(rosrust::Publisher<tf2_msgs::TFMessage>),
 }
 
 impl Feed {
@@ -188,6 +190,11 @@ impl Feed {
             "labels" => Feed::Image(rosrust::publish(topic, q).expect("advertises")),
             "camera_info" => Feed::CameraInfo(rosrust::publish(topic, q).expect("advertises")),
             "odometry" => Feed::Odometry(rosrust::publish(topic, q).expect("advertises")),
+            "tf_static" => {
+                let mut publisher = rosrust::publish(topic, q).expect("advertises");
+                publisher.set_latching(true);
+                Feed::Tf(publisher)
+            }
             _ => return None,
         })
     }
@@ -198,6 +205,7 @@ impl Feed {
             Feed::Image(p) => p.subscriber_count(),
             Feed::CameraInfo(p) => p.subscriber_count(),
             Feed::Odometry(p) => p.subscriber_count(),
+            Feed::Tf(p) => p.subscriber_count(),
         }
     }
 
@@ -208,6 +216,7 @@ impl Feed {
             Feed::Image(p) => p.send(RosMsg::decode(data).expect("bag image")),
             Feed::CameraInfo(p) => p.send(RosMsg::decode(data).expect("bag camera info")),
             Feed::Odometry(p) => p.send(RosMsg::decode(data).expect("bag odometry")),
+            Feed::Tf(p) => p.send(RosMsg::decode(data).expect("bag tf")),
         };
         sent.expect("publishes");
     }
@@ -350,7 +359,7 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
             }
         }
     }
-    assert_eq!(feeds.len(), 8, "four sensor topics per robot: {:?}", feeds.keys().collect::<Vec<_>>());
+    assert_eq!(feeds.len(), 9, "four sensor topics per robot and /tf_static: {:?}", feeds.keys().collect::<Vec<_>>());
     let statuses = Statuses::subscribe();
     let subscribed = || feeds.values().all(|f| f.subscribers() > 0) && ROBOTS.iter().all(|r| statuses.of(r).is_some());
     poll(60, || format!("the nodes did not subscribe (logs: {})", nodes.log("alpha")), || subscribed().then_some(()));
@@ -382,6 +391,9 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
         // The simulator's label ids are fusion.classes ids (segmenter identity): none unknown.
         assert_eq!(s["fusion"]["segmenter"], "identity", "{robot}: {s}");
         assert_eq!(count(&s, "fusion", "unknown_label_points"), 0, "{robot}: {s}");
+        // The camera's mount came from /tf_static (the bag's, as robot_state_publisher gives it).
+        assert_eq!(s["tf"]["mounts"][1]["source"], "tf", "{robot}: {s}");
+        assert_eq!(s["health"].as_array().map(Vec::len), Some(0), "{robot}: {s}");
         assert!(nodes.log(robot).contains("sgm node up"), "{robot}'s log");
         eprintln!("{robot}: {sent}/{sent} frames, aligned with {}", s["neighbours"]);
     }

@@ -11,7 +11,7 @@ use crate::config::RosConfig;
 use crate::error::InputError;
 use crate::inputs::Inputs;
 pub use crate::inputs::Payload;
-use crate::msg::{nav_msgs, sensor_msgs};
+use crate::msg::{nav_msgs, sensor_msgs, tf2_msgs};
 use rosrust::{Message, RosMsg};
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -23,8 +23,16 @@ use std::sync::mpsc::{sync_channel, Receiver};
 /// message refused (its topic and why), or the end.
 #[derive(Debug)]
 pub enum BagItem {
-    Message { time_nanos: u64, payload: Payload },
-    Refused { topic: String, error: InputError },
+    Message {
+        time_nanos: u64,
+        payload: Payload,
+    },
+    /// `input` names the input as the status does (`points`, `odometry`, `tf_static`, …).
+    Refused {
+        topic: String,
+        input: &'static str,
+        error: InputError,
+    },
     Failed(BagError),
 }
 
@@ -43,15 +51,30 @@ enum Kind {
     CameraInfo,
     Odometry,
     GroundTruth,
+    Tf,
+    TfStatic,
 }
 
 impl Kind {
+    fn input_name(self) -> &'static str {
+        match self {
+            Kind::Cloud => "points",
+            Kind::Image => "labels",
+            Kind::CameraInfo => "camera_info",
+            Kind::Odometry => "odometry",
+            Kind::GroundTruth => "ground_truth",
+            Kind::Tf => "tf",
+            Kind::TfStatic => "tf_static",
+        }
+    }
+
     fn expected(self) -> (String, String) {
         match self {
             Kind::Cloud => (sensor_msgs::PointCloud2::msg_type(), sensor_msgs::PointCloud2::md5sum()),
             Kind::Image => (sensor_msgs::Image::msg_type(), sensor_msgs::Image::md5sum()),
             Kind::CameraInfo => (sensor_msgs::CameraInfo::msg_type(), sensor_msgs::CameraInfo::md5sum()),
             Kind::Odometry | Kind::GroundTruth => (nav_msgs::Odometry::msg_type(), nav_msgs::Odometry::md5sum()),
+            Kind::Tf | Kind::TfStatic => (tf2_msgs::TFMessage::msg_type(), tf2_msgs::TFMessage::md5sum()),
         }
     }
 }
@@ -104,6 +127,8 @@ impl Decoder {
             Kind::CameraInfo => self.inputs.camera_info(&decode(data, self.max_bytes)?),
             Kind::Odometry => self.inputs.odometry(&decode(data, self.max_bytes)?),
             Kind::GroundTruth => self.inputs.ground_truth(&decode(data, self.max_bytes)?),
+            Kind::Tf => self.inputs.tf(&decode(data, self.max_bytes)?, false),
+            Kind::TfStatic => self.inputs.tf(&decode(data, self.max_bytes)?, true),
         }
     }
 
@@ -133,7 +158,7 @@ impl Decoder {
             for (time_nanos, topic, kind, data) in messages {
                 let item = match self.payload(kind, data) {
                     Ok(payload) => BagItem::Message { time_nanos, payload },
-                    Err(error) => BagItem::Refused { topic, error },
+                    Err(error) => BagItem::Refused { topic, input: kind.input_name(), error },
                 };
                 if !out(item) {
                     return Ok(());
@@ -157,13 +182,17 @@ pub fn decode_bag(
     mut out: impl FnMut(BagItem) -> bool,
 ) {
     let t = &config.topics;
-    let topics = vec![
+    let mut topics = vec![
         (RosConfig::resolve(&t.points, robot, id), Kind::Cloud),
         (RosConfig::resolve(&t.labels, robot, id), Kind::Image),
         (RosConfig::resolve(&t.camera_info, robot, id), Kind::CameraInfo),
         (RosConfig::resolve(&t.odometry, robot, id), Kind::Odometry),
         (RosConfig::resolve(&t.ground_truth, robot, id), Kind::GroundTruth),
     ];
+    if config.tf.listen {
+        topics.push((RosConfig::resolve(&config.tf.static_topic, robot, id), Kind::TfStatic));
+        topics.push((RosConfig::resolve(&config.tf.topic, robot, id), Kind::Tf));
+    }
     let decoder = Decoder {
         path: name.to_string(),
         topics,

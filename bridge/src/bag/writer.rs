@@ -51,6 +51,8 @@ struct Connection {
     msg_type: String,
     md5sum: String,
     definition: String,
+    /// Recorded from a latched publisher: `rosbag play` republishes it latched.
+    latching: bool,
 }
 
 impl Connection {
@@ -64,6 +66,9 @@ impl Connection {
         field(&mut data, "type", self.msg_type.as_bytes());
         field(&mut data, "md5sum", self.md5sum.as_bytes());
         field(&mut data, "message_definition", self.definition.as_bytes());
+        if self.latching {
+            field(&mut data, "latching", b"1");
+        }
         record(out, &header, &data);
     }
 }
@@ -122,6 +127,16 @@ impl BagWriter {
 
     /// Appends `message` on `topic` at `time` (the record time `rosbag play` schedules by).
     pub fn write<M: Message>(&mut self, topic: &str, time: Time, message: &M) -> io::Result<()> {
+        self.write_on(topic, time, message, false)
+    }
+
+    /// As [`write`](Self::write), on a topic recorded as latched (`/tf_static`): `rosbag play`
+    /// republishes it latched, so a node that subscribes late still gets it.
+    pub fn write_latched<M: Message>(&mut self, topic: &str, time: Time, message: &M) -> io::Result<()> {
+        self.write_on(topic, time, message, true)
+    }
+
+    fn write_on<M: Message>(&mut self, topic: &str, time: Time, message: &M, latching: bool) -> io::Result<()> {
         let id = match self.by_topic.get(topic) {
             Some(&id) => {
                 if self.connections[id as usize].msg_type != M::msg_type() {
@@ -143,6 +158,7 @@ impl BagWriter {
                     msg_type: M::msg_type(),
                     md5sum: M::md5sum(),
                     definition: M::msg_definition(),
+                    latching,
                 });
                 self.by_topic.insert(topic.to_string(), id);
                 id

@@ -1,4 +1,4 @@
-//! Poses ↔ geometry_msgs, and `nav_msgs/Odometry` in.
+//! Poses ↔ geometry_msgs, and frame ids checked.
 
 use crate::error::InputError;
 use crate::msg::{geometry_msgs, nav_msgs, std_msgs};
@@ -40,14 +40,6 @@ pub fn pose_from_msg(pose: &geometry_msgs::Pose) -> Result<Pose3, InputError> {
     Ok(Pose3::from_parts(Translation3::new(p.x, p.y, p.z), rotation))
 }
 
-/// `world_from_body` of an odometry message, checking its frames when `world_frame` /
-/// `body_frame` are non-empty.
-pub fn pose_from_odometry(msg: &nav_msgs::Odometry, world_frame: &str, body_frame: &str) -> Result<Pose3, InputError> {
-    check_frame(&msg.header.frame_id, world_frame)?;
-    check_frame(&msg.child_frame_id, body_frame)?;
-    pose_from_msg(&msg.pose.pose)
-}
-
 pub fn odometry_msg(header: std_msgs::Header, child_frame_id: &str, pose: &Pose3) -> nav_msgs::Odometry {
     let mut msg = nav_msgs::Odometry { header, child_frame_id: child_frame_id.to_string(), ..Default::default() };
     msg.pose.pose = pose_msg(pose);
@@ -82,18 +74,16 @@ mod tests {
 
     #[test]
     fn bad_poses_and_frames_are_named() {
-        let mut msg = nav_msgs::Odometry::default();
-        msg.header.frame_id = "alpha/odom".into();
-        msg.child_frame_id = "alpha/base_link".into();
-        msg.pose.pose.orientation.w = 1.0;
-        assert!(pose_from_odometry(&msg, "alpha/odom", "alpha/base_link").is_ok());
-        assert!(pose_from_odometry(&msg, "/alpha/odom", "").is_ok());
-        let err = pose_from_odometry(&msg, "map", "").unwrap_err();
-        assert_eq!(err.to_string(), "frame `alpha/odom`, `map` expected");
-        msg.pose.pose.orientation.w = 0.0;
-        assert!(pose_from_odometry(&msg, "", "").unwrap_err().to_string().contains("norm 0.000000"));
-        msg.pose.pose.orientation.w = 1.0;
-        msg.pose.pose.position.x = f64::NAN;
-        assert!(pose_from_odometry(&msg, "", "").is_err());
+        let mut pose = geometry_msgs::Pose::default();
+        pose.orientation.w = 1.0;
+        assert!(pose_from_msg(&pose).is_ok());
+        assert!(check_frame("alpha/odom", "/alpha/odom").is_ok());
+        assert!(check_frame("alpha/odom", "").is_ok());
+        assert_eq!(check_frame("alpha/odom", "map").unwrap_err().to_string(), "frame `alpha/odom`, `map` expected");
+        pose.orientation.w = 0.0;
+        assert!(pose_from_msg(&pose).unwrap_err().to_string().contains("norm 0.000000"));
+        pose.orientation.w = 1.0;
+        pose.position.x = f64::NAN;
+        assert!(pose_from_msg(&pose).is_err());
     }
 }

@@ -4,6 +4,7 @@
 
 use super::run_cmd::{fresh_run_dir, progress_bar, summary};
 use anyhow::{Context, Result};
+use sgm_bridge::tf::mounts::MountSource;
 use sgm_scenarios::replay::replay;
 use sgm_scenarios::report;
 use sgm_scenarios::scenario::{RobotSpec, Scenario};
@@ -66,6 +67,21 @@ pub fn execute(options: Options) -> Result<()> {
                 s.label_skew_sum_ms.checked_div(labelled).unwrap_or(0),
                 s.unlabelled
             );
+        }
+        if let Some(tf) = &b.tf {
+            let mounts: Vec<String> = tf
+                .mounts
+                .iter()
+                .map(|m| match m.source {
+                    MountSource::SameFrame => format!("{} in the body frame", m.sensor),
+                    MountSource::Tf => format!("{} from tf ({} ← {})", m.sensor, m.body_frame, m.sensor_frame),
+                    MountSource::Config => format!("{} from {}", m.sensor, m.key),
+                    MountSource::Missing => {
+                        format!("{} unknown ({} ← {} not in tf)", m.sensor, m.body_frame, m.sensor_frame)
+                    }
+                })
+                .collect();
+            println!("  {}: mounts: {}", b.robot, mounts.join(", "));
         }
         for finding in &b.health {
             println!("  {}: health: {}; likely cause: {}", b.robot, finding.detail, finding.likely_cause);
