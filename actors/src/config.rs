@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use sgm_model::matching::scan_context::ScanContextConfig;
 use sgm_model::matching::MatcherConfig;
 use sgm_model::perception::classes::{ClassSpec, ClassTable};
+use sgm_model::perception::colour_ids::{ColourIds, PaletteError};
 use sgm_model::perception::icp::IcpConfig;
 use sgm_model::perception::keyframes::KeyframeConfig;
 use sgm_model::perception::label_map::{LabelMap, LabelMapError, LabelMapSpec};
@@ -508,6 +509,9 @@ pub enum ConfigError {
     /// `[classes]`: the message names the key (`classes.map.chair: …`).
     #[error(transparent)]
     Classes(#[from] LabelMapError),
+    /// `[classes.palette]`: the message names the colour.
+    #[error(transparent)]
+    Palette(#[from] PaletteError),
 }
 
 fn check(ok: bool, key: &str, value: impl ToString, allowed: &str) -> Result<(), ConfigError> {
@@ -581,6 +585,13 @@ impl RobotConfig {
         Ok((classes, map))
     }
 
+    /// Colour label images back to the segmenter's pixel values (its palette and
+    /// `[classes.palette]`).
+    pub fn colour_ids(&self) -> Result<ColourIds, ConfigError> {
+        let (classes, _) = self.class_tables()?;
+        Ok(ColourIds::new(&self.classes, &classes)?)
+    }
+
     /// Checks every key against its allowed range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.matcher.matching.validate().map_err(|e| ConfigError::Invalid {
@@ -588,7 +599,7 @@ impl RobotConfig {
             value: e.value,
             allowed: e.allowed.into(),
         })?;
-        self.class_tables()?;
+        self.colour_ids()?;
         let f = &self.fusion;
         check(positive(f.cluster_tolerance_m), "fusion.cluster_tolerance_m", f.cluster_tolerance_m, "finite and > 0")?;
         check(positive(f.max_range_m), "fusion.max_range_m", f.max_range_m, "finite and > 0")?;

@@ -4,7 +4,9 @@
 //!   it (`Inputs::cloud`), for a Velodyne layout (x y z intensity ring time, 22-byte points) and
 //!   ours (x y z rgb label, labels in the cloud);
 //! - `frame_in_20k`: one whole frame: odometry, a 640 × 480 mono16 label image and the Velodyne
-//!   cloud, each decoded and checked, fed to the synchroniser, and the frame assembled.
+//!   cloud, each decoded and checked, fed to the synchroniser, and the frame assembled;
+//! - `label_image_in_640x480/{mono16_ids,rgb8_ade20k_palette}`: a label image decoded and read
+//!   (`Inputs::image`) as class ids, and painted in ADE20K's palette (read back colour by colour).
 //!
 //! `benches/compare_rospy.sh` runs this beside rospy's decode and `point_cloud2.read_points`.
 
@@ -132,6 +134,19 @@ fn frames(c: &mut Criterion) {
             bytes(&velodyne_cloud("alpha/base_link", t)),
         )
     };
+    // The timeline believes the stamps once `ros.timeline.confirm_messages` agree: first frames.
+    for _ in 0..3 {
+        let (odometry, image, cloud) = next_frame();
+        let payloads = [
+            inputs.odometry(&decode::<nav_msgs::Odometry>(&odometry)),
+            inputs.image(&decode::<sensor_msgs::Image>(&image)),
+            inputs.cloud(&decode::<sensor_msgs::PointCloud2>(&cloud)),
+        ];
+        for payload in payloads.into_iter().flatten() {
+            sync.feed(epoch, payload);
+        }
+        sync.ready();
+    }
     let mut group = c.benchmark_group("frame_in_20k");
     group.throughput(Throughput::Elements(POINTS as u64));
     group.bench_function("odometry_image_cloud", |b| {
@@ -156,5 +171,37 @@ fn frames(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, clouds, frames);
+fn label_images(c: &mut Criterion) {
+    use sgm_model::perception::palettes::ADE20K_150_PALETTE;
+    let config = sgm_actors::config::RobotConfig {
+        classes: sgm_model::perception::label_map::LabelMapSpec {
+            segmenter: "ade20k_150".into(),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let colours = config.colour_ids().unwrap_or_else(|e| panic!("{e}"));
+    let inputs = Inputs::new(&RosConfig::default(), "alpha", 1).with_colours(colours);
+    // Segments of 40 pixels of each of the 150 classes, row after row.
+    let ids: Vec<u16> = (0..640 * 480).map(|k| ((k / 40) % 150) as u16).collect();
+    let image = LabelImage::new(640, 480, ids.clone()).unwrap_or_else(|e| panic!("{e}"));
+    let mono = bytes(&label_image_msg(header("alpha/camera", 0.0), &image));
+    let rgb = bytes(&sensor_msgs::Image {
+        header: header("alpha/camera", 0.0),
+        height: 480,
+        width: 640,
+        encoding: "rgb8".into(),
+        is_bigendian: 0,
+        step: 640 * 3,
+        data: ids.iter().flat_map(|&k| ADE20K_150_PALETTE[usize::from(k)]).collect(),
+    });
+    let mut group = c.benchmark_group("label_image_in_640x480");
+    group.throughput(Throughput::Elements(640 * 480));
+    for (name, message) in [("mono16_ids", &mono), ("rgb8_ade20k_palette", &rgb)] {
+        group.bench_function(name, |b| b.iter(|| black_box(inputs.image(&decode::<sensor_msgs::Image>(message)))));
+    }
+    group.finish();
+}
+
+criterion_group!(benches, clouds, frames, label_images);
 criterion_main!(benches);

@@ -12,7 +12,7 @@ pub enum InputError {
     FieldOutsidePoint { field: String, offset: u32, point_step: u32 },
     #[error("data is {got} bytes, {expected} expected ({what})")]
     Truncated { got: usize, expected: usize, what: String },
-    #[error("unsupported encoding `{0}` (mono8, mono16, 8UC1 or 16UC1 expected)")]
+    #[error("unsupported encoding `{0}` (mono8, mono16, 8UC1, 16UC1, rgb8, bgr8, rgba8 or bgra8 expected)")]
     Encoding(String),
     #[error("frame `{got}`, `{expected}` expected")]
     Frame { got: String, expected: String },

@@ -338,14 +338,14 @@ impl Health {
                 ),
             ));
         }
-        let points = sync.points_labelled.saturating_sub(w.points_labelled);
-        let in_image = sync.points_in_image.saturating_sub(w.points_in_image);
+        let points = sync.sampled_points.saturating_sub(w.sampled_points);
+        let in_image = sync.sampled_in_image.saturating_sub(w.sampled_in_image);
         if points > 0 && share(in_image, points) < self.config.min_points_in_image_share {
             out.push(Finding::new(
                 Check::PointsOutsideImage,
                 format!(
-                    "{in_image} of {points} points of the last labelled frames project into the label image \
-                     ({:.2} %)",
+                    "{in_image} of {points} points sampled from the last labelled frames project into the \
+                     label image ({:.2} %)",
                     100.0 * share(in_image, points)
                 ),
             ));
@@ -487,8 +487,8 @@ mod tests {
         let sync = SyncCounts {
             frames: 10,
             no_lidar_mount: 5,
-            points_labelled: 10_000,
-            points_in_image: 20,
+            sampled_points: 10_000,
+            sampled_in_image: 20,
             ..Default::default()
         };
         let inputs = BTreeMap::new();

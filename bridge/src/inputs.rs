@@ -5,20 +5,23 @@
 use crate::config::RosConfig;
 use crate::convert::cloud::{read_cloud, Scan};
 use crate::convert::geometry::{check_frame, pose_from_msg};
-use crate::convert::image::{read_camera_info, read_label_image};
+use crate::convert::image::{read_camera_info, read_label_image, UnknownColours};
 use crate::error::InputError;
 use crate::msg::{nav_msgs, sensor_msgs, tf2_msgs};
 use crate::tf::{TfBatch, TfTransform};
 use rosrust::Time;
 use sgm_model::geometry::Pose3;
+use sgm_model::perception::colour_ids::ColourIds;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 /// A decoded, checked input message (header stamps in ROS time).
 #[derive(Clone, Debug)]
 pub enum Payload {
     Cloud(Time, Scan),
-    Image(Time, LabelImage),
+    /// A label image, and the pixels of colours its palette lacks (colour images).
+    Image(Time, LabelImage, UnknownColours),
     CameraInfo(CameraModel),
     Odometry(Time, Pose3),
     GroundTruth(Time, Pose3),
@@ -56,6 +59,8 @@ pub struct Inputs {
     max_image_pixels: usize,
     /// `ros.frames.aliases`, resolved: input frame (no leading `/`) → SGM's name.
     aliases: BTreeMap<String, String>,
+    /// Colour label images back to pixel values (`[classes]`); none: colour images refused.
+    colours: Option<Arc<ColourIds>>,
 }
 
 impl Inputs {
@@ -79,7 +84,14 @@ impl Inputs {
                 .iter()
                 .map(|(from, to)| (from.trim_start_matches('/').to_string(), frame(to)))
                 .collect(),
+            colours: None,
         }
+    }
+
+    /// Colour label images read back through `colours` (the robot's `[classes]` palette).
+    pub fn with_colours(mut self, colours: ColourIds) -> Self {
+        self.colours = Some(Arc::new(colours));
+        self
     }
 
     /// A frame id as SGM names it: its alias, if it has one.
@@ -102,7 +114,8 @@ impl Inputs {
         if pixels > self.max_image_pixels as u64 {
             return Err(InputError::invalid(format!("{pixels} pixels, at most {} accepted", self.max_image_pixels)));
         }
-        Ok(Payload::Image(msg.header.stamp, read_label_image(msg)?))
+        let (image, unknown) = read_label_image(msg, self.colours.as_deref())?;
+        Ok(Payload::Image(msg.header.stamp, image, unknown))
     }
 
     pub fn camera_info(&self, msg: &sensor_msgs::CameraInfo) -> Result<Payload, InputError> {

@@ -325,7 +325,8 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             .map_err(ros_error)?
         };
 
-        let inputs = Inputs::new(&ros, &robot_name, id);
+        let inputs =
+            Inputs::new(&ros, &robot_name, id).with_colours(config.robot.colour_ids().map_err(NodeError::Config)?);
         let side = Arc::new(SensorSide {
             sync: Mutex::new(Synchroniser::for_robot(&ros, &inputs).map_err(NodeError::Ros)?),
             inputs,
@@ -528,5 +529,18 @@ mod tests {
         std::fs::write(file.path(), "[classes]\nsegmenter = \"ade20k_150\"\n[classes.map]\nsofa = [23]\n").unwrap();
         let error = NodeConfig::load(Some(file.path())).unwrap_err().to_string();
         assert!(error.contains("classes.map.sofa: no class \"sofa\" in fusion.classes"), "{error}");
+    }
+
+    /// Frame aliases keep their case and slashes (config's keys are frame ids, not identifiers).
+    #[test]
+    fn frame_aliases_keep_their_names() {
+        let file = tempfile::Builder::new().suffix(".toml").tempfile().unwrap();
+        let text = "[ros.frames.aliases]\ncamera_init = \"{robot}/odom\"\n\"Livox_Frame\" = \"{robot}/livox\"\n";
+        std::fs::write(file.path(), text).unwrap();
+        let config = NodeConfig::load(Some(file.path())).unwrap();
+        let inputs = Inputs::new(&config.ros, "alpha", 1);
+        assert_eq!(inputs.frame("camera_init"), "alpha/odom");
+        assert_eq!(inputs.frame("/Livox_Frame"), "alpha/livox");
+        assert_eq!(inputs.frame("body"), "body");
     }
 }

@@ -23,6 +23,7 @@
 
 use crate::config::{LabelSource, SyncConfig, Unlabelled};
 use crate::convert::cloud::{Scan, NO_LABEL};
+use crate::convert::image::UnknownColours;
 use crate::convert::time::Epoch;
 use crate::inputs::{Inputs, Payload};
 use crate::tf::listener::{TfListener, TfStatus};
@@ -31,9 +32,14 @@ use crate::timeline::{Timeline, TimelineConfig, TimelineCounts};
 use serde::Serialize;
 use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_model::geometry::Pose3;
+use sgm_model::perception::colour_ids::hex;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
 use sgm_model::scene_graph::{LabelId, Stamp};
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
+
+/// Every this-many-th point of a labelled frame is projected to count the share that lands in
+/// the label image (a share needs no more; the full projection is Fusion's).
+pub const PROJECTION_SAMPLE: usize = 16;
 
 /// At most this many messages wait in each stream's buffer (the oldest goes first).
 const MAX_BUFFERED: usize = 1000;
@@ -64,9 +70,14 @@ pub struct SyncCounts {
     /// Clouds that found their image but not the camera's mount (then kept unlabelled or
     /// dropped as `unlabelled` says; counted there too).
     pub no_camera_mount: u64,
-    /// Points of labelled frames, and those of them that project into the label image.
-    pub points_labelled: u64,
-    pub points_in_image: u64,
+    /// A sample of the points of labelled frames (every [`PROJECTION_SAMPLE`]-th), and those of
+    /// them that project into the label image (`points_outside_image`).
+    pub sampled_points: u64,
+    pub sampled_in_image: u64,
+    /// Pixels of colour label images whose colour the palette lacks (no class), and per
+    /// colour (`#rrggbb`, the first 32 colours seen).
+    pub unknown_colour_pixels: u64,
+    pub unknown_colours: BTreeMap<String, u64>,
 }
 
 pub struct Synchroniser {
@@ -196,6 +207,21 @@ impl Synchroniser {
         }
     }
 
+    /// Counts the pixels of colours the palette lacks; each colour is logged once.
+    fn unknown_colours(&mut self, unknown: &UnknownColours) {
+        for (rgb, n) in &unknown.colours {
+            let name = hex(*rgb);
+            self.counts.unknown_colour_pixels += u64::from(*n);
+            if let Some(count) = self.counts.unknown_colours.get_mut(&name) {
+                *count += u64::from(*n);
+            } else if self.counts.unknown_colours.len() < 32 {
+                tracing::warn!(colour = %name, "label image colour in no palette entry: its pixels carry no class (map it in [classes.palette])");
+                self.counts.unknown_colours.insert(name, u64::from(*n));
+            }
+        }
+        self.counts.unknown_colour_pixels += u64::from(unknown.other);
+    }
+
     pub fn image(&mut self, t: Stamp, image: LabelImage) {
         self.saw(t);
         if !push_bounded(&mut self.images, t, image, &mut self.counts.overflow) {
@@ -218,7 +244,7 @@ impl Synchroniser {
     /// synchroniser's business: it is handed back (stamped) to the caller.
     pub fn feed(&mut self, epoch: Epoch, payload: Payload) -> Option<(Stamp, Pose3)> {
         let stamp = match &payload {
-            Payload::Cloud(t, _) | Payload::Image(t, _) | Payload::Odometry(t, _) | Payload::Clock(t) => *t,
+            Payload::Cloud(t, _) | Payload::Image(t, ..) | Payload::Odometry(t, _) | Payload::Clock(t) => *t,
             Payload::CameraInfo(_) => {
                 self.feed_checked(epoch, payload);
                 return None;
@@ -255,7 +281,10 @@ impl Synchroniser {
     fn feed_checked(&mut self, epoch: Epoch, payload: Payload) {
         match payload {
             Payload::Cloud(t, scan) => self.cloud(epoch.stamp(t), scan),
-            Payload::Image(t, image) => self.image(epoch.stamp(t), image),
+            Payload::Image(t, image, unknown) => {
+                self.unknown_colours(&unknown);
+                self.image(epoch.stamp(t), image)
+            }
             Payload::CameraInfo(camera) => self.camera_info(camera),
             Payload::Odometry(t, pose) => self.odometry(epoch.stamp(t), pose),
             Payload::Clock(t) => {
@@ -378,13 +407,13 @@ impl Synchroniser {
                 self.counts.label_skew_max_ms = self.counts.label_skew_max_ms.max(skew_ms);
                 self.counts.label_skew_sum_ms = self.counts.label_skew_sum_ms.saturating_add(skew_ms);
                 let camera_from_lidar = camera_from_body * body_from_lidar;
-                let in_image = scan
-                    .points
-                    .iter()
+                let sample = scan.points.iter().step_by(PROJECTION_SAMPLE);
+                let in_image = sample
+                    .clone()
                     .filter(|p| camera.project(&(camera_from_lidar * *p)).and_then(|uv| camera.pixel(uv)).is_some())
                     .count();
-                self.counts.points_labelled += scan.points.len() as u64;
-                self.counts.points_in_image += in_image as u64;
+                self.counts.sampled_points += sample.count() as u64;
+                self.counts.sampled_in_image += in_image as u64;
                 Outcome::Ready(FrameLabels::Image { image, camera, camera_from_body })
             }
         }
@@ -474,7 +503,7 @@ impl Synchroniser {
 fn with_stamp(payload: Payload, t: rosrust::Time) -> Payload {
     match payload {
         Payload::Cloud(_, scan) => Payload::Cloud(t, scan),
-        Payload::Image(_, image) => Payload::Image(t, image),
+        Payload::Image(_, image, unknown) => Payload::Image(t, image, unknown),
         Payload::Odometry(_, pose) => Payload::Odometry(t, pose),
         Payload::GroundTruth(_, pose) => Payload::GroundTruth(t, pose),
         Payload::Clock(_) => Payload::Clock(t),
@@ -747,14 +776,13 @@ mod tests {
         let mut s = Synchroniser::for_robot(&ros, &inputs).unwrap();
         let epoch = Epoch { sec: 100 };
         let at = |t: f64| epoch.time(t);
-        let two_points = Scan {
-            points: vec![Point3::new(1.0, 0.0, 0.0), Point3::new(-1.0, 0.0, 0.0)],
-            labels: None,
-            dropped_non_finite: 0,
-        };
+        // Sampled: the 1st and the 17th point, one ahead and one behind.
+        let mut points = vec![Point3::new(1.0, 0.0, 0.0); PROJECTION_SAMPLE];
+        points.push(Point3::new(-1.0, 0.0, 0.0));
+        let two_points = Scan { points, labels: None, dropped_non_finite: 0 };
         s.camera_info(camera());
         s.feed(epoch, Payload::Odometry(at(0.0), Pose3::identity()));
-        s.feed(epoch, Payload::Image(at(0.0), image()));
+        s.feed(epoch, Payload::Image(at(0.0), image(), Default::default()));
         s.feed(epoch, Payload::Cloud(at(0.0), two_points.clone()));
         s.feed(epoch, Payload::Odometry(at(2.0), Pose3::identity()));
         let frames = s.ready();
@@ -771,11 +799,11 @@ mod tests {
             parent_from_child: optical,
         };
         s.feed(epoch, Payload::Tf(TfBatch { is_static: true, transforms: vec![mount], refused: vec![] }));
-        s.feed(epoch, Payload::Image(at(2.0), image()));
+        s.feed(epoch, Payload::Image(at(2.0), image(), Default::default()));
         s.feed(epoch, Payload::Cloud(at(2.0), two_points));
         s.feed(epoch, Payload::Odometry(at(2.1), Pose3::identity()));
         let frames = s.ready();
         assert!(matches!(frames[0].labels, FrameLabels::Image { .. }), "labelled");
-        assert_eq!((s.counts.points_labelled, s.counts.points_in_image), (2, 1));
+        assert_eq!((s.counts.sampled_points, s.counts.sampled_in_image), (2, 1));
     }
 }

@@ -2,7 +2,7 @@
 //! info/check/play` are run on the same kind of bag by `tests/ros_interop.sh` from `.ci/run`).
 
 use nalgebra::Point3;
-use sgm_bridge::bag::reader::{read_bag, BagItem, Payload};
+use sgm_bridge::bag::reader::{read_bag, BagItem, BagSource, Payload};
 use sgm_bridge::bag::records::{BagLimits, ChunkRecord, ChunkSection};
 use sgm_bridge::bag::writer::BagWriter;
 use sgm_bridge::config::RosConfig;
@@ -44,7 +44,7 @@ fn written_bags_read_back_in_time_order_across_chunks() {
         let encoding_ok = k != 7;
         let mut image = label_image_msg(header(t, "alpha/camera"), &LabelImage::new(4, 2, vec![k as u16; 8]).unwrap());
         if !encoding_ok {
-            image.encoding = "bgr8".into();
+            image.encoding = "yuv422".into();
         }
         bag.write("/alpha/labels", SCENARIO_EPOCH.time(t), &image).unwrap();
     }
@@ -58,7 +58,7 @@ fn written_bags_read_back_in_time_order_across_chunks() {
     let mut clouds = 0;
     let mut last = 0;
     let mut refused = Vec::new();
-    for item in read_bag(&path, &RosConfig::default(), "alpha", 1) {
+    for item in read_bag(&path, BagSource::new(&RosConfig::default(), "alpha", 1)) {
         match item {
             BagItem::Message { time_nanos, payload } => {
                 assert!(time_nanos >= last, "record times in order");
@@ -75,7 +75,7 @@ fn written_bags_read_back_in_time_order_across_chunks() {
         }
     }
     assert_eq!(clouds, frames);
-    assert_eq!(refused, vec!["/alpha/labels: unsupported encoding `bgr8` (mono8, mono16, 8UC1 or 16UC1 expected)"]);
+    assert_eq!(refused, vec!["/alpha/labels: unsupported encoding `yuv422` (mono8, mono16, 8UC1, 16UC1, rgb8, bgr8, rgba8 or bgra8 expected)"]);
 }
 
 #[test]
@@ -85,16 +85,16 @@ fn a_topic_of_the_wrong_type_and_a_missing_file_are_named() {
     let mut bag = BagWriter::create(&path).unwrap();
     bag.write("/points", SCENARIO_EPOCH.time(1.0), &header(1.0, "x")).unwrap();
     bag.finish().unwrap();
-    let items: Vec<BagItem> = read_bag(&path, &RosConfig::default(), "alpha", 1).into_iter().collect();
+    let items: Vec<BagItem> = read_bag(&path, BagSource::new(&RosConfig::default(), "alpha", 1)).into_iter().collect();
     assert!(
         matches!(&items[..], [BagItem::Failed(e)] if e.to_string().contains("topic /points carries std_msgs/Header"))
     );
     let items: Vec<BagItem> =
-        read_bag(&dir.path().join("none.bag"), &RosConfig::default(), "a", 1).into_iter().collect();
+        read_bag(&dir.path().join("none.bag"), BagSource::new(&RosConfig::default(), "a", 1)).into_iter().collect();
     assert!(matches!(&items[..], [BagItem::Failed(e)] if e.to_string().contains("none.bag")));
     std::fs::write(dir.path().join("junk.bag"), b"#ROSBAG V2.0\n\x10\x00").unwrap();
     let items: Vec<BagItem> =
-        read_bag(&dir.path().join("junk.bag"), &RosConfig::default(), "a", 1).into_iter().collect();
+        read_bag(&dir.path().join("junk.bag"), BagSource::new(&RosConfig::default(), "a", 1)).into_iter().collect();
     assert!(matches!(&items[..], [BagItem::Failed(_)]));
 }
 

@@ -9,7 +9,7 @@
 //! largest single allocation measured (this test binary's allocator records it).
 
 use rosrust::RosMsg;
-use sgm_bridge::bag::reader::{read_bag, BagItem};
+use sgm_bridge::bag::reader::{read_bag, BagItem, BagSource};
 use sgm_bridge::bounded::{Bounded, Layout};
 use sgm_bridge::bounded_deliver::BoundedDeliverReq;
 use sgm_bridge::config::{RosConfig, DEFAULT_MAX_MESSAGE_BYTES};
@@ -121,8 +121,9 @@ fn bags_the_fuzzer_stopped_on_fail_by_name_within_their_size() {
     assert_eq!(inputs.len(), expected.len());
     for ((path, bytes), (name, error)) in inputs.iter().zip(expected) {
         assert!(path.ends_with(name), "{}", path.display());
-        let (items, largest) =
-            largest_allocation(|| read_bag(path, &RosConfig::default(), "alpha", 1).into_iter().collect::<Vec<_>>());
+        let (items, largest) = largest_allocation(|| {
+            read_bag(path, BagSource::new(&RosConfig::default(), "alpha", 1)).into_iter().collect::<Vec<_>>()
+        });
         match items.last() {
             Some(BagItem::Failed(e)) => assert!(e.to_string().contains(error), "{}: {e}", path.display()),
             other => panic!("{}: ends with {other:?}, a failure expected", path.display()),

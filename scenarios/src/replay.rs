@@ -15,7 +15,7 @@ use crate::team::{RunError, Team, Timing};
 use indicatif::ProgressBar;
 use serde::Serialize;
 use sgm_actors::transport::InProcessRadio;
-use sgm_bridge::bag::reader::{read_bag, BagItem, Payload};
+use sgm_bridge::bag::reader::{read_bag, BagItem, BagSource, Payload};
 use sgm_bridge::config::LabelSource;
 use sgm_bridge::convert::time::Epoch;
 use sgm_bridge::health::{Health, HealthConfig, Observed};
@@ -104,7 +104,7 @@ impl BagRobot {
             self.inputs.entry(payload.input_name().to_string()).or_default().accepted += 1;
             let stamped = match &payload {
                 Payload::Cloud(t, _)
-                | Payload::Image(t, _)
+                | Payload::Image(t, ..)
                 | Payload::Odometry(t, _)
                 | Payload::GroundTruth(t, _)
                 | Payload::Clock(t) => Some(*t),
@@ -162,8 +162,9 @@ pub async fn replay(
     for (k, path) in bags.iter().enumerate() {
         let id = k as u16 + 1;
         let inputs = sgm_bridge::inputs::Inputs::new(&ros, &names[k], id);
+        let colours = scenario.robot_config(k).colour_ids().map_err(|e| RunError::Input(e.to_string()))?;
         robots.push(BagRobot {
-            stream: read_bag(path, &ros, &names[k], id).into_iter().peekable(),
+            stream: read_bag(path, BagSource::new(&ros, &names[k], id).with_colours(colours)).into_iter().peekable(),
             sync: Synchroniser::for_robot(&ros, &inputs).map_err(|e| RunError::Input(format!("[ros]: {e}")))?,
             truth: Vec::new(),
             first_odometry: None,

@@ -141,9 +141,9 @@ pub fn ros_messages(data: &[u8]) {
 /// Whatever the bytes, the reader ends: with its messages and refusals, and at most one failure,
 /// the last item.
 pub fn rosbag(data: &[u8]) {
-    use sgm_bridge::bag::reader::{decode_bag, BagItem};
+    use sgm_bridge::bag::reader::{decode_bag, BagItem, BagSource};
     let mut failed = false;
-    decode_bag(data, data.len() as u64, "fuzz.bag", &RosConfig::default(), "alpha", 1, |item| {
+    decode_bag(data, data.len() as u64, "fuzz.bag", &BagSource::new(&RosConfig::default(), "alpha", 1), |item| {
         assert!(!failed, "an item after the failure");
         failed = matches!(item, BagItem::Failed(_));
         true

@@ -19,7 +19,8 @@ const SCENARIOS: &str = include_str!("../../book/src/scenarios.md");
 const ROS: &str = include_str!("../../book/src/ros.md");
 const OWN_SECTIONS: [&str; 6] = ["scenario", "world", "lidar", "camera", "odometry", "radio"];
 /// Tables documented as a whole rather than key by key.
-const WHOLE: [&str; 4] = ["fusion.classes", "classes.map", "world.objects", "robots[].route"];
+const WHOLE: [&str; 6] =
+    ["fusion.classes", "classes.map", "classes.palette", "ros.frames.aliases", "world.objects", "robots[].route"];
 
 /// Dotted key → default value; arrays and the `WHOLE` tables are leaves.
 fn flatten(prefix: &str, value: &Value, out: &mut BTreeMap<String, Value>) {

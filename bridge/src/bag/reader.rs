@@ -13,6 +13,7 @@ use crate::inputs::Inputs;
 pub use crate::inputs::Payload;
 use crate::msg::{nav_msgs, sensor_msgs, tf2_msgs};
 use rosrust::{Message, RosMsg};
+use sgm_model::perception::colour_ids::ColourIds;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufReader, Read};
@@ -172,15 +173,9 @@ impl Decoder {
 /// Reads a bag of `len` bytes from `bag` as robot `robot` (id `id`) on this thread, handing
 /// each item to `out` until it returns false; a bag that cannot be read ends with one
 /// [`BagItem::Failed`] (`name` names the bag in it). What [`read_bag`]'s thread runs.
-pub fn decode_bag(
-    bag: impl Read,
-    len: u64,
-    name: &str,
-    config: &RosConfig,
-    robot: &str,
-    id: u16,
-    mut out: impl FnMut(BagItem) -> bool,
-) {
+pub fn decode_bag(bag: impl Read, len: u64, name: &str, source: &BagSource, mut out: impl FnMut(BagItem) -> bool) {
+    let BagSource { config, robot, id, colours } = source;
+    let (robot, id) = (robot.as_str(), *id);
     let t = &config.topics;
     let mut topics = vec![
         (RosConfig::resolve(&t.points, robot, id), Kind::Cloud),
@@ -196,7 +191,10 @@ pub fn decode_bag(
     let decoder = Decoder {
         path: name.to_string(),
         topics,
-        inputs: Inputs::new(config, robot, id),
+        inputs: match colours {
+            Some(colours) => Inputs::new(config, robot, id).with_colours(colours.clone()),
+            None => Inputs::new(config, robot, id),
+        },
         connections: BTreeMap::new(),
         max_bytes: config.max_message_bytes,
     };
@@ -208,17 +206,36 @@ pub fn decode_bag(
     }
 }
 
-/// Starts reading `path` as robot `robot` (id `id`) on its own thread.
-pub fn read_bag(path: &Path, config: &RosConfig, robot: &str, id: u16) -> Receiver<BagItem> {
+/// Whose bag it is: the `[ros]` section, the robot's name and id (`{robot}`, `{id}` in its
+/// topics and frames), and its palette for colour label images (refused without).
+#[derive(Clone, Debug)]
+pub struct BagSource {
+    pub config: RosConfig,
+    pub robot: String,
+    pub id: u16,
+    pub colours: Option<ColourIds>,
+}
+
+impl BagSource {
+    pub fn new(config: &RosConfig, robot: &str, id: u16) -> Self {
+        Self { config: config.clone(), robot: robot.into(), id, colours: None }
+    }
+
+    pub fn with_colours(mut self, colours: ColourIds) -> Self {
+        self.colours = Some(colours);
+        self
+    }
+}
+
+/// Starts reading `path` as `source` says on its own thread.
+pub fn read_bag(path: &Path, source: BagSource) -> Receiver<BagItem> {
     let (sender, receiver) = sync_channel(64);
-    let (path, config, robot) = (path.to_path_buf(), config.clone(), robot.to_string());
+    let path = path.to_path_buf();
     std::thread::spawn(move || {
         let name = path.display().to_string();
         let opened = File::open(&path).and_then(|file| Ok((file.metadata()?.len(), file)));
         match opened {
-            Ok((len, file)) => {
-                decode_bag(BufReader::new(file), len, &name, &config, &robot, id, |item| sender.send(item).is_ok())
-            }
+            Ok((len, file)) => decode_bag(BufReader::new(file), len, &name, &source, |item| sender.send(item).is_ok()),
             Err(e) => {
                 let _ = sender.send(BagItem::Failed(BagError::Read { path: name, message: e.to_string() }));
             }

@@ -14,7 +14,8 @@
 //! ([`crate::perception::segmenters`]) unless `[classes.map]` has an entry for `c`, which then
 //! replaces it. Segmenter `identity` (the default) is today's convention: the pixel value *is*
 //! the `fusion.classes` id, each class's group is its own id, names in `[classes.map]` are
-//! `fusion.classes` names. Colour label images (`palette`) are not supported yet.
+//! `fusion.classes` names. Colour label images (rgb8) are read back to pixel values through the
+//! segmenter's palette ([`crate::perception::colour_ids`], `[classes.palette]`).
 
 use crate::perception::classes::ClassTable;
 use crate::perception::segmenters::{segmenter, Segmenter, NO_LABEL, SEGMENTERS};
@@ -85,11 +86,15 @@ pub struct LabelMapSpec {
     /// entry replaces the shipped default group of that class; `[]` maps nothing to it. Default
     /// empty (the shipped groups).
     pub map: BTreeMap<String, Vec<SegmenterClass>>,
+    /// Colour label images: `"#rrggbb"` ← the segmenter class (name or pixel value) it paints,
+    /// beside (or instead of) the segmenter's shipped palette (`fusion.classes` colours for
+    /// `identity`). Default empty.
+    pub palette: BTreeMap<String, SegmenterClass>,
 }
 
 impl Default for LabelMapSpec {
     fn default() -> Self {
-        Self { segmenter: IDENTITY.into(), map: BTreeMap::new() }
+        Self { segmenter: IDENTITY.into(), map: BTreeMap::new(), palette: BTreeMap::new() }
     }
 }
 
@@ -257,7 +262,7 @@ impl LabelMap {
 }
 
 /// A group member as a pixel value.
-fn resolve(
+pub(crate) fn resolve(
     class: &str,
     member: &SegmenterClass,
     table: Option<&Segmenter>,
@@ -317,6 +322,7 @@ mod tests {
         LabelMapSpec {
             segmenter: segmenter.into(),
             map: map.iter().map(|(k, v)| ((*k).to_string(), v.clone())).collect(),
+            palette: BTreeMap::new(),
         }
     }
 

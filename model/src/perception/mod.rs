@@ -5,6 +5,7 @@
 
 pub mod classes;
 pub mod clustering;
+pub mod colour_ids;
 pub mod icp;
 pub mod keyframes;
 pub mod label_map;
