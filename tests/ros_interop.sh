@@ -98,7 +98,7 @@ ALPHA=$(children "$LAUNCH_A") BRAVO=$(children "$LAUNCH_B")
 echo "  roslaunch: /alpha/sgm_alpha (pid $ALPHA) and /bravo/sgm_bravo (pid $BRAVO) up in" \
   "$(/usr/bin/python3 -c "import sys; print(f'{float(sys.argv[2]) - float(sys.argv[1]):.1f}')" "$LAUNCH_STARTED" "$(date +%s.%N)") s"
 rosbag record -q --lz4 -O "$WORK/recorded.bag" /alpha/velodyne_points /alpha/labels /alpha/camera_info /alpha/Odometry \
-  /bravo/velodyne_points /bravo/labels /bravo/camera_info /bravo/Odometry >/dev/null 2>&1 & RECORD=$!; PIDS+=($RECORD)
+  /bravo/velodyne_points /bravo/labels /bravo/camera_info /bravo/Odometry /tf_static >/dev/null 2>&1 & RECORD=$!; PIDS+=($RECORD)
 sleep 1
 rosbag play -q -r 3 "$WORK/bags/alpha.bag" "$WORK/bags/bravo.bag" \
   /alpha/points:=/alpha/velodyne_points /alpha/odometry:=/alpha/Odometry \
@@ -146,7 +146,7 @@ grep 'bravo/odom' "$WORK/path.txt" >/dev/null || fail "path frame"
 
 echo "== malformed messages are refused and counted"
 rostopic pub -1 /alpha/labels sensor_msgs/Image \
-  "{header: {frame_id: alpha/camera}, width: 2, height: 1, encoding: rgb8, step: 6, data: [1,2,3,4,5,6]}" >/dev/null
+  "{header: {frame_id: alpha/camera}, width: 2, height: 1, encoding: yuv422, step: 4, data: [1,2,3,4]}" >/dev/null
 rostopic pub -1 /alpha/velodyne_points sensor_msgs/PointCloud2 \
   "{header: {frame_id: elsewhere}, width: 1, height: 1, point_step: 12, row_step: 12}" >/dev/null
 rostopic pub -1 /alpha/Odometry nav_msgs/Odometry \
@@ -157,7 +157,8 @@ status alpha > "$WORK/alpha.status2.json"
 /usr/bin/python3 - "$WORK/alpha.status2.json" <<'PY' || fail "refusals not counted"
 import json, sys
 s = json.load(open(sys.argv[1]))
-assert s["refused"] == {"camera_info": 0, "clock": 0, "labels": 1, "odometry": 1, "points": 1}, s["refused"]
+assert s["refused"] == {"camera_info": 0, "clock": 0, "labels": 1, "odometry": 1, "points": 1, "tf": 0, "tf_static": 0}, \
+    s["refused"]
 print("  alpha refused", s["refused"], "and kept running")
 PY
 # Ctrl-C on roslaunch stops its node (SIGINT) and roslaunch exits 0.

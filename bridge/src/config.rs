@@ -38,6 +38,10 @@ pub struct RosConfig {
     /// `frames.body` and `frames.lidar` (the identity when they are one frame).
     pub body_from_lidar: Option<[f64; 7]>,
     pub sync: SyncConfig,
+    /// Publish the odometry's `frames.world` → `frames.body` on `topics.tf` (10 Hz at most), for
+    /// robots whose odometry's own tf is remapped away or names frames every robot shares.
+    /// Default false (the odometry publishes it).
+    pub publish_body_tf: bool,
     /// Markers, path, map, tf and status are published every this many seconds. Default 1.
     pub publish_interval_s: f64,
     /// Voxel of the published semantic map cloud, m. Default 0.25.
@@ -74,6 +78,7 @@ impl Default for RosConfig {
             body_from_camera: None,
             body_from_lidar: None,
             sync: SyncConfig::default(),
+            publish_body_tf: false,
             publish_interval_s: 1.0,
             map_voxel_m: 0.25,
             max_cloud_points: 2_000_000,

@@ -15,6 +15,7 @@ pub mod msg;
 pub mod node;
 pub mod persist;
 pub mod sync;
+pub mod team_frames;
 pub mod tf;
 pub mod timeline;
 pub mod transport;

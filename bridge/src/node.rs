@@ -12,13 +12,14 @@ use crate::bounded::{Bounded, Layout};
 use crate::bounded_deliver::{BoundedDeliver, BoundedDeliverReq, BoundedDeliverRes};
 use crate::config::RosConfig;
 use crate::convert::cloud::cloud_msg;
-use crate::convert::markers::{keyframe_path, map_markers, neighbour_transforms};
+use crate::convert::markers::{keyframe_path, map_markers};
 use crate::convert::time::Epoch;
 use crate::error::InputError;
 use crate::inputs::{Inputs, Payload};
 use crate::msg::{nav_msgs, rosgraph_msgs, sensor_msgs, sgm_msgs, std_msgs, tf2_msgs, visualization_msgs};
 use crate::persist::{Intake, Snapshots};
 use crate::sync::Synchroniser;
+use crate::team_frames::{team_transform, world_frame_param, WorldFrames};
 use crate::transport::peers::MasterLocator;
 use crate::transport::{RosTransport, TransportCounts};
 use serde::{Deserialize, Serialize};
@@ -359,6 +360,8 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         };
 
         let publishers = Publishers::advertise(&ros).map_err(ros_error)?;
+        let world_frames = WorldFrames::new(&ros);
+        register_world_frame(id, side.inputs.world_frame(), world_frames.clone());
         tracing::info!(robot = %robot_name, id, service = %deliver_name, "sgm node up");
         let world_frame = side.inputs.world_frame().to_string();
         let mut health = crate::health::Health::new(ros.health.clone());
@@ -368,9 +371,24 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         let mut seq = 0u32;
         let mut last_snapshot = handle.clock.now();
         let mut snapshots = store.clone().map(Snapshots::new);
+        let mut body_published: Option<sgm_model::scene_graph::Stamp> = None;
         while rosrust::is_ok() {
             actix_rt::time::sleep(tick).await;
             handle.supervisor.do_send(Tick { now: handle.clock.now() });
+            // The body in the world, from the odometry, for the team's tf tree (the odometry's
+            // own tf may be remapped away, or name frames every robot shares).
+            if ros.publish_body_tf {
+                let latest = side.sync().latest_odometry();
+                if let Some((t, world_from_body)) = latest.filter(|(t, _)| body_published != Some(*t)) {
+                    body_published = Some(t);
+                    let transform = crate::msg::geometry_msgs::TransformStamped {
+                        header: std_msgs::Header { seq: 0, stamp: side.ros_time(t), frame_id: world_frame.clone() },
+                        child_frame_id: side.inputs.body_frame().to_string(),
+                        transform: crate::convert::geometry::transform_msg(&world_from_body),
+                    };
+                    let _ = publishers.tf.send(tf2_msgs::TFMessage { transforms: vec![transform] });
+                }
+            }
             if let Some(snapshots) = &mut snapshots {
                 if handle.clock.now() - last_snapshot >= persistence.interval_s {
                     last_snapshot = handle.clock.now();
@@ -395,11 +413,9 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             };
             let _ = publishers.markers.send(map_markers(&header, &map, &classes));
             let _ = publishers.path.send(keyframe_path(&header, &map, |t| side.ros_time(t)));
-            let tf = neighbour_transforms(&header, &neighbours, |r| {
-                RosConfig::resolve(&ros.frames.world, &format!("robot_{}", r.0), r.0)
-            });
-            if !tf.transforms.is_empty() {
-                let _ = publishers.tf.send(tf);
+            let own = sgm_model::scene_graph::RobotId(id);
+            if let Some(transform) = team_transform(&header, own, &neighbours, &world_frames) {
+                let _ = publishers.tf.send(tf2_msgs::TFMessage { transforms: vec![transform] });
             }
             if publishers.map.subscriber_count() > 0 {
                 if let Ok(graph) = handle.tracker.send(GetSceneGraph).await {
@@ -459,6 +475,41 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         }
         Ok(())
     })
+}
+
+/// Registers this robot's world frame on the master (`/sgm/world_frames/robot_{id}`) and keeps
+/// `frames` up to date with the team's registrations, on a thread of its own (the master's
+/// parameter calls block), every 5 s while the node runs.
+fn register_world_frame(id: u16, world_frame: &str, frames: WorldFrames) {
+    let (name, frame) = (world_frame_param(id), world_frame.to_string());
+    let spawned = std::thread::Builder::new().name("sgm-world-frames".into()).spawn(move || {
+        match rosrust::param(&name) {
+            Some(param) => {
+                if let Ok(existing) = param.get::<String>() {
+                    if existing != frame {
+                        tracing::warn!(param = %name, existing, frame,
+                            "another world frame was registered for this robot id: a second robot with this id, \
+                             or this robot started before with another ros.frames.world; taking it over");
+                    }
+                }
+                if let Err(e) = param.set(&frame) {
+                    tracing::warn!(param = %name, "world frame not registered on the master: {e}");
+                }
+            }
+            None => tracing::warn!(param = %name, "world frame not registered: not a valid parameter name"),
+        }
+        while rosrust::is_ok() {
+            if let Some(Ok(registered)) =
+                rosrust::param("/sgm/world_frames").map(|p| p.get::<BTreeMap<String, String>>())
+            {
+                frames.update(&registered);
+            }
+            std::thread::sleep(Duration::from_secs(5));
+        }
+    });
+    if let Err(e) = spawned {
+        tracing::warn!("world frames not followed (no thread: {e}): neighbours' worlds are named robot_ID");
+    }
 }
 
 /// A random, non-zero incarnation (0 is simulation's): std's `RandomState` keys come from the

@@ -301,6 +301,11 @@ impl Synchroniser {
         self.clock
     }
 
+    /// The newest odometry pose, and its stamp.
+    pub fn latest_odometry(&self) -> Option<(Stamp, Pose3)> {
+        self.odometry.back().copied()
+    }
+
     /// Clouds still waiting for a partner.
     pub fn pending(&self) -> usize {
         self.clouds.len()

@@ -426,14 +426,28 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
     let p = path.wait_for(20, "alpha's path", |p| p.poses.len() == keyframes);
     assert_eq!(p.header.frame_id, "alpha/odom");
     assert!(p.poses.windows(2).all(|w| w[0].header.stamp < w[1].header.stamp), "path stamps increase");
-    let bravo_id = status["neighbours"][0]["robot"].as_u64().unwrap();
-    let t = tf.wait_for(20, "alpha's tf", |t| t.transforms.iter().any(|t| t.header.frame_id == "alpha/odom"));
-    let t = &t.transforms[0];
-    assert_eq!(t.child_frame_id, format!("robot_{bravo_id}/odom"));
-    let expected: Vec<f64> = serde_json::from_value(status["neighbours"][0]["local_from_remote"].clone()).unwrap();
-    let (v, q) = (&t.transform.translation, &t.transform.rotation);
-    let got = [v.x, v.y, v.z, q.x, q.y, q.z, q.w];
-    assert!(got.iter().zip(&expected).all(|(a, b)| (a - b).abs() < 1e-9), "tf {got:?} ≠ status {expected:?}");
+    // The team's tf tree: bravo (id 2) places its world under alpha's (id 1), the frame alpha
+    // registered on the master; the transform is the inverse of bravo's local_from_remote.
+    let t = tf.wait_for(20, "bravo's place in alpha's world", |t| {
+        t.transforms.iter().any(|t| t.header.frame_id == "alpha/odom" && t.child_frame_id == "bravo/odom")
+    });
+    let t = t.transforms.iter().find(|t| t.child_frame_id == "bravo/odom").unwrap();
+    let bravo = statuses.of("bravo").unwrap();
+    let v: Vec<f64> = serde_json::from_value(bravo["neighbours"][0]["local_from_remote"].clone()).unwrap();
+    let bravo_from_alpha = nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::new(v[0], v[1], v[2]),
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(v[6], v[3], v[4], v[5])),
+    );
+    let alpha_from_bravo = bravo_from_alpha.inverse();
+    let (tr, q) = (&t.transform.translation, &t.transform.rotation);
+    let expected = alpha_from_bravo.translation.vector;
+    assert!((nalgebra::Vector3::new(tr.x, tr.y, tr.z) - expected).norm() < 1e-6, "tf {tr:?} ≠ {expected}");
+    let got = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z));
+    assert!(got.angle_to(&alpha_from_bravo.rotation) < 1e-6);
+    assert!(
+        tf.get().is_none_or(|m| m.transforms.iter().all(|t| t.child_frame_id != "alpha/odom")),
+        "alpha, the lowest id, is the tree's root"
+    );
     let semantic = map.wait_for(20, "alpha's semantic map", |c| c.width > 0);
     assert_eq!(semantic.header.frame_id, "alpha/odom");
     let scan = read_cloud(&semantic, "label").expect("the map reads back");
@@ -457,7 +471,7 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
     bad_points.send(cloud(lidar, 5, 12)).unwrap(); // int32 coordinates
     bad_points.send(cloud(lidar, 7, 5)).unwrap(); // 5 bytes of a 12-byte point
     bad_points.send(cloud("elsewhere", 7, 12)).unwrap(); // wrong frame
-    bad_labels.send(image("rgb8")).unwrap();
+    bad_labels.send(image("yuv422")).unwrap();
     bad_labels.send(image("bayer_rggb8")).unwrap();
     bad_odometry.send(zero_quaternion).unwrap();
     let expected = [("points", 3), ("labels", 2), ("odometry", 1), ("camera_info", 0)];
@@ -467,7 +481,7 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
     assert_eq!(count(&after, "accepted", "points"), count(&before, "accepted", "points"));
     assert!(nodes.running("alpha"), "alpha died on malformed input");
     let log = nodes.log("alpha");
-    for reason in ["datatype 5", "data is 5 bytes", "frame `elsewhere`", "encoding `rgb8`", "encoding `bayer_rggb8`"] {
+    for reason in ["datatype 5", "data is 5 bytes", "frame `elsewhere`", "encoding `yuv422`", "encoding `bayer_rggb8`"] {
         assert!(log.contains(reason), "alpha's log names {reason:?}:\n{log}");
     }
     assert_eq!(log.matches("message refused").count(), 6, "{log}");

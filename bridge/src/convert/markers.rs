@@ -2,11 +2,8 @@
 //! scene graph's edges (keyframe trajectory, object → anchor keyframe), its keyframe path, and
 //! the tf of every aligned neighbour's world.
 
-use crate::convert::geometry::{pose_msg, transform_msg};
-use crate::msg::{
-    geometry_msgs, nav_msgs, std_msgs, tf2_msgs, visualization_msgs::Marker, visualization_msgs::MarkerArray,
-};
-use sgm_actors::matcher::NeighbourStatus;
+use crate::convert::geometry::pose_msg;
+use crate::msg::{geometry_msgs, nav_msgs, std_msgs, visualization_msgs::Marker, visualization_msgs::MarkerArray};
 use sgm_actors::tracker::MapSummary;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::classes::ClassTable;
@@ -97,36 +94,12 @@ pub fn keyframe_path(
     nav_msgs::Path { header: header.clone(), poses }
 }
 
-/// `world_frame` → each aligned neighbour's world frame (`frame_of(robot)`):
-/// local_world_from_remote_world as tf.
-pub fn neighbour_transforms(
-    header: &std_msgs::Header,
-    neighbours: &[NeighbourStatus],
-    frame_of: impl Fn(sgm_model::scene_graph::RobotId) -> String,
-) -> tf2_msgs::TFMessage {
-    let transforms = neighbours
-        .iter()
-        .filter_map(|n| {
-            let local_from_remote = n.local_from_remote?;
-            let child_frame_id = frame_of(n.robot);
-            // A world frame without `{robot}` or `{id}` names every robot's world alike: a
-            // transform from it to itself would be a loop in the tf tree, so none is sent.
-            (child_frame_id != header.frame_id).then(|| geometry_msgs::TransformStamped {
-                header: header.clone(),
-                child_frame_id,
-                transform: transform_msg(&local_from_remote),
-            })
-        })
-        .collect();
-    tf2_msgs::TFMessage { transforms }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use nalgebra::{Point3, Vector3};
     use sgm_actors::tracker::MapObject;
-    use sgm_model::scene_graph::{Keyframe, KeyframeId, LabelId, ObjectId, RobotId};
+    use sgm_model::scene_graph::{Keyframe, KeyframeId, LabelId, ObjectId};
 
     #[test]
     fn objects_become_boxes_labels_and_edges() {
@@ -172,48 +145,5 @@ mod tests {
         let path = keyframe_path(&header, &map, |t| rosrust::Time { sec: t as u32, nsec: 0 });
         assert_eq!(path.poses.len(), 2);
         assert_eq!((path.poses[1].pose.position.x, path.poses[1].header.stamp.sec), (2.0, 1));
-
-        let neighbours = vec![
-            NeighbourStatus {
-                robot: RobotId(2),
-                state: "aligned",
-                local_from_remote: Some(Pose3::translation(5.0, 0.0, 0.0)),
-                first_aligned: Some(1.0),
-                keyframes_held: 0,
-                objects_revision: None,
-            },
-            NeighbourStatus {
-                robot: RobotId(3),
-                state: "matching",
-                local_from_remote: None,
-                first_aligned: None,
-                keyframes_held: 0,
-                objects_revision: None,
-            },
-        ];
-        let tf = neighbour_transforms(&header, &neighbours, |r| format!("robot{}/odom", r.0));
-        assert_eq!(tf.transforms.len(), 1);
-        assert_eq!(
-            (tf.transforms[0].child_frame_id.as_str(), tf.transforms[0].transform.translation.x),
-            ("robot2/odom", 5.0)
-        );
-    }
-
-    #[test]
-    fn no_transform_from_a_frame_to_itself() {
-        let header = std_msgs::Header { frame_id: "odom".into(), ..Default::default() };
-        let neighbour = |robot| NeighbourStatus {
-            robot: RobotId(robot),
-            state: "Aligned",
-            local_from_remote: Some(sgm_model::geometry::Pose3::identity()),
-            first_aligned: Some(1.0),
-            keyframes_held: 3,
-            objects_revision: Some(1),
-        };
-        let neighbours = [neighbour(2), neighbour(3)];
-        // The template lacks `{robot}`: every robot's world is "odom".
-        assert!(neighbour_transforms(&header, &neighbours, |_| "odom".into()).transforms.is_empty());
-        let named = neighbour_transforms(&header, &neighbours, |r| format!("robot_{}/odom", r.0));
-        assert_eq!(named.transforms.len(), 2);
     }
 }
