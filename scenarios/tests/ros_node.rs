@@ -481,7 +481,8 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
     assert_eq!(count(&after, "accepted", "points"), count(&before, "accepted", "points"));
     assert!(nodes.running("alpha"), "alpha died on malformed input");
     let log = nodes.log("alpha");
-    for reason in ["datatype 5", "data is 5 bytes", "frame `elsewhere`", "encoding `yuv422`", "encoding `bayer_rggb8`"] {
+    for reason in ["datatype 5", "data is 5 bytes", "frame `elsewhere`", "encoding `yuv422`", "encoding `bayer_rggb8`"]
+    {
         assert!(log.contains(reason), "alpha's log names {reason:?}:\n{log}");
     }
     assert_eq!(log.matches("message refused").count(), 6, "{log}");

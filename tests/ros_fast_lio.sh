@@ -1,0 +1,130 @@
+#!/usr/bin/env bash
+# A fleet whose odometry is FAST-LIO, as the book's "Deploy on your robots" chapter sets it up:
+# FAST-LIO publishes /Odometry, /cloud_registered_body and tf camera_init -> body under the same
+# absolute names and frames on every robot. Against Debian's rosmaster and roslaunch, two robots
+# started by `roslaunch sgm fast_lio_robot.launch` (the shipped launch file and
+# config/fast_lio.toml, as they are), each with a stand-in for FAST-LIO's node (package
+# tests/ros_packages/fast_lio: the same names, fed from quickstart's bags):
+#   1. roslaunch's own check of the launch file; `roslaunch --nodes` names /alpha/laserMapping
+#      and /alpha/sgm_alpha;
+#   2. FAST-LIO's names land in each robot's namespace: /alpha/Odometry, /alpha/tf, its inputs
+#      /alpha/livox/lidar; nothing on the global /Odometry or /cloud_registered_body;
+#   3. both robots take every frame (nothing refused), align, read the camera's mount from their
+#      own tf_static under FAST-LIO's body (renamed alpha/base_link), find the odometry and
+#      FAST-LIO's tf in agreement, and raise no health finding;
+#   4. on the global /tf: each robot's body under its own world (alpha/odom -> alpha/base_link)
+#      and the team's tree (alpha/odom -> bravo/odom).
+# Needs `sgm` (SGM=…) and Debian's ROS 1 packages (.ci/run installs them). Everything listens on
+# 127.0.0.1; every process started here is stopped by PID.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+SGM=${SGM:-target/release/sgm}
+WORK=$(mktemp -d /tmp/sgm-fast-lio.XXXXXX)
+export ROS_MASTER_URI=http://127.0.0.1:11311 ROS_IP=127.0.0.1 ROS_HOME=$WORK/roshome
+mkdir -p "$ROS_HOME"
+PIDS=()
+cleanup() {
+  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
+  for pid in "${PIDS[@]}"; do wait "$pid" 2>/dev/null || true; done
+}
+trap cleanup EXIT
+fail() { echo "ros fast_lio FAILED: $*" >&2; for f in "$WORK"/roslaunch_*.log; do [ -e "$f" ] && tail -n 30 "$f" >&2; done; exit 1; }
+
+# The simulated camera speaks ADE20K-150 ids, as the segmenter config/fast_lio.toml names.
+SGM__CLASSES__SEGMENTER=ade20k_150 "$SGM" run quickstart --quiet --out "$WORK/run" --bag-out "$WORK/bags" >/dev/null
+(umask 077 && head -c 32 /dev/urandom | od -An -vtx1 | tr -d ' \n' > "$WORK/team.key")
+export ROS_PACKAGE_PATH=$PWD/bridge/ros:$PWD/tests/ros_packages:${ROS_PACKAGE_PATH:-/usr/share}
+SGM_PATH=$(cd "$(dirname "$SGM")" && pwd)
+if [ "$(basename "$SGM")" = sgm ]; then SGM_PATH="$SGM_PATH:$PATH"; else export SGM_BIN="$SGM_PATH/$(basename "$SGM")"; SGM_PATH=$PATH; fi
+export FAST_LIO_STUB_BAGS=$WORK/bags FAST_LIO_STUB_RATE=${FAST_LIO_STUB_RATE:-3}
+
+echo "== fast_lio_robot.launch: roslaunch's check, its nodes"
+/usr/bin/python3 - bridge/ros/sgm/launch/fast_lio_robot.launch <<'PY' || fail "roslaunch check of fast_lio_robot.launch"
+import sys, roslaunch.rlutil
+error = roslaunch.rlutil.check_roslaunch(sys.argv[1], ignore_unset_args=True)  # robot:=, id:= are the user's
+assert error is None, error
+PY
+NODES=$(roslaunch --nodes sgm fast_lio_robot.launch robot:=alpha id:=1 | tr '\n' ' ')
+[ "$NODES" = "/alpha/laserMapping /alpha/sgm_alpha " ] || fail "roslaunch --nodes: $NODES"
+
+ss -ltn | grep ':11311 ' >/dev/null && fail "port 11311 busy"
+rosmaster --core -p 11311 >"$ROS_HOME/master.log" 2>&1 & PIDS+=($!)
+for _ in $(seq 100); do rostopic list >/dev/null 2>&1 && break; sleep 0.1; done
+# The global /tf as RViz would see it: every (parent, child) pair, recorded while the robots run.
+/usr/bin/python3 - "$WORK/tf_pairs.txt" <<'PY' & PIDS+=($!)
+import sys, rospy
+from tf2_msgs.msg import TFMessage
+pairs = set()
+def heard(m):
+    for t in m.transforms:
+        pair = f"{t.header.frame_id} {t.child_frame_id}"
+        if pair not in pairs:
+            pairs.add(pair)
+            with open(sys.argv[1], "a") as f:
+                f.write(pair + "\n")
+rospy.init_node("tf_pairs", anonymous=True)
+rospy.Subscriber("/tf", TFMessage, heard)
+rospy.spin()
+PY
+echo "== two robots, each: roslaunch sgm fast_lio_robot.launch robot:=NAME id:=ID"
+launch_robot() {
+  PATH="$SGM_PATH" roslaunch sgm fast_lio_robot.launch robot:="$1" id:="$2" team_key_file:="$WORK/team.key" \
+    >"$WORK/roslaunch_$1.log" 2>&1 & PIDS+=($!)
+  for _ in $(seq 100); do rosnode list 2>/dev/null | grep "^/$1/sgm_$1\$" >/dev/null && return 0; sleep 0.2; done
+  fail "roslaunch of $1: no node /$1/sgm_$1"
+}
+launch_robot alpha 1
+launch_robot bravo 2
+# While the stand-ins play (90 s at 3x):
+for _ in $(seq 100); do rostopic list 2>/dev/null | grep -x /bravo/Odometry >/dev/null && break; sleep 0.2; done
+echo "== FAST-LIO's names in each robot's namespace"
+rostopic list > "$WORK/topics.txt"
+for t in /alpha/Odometry /bravo/Odometry /alpha/cloud_registered_body /alpha/tf /bravo/tf /alpha/tf_static; do
+  grep -x "$t" "$WORK/topics.txt" >/dev/null || fail "no topic $t: $(tr '\n' ' ' < "$WORK/topics.txt")"
+done
+for t in /Odometry /cloud_registered_body /cloud_registered; do
+  grep -x "$t" "$WORK/topics.txt" >/dev/null && fail "FAST-LIO's $t is global"
+done
+rostopic info /alpha/livox/lidar > "$WORK/lidar.txt"
+grep -q "/alpha/laserMapping" "$WORK/lidar.txt" || fail "FAST-LIO does not read /alpha/livox/lidar: $(cat "$WORK/lidar.txt")"
+
+# The stand-ins play the bags (90 s at 3x), then exit; the nodes stay up.
+for _ in $(seq 300); do
+  grep -q "messages published" "$WORK/roslaunch_alpha.log" && grep -q "messages published" "$WORK/roslaunch_bravo.log" && break
+  sleep 0.5
+done
+grep -q "messages published" "$WORK/roslaunch_bravo.log" || fail "the FAST-LIO stand-ins did not finish"
+sleep 3
+
+echo "== every frame taken, aligned, mounts from tf, odometry and tf agree"
+status() { timeout 20 rostopic echo -n 1 "/$1/sgm/status" | /usr/bin/python3 -c '
+import sys, yaml
+print(yaml.safe_load(sys.stdin.read().split("---")[0])["data"])'; }
+for robot in alpha bravo; do
+  status "$robot" > "$WORK/$robot.status.json" || fail "$robot's status"
+  /usr/bin/python3 - "$WORK/$robot.status.json" "$robot" <<'PY' || fail "$robot's status"
+import json, sys
+s, robot = json.load(open(sys.argv[1])), sys.argv[2]
+assert s["accepted"]["points"] == 180 and s["sync"]["frames"] == 180, (s["accepted"], s["sync"])
+assert all(v == 0 for v in s["refused"].values()), s["refused"]
+assert s["neighbours"] and all(n["state"] == "Aligned" for n in s["neighbours"]), s["neighbours"]
+camera = [m for m in s["tf"]["mounts"] if m["sensor"] == "camera"][0]
+assert camera["source"] == "tf" and camera["body_frame"] == f"{robot}/base_link", camera
+assert s["tf"]["world_frame"] == f"{robot}/odom", s["tf"]
+assert s["tf"]["odometry_compared"] > 100 and s["tf"]["odometry_disagreed"] == 0, s["tf"]
+assert s["health"] == [], s["health"]
+assert s["fusion"]["segmenter"] == "ade20k_150" and s["fusion"]["unknown_label_points"] == 0, s["fusion"]
+print(f"  {robot}: 180/180 frames, {s['objects']} objects, aligned at "
+      + ", ".join(f"{n['first_aligned'] - 1700000000:.0f} s" for n in s["neighbours"])
+      + f"; camera mount from tf ({camera['body_frame']} <- {camera['sensor_frame']}); odometry against "
+      + f"FAST-LIO's tf: {s['tf']['odometry_compared']} compared, {s['tf']['odometry_max_m']:.1e} m apart at most")
+PY
+done
+
+echo "== the global /tf: bodies under their own worlds, the team's tree"
+for pair in "alpha/odom alpha/base_link" "bravo/odom bravo/base_link" "alpha/odom bravo/odom"; do
+  grep -x "$pair" "$WORK/tf_pairs.txt" >/dev/null || fail "no $pair on /tf: $(tr '\n' ';' < "$WORK/tf_pairs.txt")"
+done
+grep -E '^(camera_init|body) |^bravo/odom alpha/odom$' "$WORK/tf_pairs.txt" && fail "/tf carries FAST-LIO's frames or a loop"
+echo "  /tf: $(tr '\n' ';' < "$WORK/tf_pairs.txt")"
+echo "ros fast_lio: all checks passed"
