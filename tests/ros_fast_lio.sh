@@ -13,7 +13,9 @@
 #      own tf_static under FAST-LIO's body (renamed alpha/base_link), find the odometry and
 #      FAST-LIO's tf in agreement, and raise no health finding;
 #   4. on the global /tf: each robot's body under its own world (alpha/odom -> alpha/base_link)
-#      and the team's tree (alpha/odom -> bravo/odom).
+#      and the team's tree (alpha/odom -> bravo/odom);
+#   5. `sgm doctor --live` with the launch file's remappings says OK for every input; without
+#      them it fails on points, naming the PointCloud2 topics the master has.
 # Needs `sgm` (SGM=…) and Debian's ROS 1 packages (.ci/run installs them). Everything listens on
 # 127.0.0.1; every process started here is stopped by PID.
 set -euo pipefail
@@ -88,6 +90,17 @@ done
 rostopic info /alpha/livox/lidar > "$WORK/lidar.txt"
 grep -q "/alpha/laserMapping" "$WORK/lidar.txt" || fail "FAST-LIO does not read /alpha/livox/lidar: $(cat "$WORK/lidar.txt")"
 
+echo "== sgm doctor --live, as the deploy chapter runs it, while the robots run"
+# With the launch file's remappings: every input OK. Without them: no publisher on points.
+"$SGM" doctor --live --robot alpha --id 1 --config bridge/ros/sgm/config/fast_lio.toml --duration 6 \
+  points:=cloud_registered_body odometry:=Odometry > "$WORK/doctor_alpha.txt" || { cat "$WORK/doctor_alpha.txt"; fail "sgm doctor --live alpha"; }
+cat "$WORK/doctor_alpha.txt"
+grep -q "^verdict: OK" "$WORK/doctor_alpha.txt" || fail "sgm doctor --live alpha: not OK"
+rc=0; "$SGM" doctor --live --robot bravo --id 2 --config bridge/ros/sgm/config/fast_lio.toml --duration 3 \
+  > "$WORK/doctor_bravo.txt" || rc=$?
+[ "$rc" = 1 ] && grep -q "nobody publishes it; sensor_msgs/PointCloud2 topics published on the master: .*/bravo/cloud_registered_body" \
+  "$WORK/doctor_bravo.txt" || { cat "$WORK/doctor_bravo.txt"; fail "sgm doctor --live without the remappings (exit $rc)"; }
+echo "  without points:=cloud_registered_body: $(grep -m1 'nobody publishes' "$WORK/doctor_bravo.txt" | sed 's/^ *//')"
 # The stand-ins play the bags (90 s at 3x), then exit; the nodes stay up.
 for _ in $(seq 300); do
   grep -q "messages published" "$WORK/roslaunch_alpha.log" && grep -q "messages published" "$WORK/roslaunch_bravo.log" && break

@@ -170,8 +170,8 @@ pub struct Observed<'a> {
     pub tf: &'a TfStatus,
     /// Why a mount the frames need is unknown, naming the frames (the synchroniser's).
     pub missing_mount: Option<&'a str>,
-    /// Confirmed objects in the map.
-    pub objects: usize,
+    /// Confirmed objects in the map (none: not judged, as `sgm doctor`, which builds no map).
+    pub objects: Option<usize>,
 }
 
 /// Where the current window started.
@@ -253,7 +253,7 @@ impl Health {
             findings.push(Finding::new(Check::MountDisagrees, detail));
         }
         if let Some(first) = self.first_frame_at {
-            if observed.objects == 0 && now - first >= self.config.no_objects_after_s {
+            if observed.objects == Some(0) && now - first >= self.config.no_objects_after_s {
                 findings.push(Finding::new(
                     Check::NoObjects,
                     format!(
@@ -369,7 +369,7 @@ mod tests {
     /// Feeds `sync` and `objects` with no other news.
     fn update(h: &mut Health, now: f64, sync: &SyncCounts, objects: usize) -> Vec<Finding> {
         let (inputs, tf) = (BTreeMap::new(), tf());
-        h.update(now, &Observed { sync, inputs: &inputs, tf: &tf, missing_mount: None, objects })
+        h.update(now, &Observed { sync, inputs: &inputs, tf: &tf, missing_mount: None, objects: Some(objects) })
     }
 
     fn checks(f: &[Finding]) -> Vec<Check> {
@@ -447,7 +447,8 @@ mod tests {
         );
         inputs.insert("points".to_string(), TopicTally { accepted: 40, ..Default::default() });
         let (sync, tf) = (SyncCounts { no_odometry: 40, ..Default::default() }, tf());
-        let f = h.update(0.0, &Observed { sync: &sync, inputs: &inputs, tf: &tf, missing_mount: None, objects: 0 });
+        let f =
+            h.update(0.0, &Observed { sync: &sync, inputs: &inputs, tf: &tf, missing_mount: None, objects: Some(0) });
         assert_eq!(checks(&f), vec![Check::InputRefused, Check::NoOdometry]);
         assert_eq!(
             f[0].detail,
@@ -494,8 +495,10 @@ mod tests {
         let inputs = BTreeMap::new();
         let missing = "the lidar mount `base_link` ← `velodyne` is unknown: no frame `velodyne` in tf";
         let mut h = Health::new(HealthConfig { window_frames: 10, ..Default::default() });
-        let f = h
-            .update(0.0, &Observed { sync: &sync, inputs: &inputs, tf: &tf, missing_mount: Some(missing), objects: 1 });
+        let f = h.update(
+            0.0,
+            &Observed { sync: &sync, inputs: &inputs, tf: &tf, missing_mount: Some(missing), objects: Some(1) },
+        );
         assert_eq!(
             checks(&f),
             vec![Check::NoMount, Check::MountDisagrees, Check::OdometryDisagreesWithTf, Check::PointsOutsideImage]

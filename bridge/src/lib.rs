@@ -7,6 +7,7 @@ pub mod bounded;
 pub mod bounded_deliver;
 pub mod config;
 pub mod convert;
+pub mod doctor;
 pub mod error;
 pub mod health;
 pub mod inputs;

@@ -435,7 +435,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                     inputs: &inputs,
                     tf: &tf_status,
                     missing_mount: missing_mount.as_deref(),
-                    objects: confirmed,
+                    objects: Some(confirmed),
                 },
             );
             let status = serde_json::json!({

@@ -298,7 +298,7 @@ pub async fn replay(
             inputs: &r.inputs,
             tf: &tf,
             missing_mount: missing_mount.as_deref(),
-            objects: confirmed,
+            objects: Some(confirmed),
         };
         let health = Health::new(whole_bag).mapping_since(0.0).update(last_t, &observed);
         bag_stats.push(BagStats {

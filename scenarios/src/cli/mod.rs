@@ -1,3 +1,4 @@
+pub mod doctor_cmd;
 pub mod encode_cloud_cmd;
 pub mod icp_cmd;
 pub mod match_cmd;

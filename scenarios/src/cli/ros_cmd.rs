@@ -5,7 +5,7 @@
 use anyhow::{bail, Context, Result};
 use sgm_bridge::node::{self, NodeConfig, PublicKeys};
 use sgm_scenarios::scenario::Scenario;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 pub struct Options {
     pub robot: String,
@@ -16,22 +16,29 @@ pub struct Options {
     pub development_key: bool,
 }
 
-pub fn execute(options: Options) -> Result<()> {
-    let mut config = match &options.scenario {
+/// Robot `robot`'s node configuration: from a file (or the defaults), or from a scenario's
+/// robot of that name; `id` overrides the configuration's.
+pub fn node_config(robot: &str, id: Option<u16>, config: Option<&Path>, scenario: Option<&str>) -> Result<NodeConfig> {
+    let mut node = match scenario {
         Some(name) => {
             let scenario = Scenario::load(name)?;
-            let Some(k) = (0..scenario.robots.len()).find(|&k| scenario.robot_name(k) == options.robot) else {
+            let Some(k) = (0..scenario.robots.len()).find(|&k| scenario.robot_name(k) == robot) else {
                 let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
-                bail!("scenario {name} has no robot {} (it has {})", options.robot, names.join(", "));
+                bail!("scenario {name} has no robot {robot} (it has {})", names.join(", "));
             };
             NodeConfig { robot: scenario.robot_config(k), ros: scenario.ros.clone() }
         }
-        None => NodeConfig::load(options.config.as_deref()).context("loading the configuration")?,
+        None => NodeConfig::load(config).context("loading the configuration")?,
     };
-    config.robot.robot.name = options.robot;
-    if let Some(id) = options.id {
-        config.robot.robot.id = id;
+    node.robot.robot.name = robot.to_string();
+    if let Some(id) = id {
+        node.robot.robot.id = id;
     }
+    Ok(node)
+}
+
+pub fn execute(options: Options) -> Result<()> {
+    let config = node_config(&options.robot, options.id, options.config.as_deref(), options.scenario.as_deref())?;
     // The node runs for hours on wall time, with no observations to give free pages back at.
     let _release = sgm_scenarios::memory::release_free_pages_every(sgm_scenarios::memory::RELEASE_INTERVAL)
         .context("starting the thread that gives free memory back")?;

@@ -1,0 +1,411 @@
+//! `sgm doctor`: a robot's inputs checked before (or beside) a mission, from a bag or a live
+//! master, with a verdict per input. The same checks as the node's ([`Inputs`](crate::inputs),
+//! the [`Synchroniser`], the mounts from tf, the [`Health`] findings), plus what only a
+//! look at the whole stream tells: rates, sizes, which classes the label images' pixel values
+//! mean under `[classes]`. Plain state fed message by message ([`Doctor::observe`]); [`bag`]
+//! feeds it a bag, [`live`] a running master.
+
+pub mod bag;
+pub mod live;
+mod verdicts;
+
+use crate::config::LabelSource;
+use crate::convert::time::Epoch;
+use crate::error::InputError;
+use crate::health::{Finding, Health, HealthConfig, Observed, TopicTally};
+use crate::inputs::{Inputs, Payload};
+use crate::node::NodeConfig;
+use crate::sync::Synchroniser;
+use serde::Serialize;
+use sgm_model::perception::classes::ClassTable;
+use sgm_model::perception::label_map::{LabelMap, Mapped};
+use sgm_model::perception::projection::CameraModel;
+use sgm_model::scene_graph::Stamp;
+use std::collections::BTreeMap;
+
+/// Every this-many-th pixel of a label image is counted in the class shares.
+const PIXEL_SAMPLE: usize = 7;
+
+/// How an input (or the whole robot) fares.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "UPPERCASE")]
+pub enum Verdict {
+    Ok,
+    Warn,
+    Fail,
+}
+
+impl std::fmt::Display for Verdict {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Verdict::Ok => "OK",
+            Verdict::Warn => "WARN",
+            Verdict::Fail => "FAIL",
+        })
+    }
+}
+
+/// One input's (or check's) verdict: what was seen, and what is wrong.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct InputVerdict {
+    pub input: String,
+    pub verdict: Verdict,
+    pub seen: String,
+    pub problems: Vec<String>,
+}
+
+/// The doctor's whole answer.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DoctorReport {
+    pub robot: String,
+    /// The bag, or the master and how long it was listened to.
+    pub source: String,
+    /// From the first to the last sensor stamp, s.
+    pub span_s: f64,
+    pub inputs: Vec<InputVerdict>,
+    /// The node's health findings over the whole span (each is quoted in its input's problems).
+    pub findings: Vec<Finding>,
+    pub verdict: Verdict,
+}
+
+/// Stamps of one input.
+#[derive(Clone, Debug, Default)]
+struct Stamps {
+    first: Option<Stamp>,
+    last: Option<Stamp>,
+    count: u64,
+}
+
+impl Stamps {
+    fn add(&mut self, t: Stamp) {
+        self.first = Some(self.first.map_or(t, |f| f.min(t)));
+        self.last = Some(self.last.map_or(t, |l| l.max(t)));
+        self.count += 1;
+    }
+
+    /// Messages per second over the span of their stamps.
+    fn rate_hz(&self) -> Option<f64> {
+        let span = self.last? - self.first?;
+        (self.count > 1 && span > 0.0).then(|| (self.count - 1) as f64 / span)
+    }
+}
+
+/// What was seen of the label images' pixel values (a sample), by meaning.
+#[derive(Clone, Debug, Default)]
+struct PixelShares {
+    /// Sampled pixels per SGM class name.
+    classes: BTreeMap<String, u64>,
+    /// Of an SGM class that makes objects (`fusion.classes`' `object`).
+    object_pixels: u64,
+    /// No class: an ignore value or a segmenter class no group takes.
+    ignored: u64,
+    /// Beyond `[classes]`: per pixel value (the first 32).
+    unknown: BTreeMap<u16, u64>,
+    unknown_pixels: u64,
+    total: u64,
+    /// Image sizes seen (width, height) → images.
+    sizes: BTreeMap<(u32, u32), u64>,
+}
+
+/// The doctor's state.
+pub struct Doctor {
+    robot: String,
+    labels: LabelSource,
+    /// The input topics, as configured (`{robot}`, `{id}` filled in).
+    topics: crate::config::RosTopics,
+    /// What the caller found beside the messages (a topic nobody publishes), per input.
+    notes: BTreeMap<String, Vec<(Verdict, String)>>,
+    sync: Synchroniser,
+    inputs: Inputs,
+    map: LabelMap,
+    classes: ClassTable,
+    tallies: BTreeMap<String, TopicTally>,
+    stamps: BTreeMap<&'static str, Stamps>,
+    points: u64,
+    pixels: PixelShares,
+    camera: Option<CameraModel>,
+    epoch: Option<Epoch>,
+    frames: u64,
+    health: HealthConfig,
+}
+
+/// Why the doctor cannot start: the configuration.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct DoctorError(pub String);
+
+impl Doctor {
+    pub fn new(config: &NodeConfig) -> Result<Self, DoctorError> {
+        let robot = config.robot.robot.name.clone();
+        let id = config.robot.robot.id;
+        let (classes, map) = config.robot.class_tables().map_err(|e| DoctorError(e.to_string()))?;
+        let colours = config.robot.colour_ids().map_err(|e| DoctorError(e.to_string()))?;
+        let inputs = Inputs::new(&config.ros, &robot, id).with_colours(colours);
+        let sync = Synchroniser::for_robot(&config.ros, &inputs).map_err(|e| DoctorError(format!("[ros]: {e}")))?;
+        let mut tallies = BTreeMap::new();
+        let mut expected = vec!["points", "odometry"];
+        if config.ros.labels == LabelSource::Image {
+            expected.extend(["labels", "camera_info"]);
+        }
+        for input in expected {
+            tallies.insert(input.to_string(), TopicTally::default());
+        }
+        let t = &config.ros.topics;
+        let resolve = |name: &str| crate::config::RosConfig::resolve(name, &robot, id);
+        let topics = crate::config::RosTopics {
+            points: resolve(&t.points),
+            labels: resolve(&t.labels),
+            camera_info: resolve(&t.camera_info),
+            odometry: resolve(&t.odometry),
+            ..t.clone()
+        };
+        Ok(Self {
+            robot,
+            labels: config.ros.labels,
+            topics,
+            notes: BTreeMap::new(),
+            sync,
+            inputs,
+            map,
+            classes,
+            tallies,
+            stamps: BTreeMap::new(),
+            points: 0,
+            pixels: PixelShares::default(),
+            camera: None,
+            epoch: None,
+            frames: 0,
+            health: config.ros.health.clone(),
+        })
+    }
+
+    /// The checks of this robot's inputs (for feeding messages through them).
+    pub fn inputs(&self) -> &Inputs {
+        &self.inputs
+    }
+
+    /// The input topics, as configured.
+    pub fn topics(&self) -> &crate::config::RosTopics {
+        &self.topics
+    }
+
+    /// Something the caller found about `input` beside its messages, with its weight.
+    pub fn note(&mut self, input: &str, verdict: Verdict, text: String) {
+        self.notes.entry(input.to_string()).or_default().push((verdict, text));
+    }
+
+    /// One message on `input` (`points`, `labels`, `camera_info`, `odometry`, `tf`,
+    /// `tf_static`, `clock`), checked or refused.
+    pub fn observe(&mut self, input: &str, result: Result<Payload, InputError>) {
+        let tally = self.tallies.entry(input.to_string()).or_default();
+        let payload = match result {
+            Ok(payload) => {
+                tally.accepted += 1;
+                payload
+            }
+            Err(e) => {
+                tally.refused += 1;
+                tally.last_refusal = Some(e.to_string());
+                return;
+            }
+        };
+        let stamp = match &payload {
+            Payload::Cloud(t, _) | Payload::Image(t, ..) | Payload::Odometry(t, _) => Some(*t),
+            _ => None,
+        };
+        if let Some(t) = stamp {
+            let epoch = *self.epoch.get_or_insert_with(|| Epoch::at(t));
+            if let Some(name) = static_name(input) {
+                self.stamps.entry(name).or_default().add(epoch.stamp(t));
+            }
+        }
+        match &payload {
+            Payload::Cloud(_, scan) => self.points += scan.points.len() as u64,
+            Payload::Image(_, image, _) => self.count_pixels(image),
+            Payload::CameraInfo(camera) => self.camera = Some(camera.clone()),
+            _ => {}
+        }
+        let epoch = self.epoch.unwrap_or(Epoch { sec: 0 });
+        self.sync.feed(epoch, payload);
+        self.frames += self.sync.ready().len() as u64;
+    }
+
+    fn count_pixels(&mut self, image: &sgm_model::perception::projection::LabelImage) {
+        let p = &mut self.pixels;
+        *p.sizes.entry((image.width, image.height)).or_default() += 1;
+        for &pixel in image.labels.iter().step_by(PIXEL_SAMPLE) {
+            p.total += 1;
+            match self.map.get(pixel) {
+                Mapped::Class(label) => {
+                    let class = self.classes.get(label);
+                    if class.is_some_and(|c| c.object) {
+                        p.object_pixels += 1;
+                    }
+                    *p.classes
+                        .entry(class.map_or_else(|| format!("id {}", label.0), |c| c.name.clone()))
+                        .or_default() += 1;
+                }
+                Mapped::Ignored => p.ignored += 1,
+                Mapped::Unknown => {
+                    p.unknown_pixels += 1;
+                    if p.unknown.len() < 32 || p.unknown.contains_key(&pixel) {
+                        *p.unknown.entry(pixel).or_default() += 1;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The input has ended: every waiting cloud settled, the findings judged over the whole
+    /// span, a verdict per input. `source` names what was read.
+    pub fn finish(mut self, source: String) -> DoctorReport {
+        let epoch = self.epoch.unwrap_or(Epoch { sec: 0 });
+        self.frames += self.sync.finish(epoch).len() as u64;
+        let span = self.stamps.values().filter_map(|s| Some((s.first?, s.last?))).fold(None, |acc, (f, l)| match acc {
+            None => Some((f, l)),
+            Some((a, b)) => Some((f64::min(a, f), f64::max(b, l))),
+        });
+        let (first, last) = span.unwrap_or((0.0, 0.0));
+        let tf = self.sync.tf();
+        let missing = self.sync.missing_mount();
+        let observed = Observed {
+            sync: &self.sync.counts,
+            inputs: &self.tallies,
+            tf: &tf,
+            missing_mount: missing.as_deref(),
+            objects: None,
+        };
+        let whole = HealthConfig { window_frames: 1, ..self.health.clone() };
+        let findings = Health::new(whole).mapping_since(first).update(last, &observed);
+        let inputs = verdicts::judge(&self, &tf, &findings);
+        let verdict = inputs.iter().map(|v| v.verdict).max().unwrap_or(Verdict::Fail);
+        DoctorReport { robot: self.robot, source, span_s: last - first, inputs, findings, verdict }
+    }
+}
+
+/// The static name of an input (for the stamps map).
+fn static_name(input: &str) -> Option<&'static str> {
+    ["points", "labels", "camera_info", "odometry"].into_iter().find(|n| *n == input)
+}
+
+impl DoctorReport {
+    /// The report as the terminal shows it.
+    pub fn text(&self) -> String {
+        let mut out = format!("sgm doctor: robot {}, {} ({:.1} s of stamps)\n", self.robot, self.source, self.span_s);
+        for v in &self.inputs {
+            out.push_str(&format!("  {:<12} {:<4}  {}\n", v.input, v.verdict.to_string(), v.seen));
+            for p in &v.problems {
+                out.push_str(&format!("  {:<12}       - {p}\n", ""));
+            }
+        }
+        let count = |v: Verdict| self.inputs.iter().filter(|i| i.verdict == v).count();
+        out.push_str(&format!(
+            "verdict: {} ({} failed, {} with warnings, {} ok)\n",
+            self.verdict,
+            count(Verdict::Fail),
+            count(Verdict::Warn),
+            count(Verdict::Ok)
+        ));
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::convert::cloud::Scan;
+    use crate::tf::{TfBatch, TfTransform};
+    use nalgebra::Point3;
+    use sgm_model::geometry::Pose3;
+    use sgm_model::perception::projection::LabelImage;
+
+    fn config() -> NodeConfig {
+        let mut config = NodeConfig::default();
+        config.robot.robot.name = "alpha".into();
+        config.ros.timeline.confirm_messages = 1;
+        config
+    }
+
+    fn at(t: f64) -> rosrust::Time {
+        Epoch { sec: 100 }.time(t)
+    }
+
+    fn camera(width: u32) -> CameraModel {
+        CameraModel { width, height: 2, fx: 1.0, fy: 1.0, cx: 1.0, cy: 1.0, distortion: [0.0; 5] }
+    }
+
+    /// Ten frames of a robot whose camera looks along +x at a tree (SGM class 2) and ground (0),
+    /// its mount on tf_static; `image_width` and `pixel` let a test spoil them.
+    fn feed(d: &mut Doctor, image_width: u32, pixel: u16) {
+        let optical = sgm_model::perception::projection::optical_from_forward_body().inverse();
+        let mount = TfTransform {
+            stamp: rosrust::Time::default(),
+            parent: "alpha/base_link".into(),
+            child: "alpha/camera".into(),
+            parent_from_child: optical,
+        };
+        d.observe("tf_static", Ok(Payload::Tf(TfBatch { is_static: true, transforms: vec![mount], refused: vec![] })));
+        d.observe("camera_info", Ok(Payload::CameraInfo(camera(8))));
+        for k in 0..10 {
+            let t = f64::from(k) * 0.1;
+            let pixels = (0..image_width * 2).map(|i| if i % 2 == 0 { 2 } else { pixel }).collect();
+            let labels = LabelImage::new(image_width, 2, pixels);
+            d.observe("odometry", Ok(Payload::Odometry(at(t), Pose3::translation(t, 0.0, 0.0))));
+            d.observe("labels", Ok(Payload::Image(at(t), labels.unwrap(), Default::default())));
+            let scan = Scan { points: vec![Point3::new(5.0, 0.0, 0.0); 32], labels: None, dropped_non_finite: 0 };
+            d.observe("points", Ok(Payload::Cloud(at(t), scan)));
+        }
+    }
+
+    fn verdicts(report: &DoctorReport) -> Vec<(&str, Verdict)> {
+        report.inputs.iter().map(|v| (v.input.as_str(), v.verdict)).collect()
+    }
+
+    #[test]
+    fn healthy_inputs_are_ok() {
+        let mut d = Doctor::new(&config()).unwrap();
+        feed(&mut d, 8, 0);
+        let report = d.finish("test".into());
+        assert_eq!(report.verdict, Verdict::Ok, "{}", report.text());
+        assert!(report.text().contains("10 clouds on points, 10.0 Hz, 32 points each"), "{}", report.text());
+        assert!(report.text().contains("camera from tf (alpha/base_link ← alpha/camera)"), "{}", report.text());
+        assert!(report.text().contains("10 of 10 clouds assembled"), "{}", report.text());
+    }
+
+    /// No odometry, refused labels, images of another size than camera_info, unknown ids:
+    /// each named on its input.
+    #[test]
+    fn broken_inputs_are_named() {
+        let mut d = Doctor::new(&config()).unwrap();
+        d.observe("labels", Err(InputError::Encoding("yuv422".into())));
+        feed(&mut d, 9, 999);
+        let mut no_odometry = Doctor::new(&config()).unwrap();
+        no_odometry.observe(
+            "points",
+            Ok(Payload::Cloud(at(0.0), Scan { points: vec![], labels: None, dropped_non_finite: 0 })),
+        );
+        let report = no_odometry.finish("test".into());
+        assert_eq!(report.verdict, Verdict::Fail);
+        let odometry = report.inputs.iter().find(|v| v.input == "odometry").unwrap();
+        assert_eq!(odometry.problems[0], "no message on odometry");
+
+        let report = d.finish("test".into());
+        let text = report.text();
+        assert_eq!(
+            verdicts(&report),
+            [
+                ("points", Verdict::Ok),
+                ("odometry", Verdict::Ok),
+                ("labels", Verdict::Warn),
+                ("camera_info", Verdict::Fail),
+                ("tf", Verdict::Ok),
+                ("frames", Verdict::Ok),
+                ("classes", Verdict::Warn),
+            ],
+            "{text}"
+        );
+        assert!(text.contains("1 of 11 messages on labels refused (last: unsupported encoding `yuv422`"), "{text}");
+        assert!(text.contains("label images are not 8×2 as camera_info says"), "{text}");
+        assert!(text.contains("carry ids [classes] does not know (999)"), "{text}");
+    }
+}
