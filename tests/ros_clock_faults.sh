@@ -27,7 +27,7 @@ fail() { echo "ros clock faults FAILED: $*" >&2; exit 1; }
 ss -ltn | grep -q ':11321 ' && fail "port 11321 busy"
 rosmaster --core -p 11321 >"$WORK/master.log" 2>&1 & PIDS+=($!)
 for _ in $(seq 100); do rosnode list >/dev/null 2>&1 && break; sleep 0.1; done
-TOPICS=(/alpha/points /alpha/labels /alpha/camera_info /alpha/odometry)
+TOPICS=(/alpha/points /alpha/labels /alpha/camera_info /alpha/odometry /tf_static)
 start_node() {
   SGM__COMMS__TEAM_KEY_FILE=$WORK/team.key NO_COLOR=1 "$SGM" ros --robot alpha --scenario quickstart __ns:=/alpha \
     >"$WORK/alpha.$1.log" 2>&1 & NODE=$!; PIDS+=($NODE)

@@ -141,7 +141,7 @@ phase() {
   local plays=()
   for r in "${ROBOTS[@]}"; do
     bg "$r" rosbag play -q -r "$RATE" --wait-for-subscribers "$WORK/bags/$r.bag" \
-      --topics "/$r/points" "/$r/labels" "/$r/camera_info" "/$r/odometry" >"$WORK/play_$r.$name.log" 2>&1 &
+      --topics "/$r/points" "/$r/labels" "/$r/camera_info" "/$r/odometry" /tf_static >"$WORK/play_$r.$name.log" 2>&1 &
     plays+=($!); PIDS+=($!)
   done
   local started=$SECONDS
