@@ -11,7 +11,7 @@
 use crate::bounded::{Bounded, Layout};
 use crate::bounded_deliver::{BoundedDeliver, BoundedDeliverReq, BoundedDeliverRes};
 use crate::config::RosConfig;
-use crate::convert::cloud::cloud_msg;
+use crate::convert::cloud::semantic_map;
 use crate::convert::markers::{keyframe_path, map_markers};
 use crate::convert::time::Epoch;
 use crate::error::InputError;
@@ -34,8 +34,8 @@ use sgm_actors::messages::Tick;
 use sgm_actors::snapshot::SnapshotStore;
 use sgm_actors::supervisor::start_robot_restored;
 use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
+use sgm_model::geometry::Pose3;
 use sgm_model::perception::classes::ClassTable;
-use sgm_model::scene_graph::{LabelledVoxels, SceneGraph};
 use sgm_model::wire::Sequence;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -419,7 +419,12 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             }
             if publishers.map.subscriber_count() > 0 {
                 if let Ok(graph) = handle.tracker.send(GetSceneGraph).await {
-                    let _ = publishers.map.send(semantic_map(&header, &graph, &classes, ros.map_voxel_m));
+                    let _ = publishers.map.send(semantic_map(
+                        &header,
+                        &[(&graph, Pose3::identity())],
+                        &classes,
+                        ros.map_voxel_m,
+                    ));
                 }
             }
             let (sync_counts, timeline, tf_status, missing_mount) = {
@@ -547,20 +552,6 @@ impl Publishers {
             tf: rosrust::publish(&ros.topics.tf, q)?,
         })
     }
-}
-
-/// The keyframes' labelled points in the world frame, one per `voxel_m` voxel.
-fn semantic_map(
-    header: &std_msgs::Header,
-    graph: &SceneGraph,
-    classes: &ClassTable,
-    voxel_m: f64,
-) -> sensor_msgs::PointCloud2 {
-    let mut voxels = LabelledVoxels::new(voxel_m);
-    voxels.insert_graph(graph, &sgm_model::geometry::Pose3::identity());
-    let (points, labels): (Vec<_>, Vec<_>) = voxels.points().map(|(p, l)| (p.cast::<f32>(), l.0)).unzip();
-    let colour = |l: u16| classes.get(sgm_model::scene_graph::LabelId(l)).map_or([128, 128, 128], |c| c.colour);
-    cloud_msg(header.clone(), &points, Some(&labels), colour)
 }
 
 #[cfg(test)]

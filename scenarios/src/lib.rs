@@ -6,6 +6,7 @@ pub mod memory;
 pub mod object_file;
 pub mod replay;
 pub mod report;
+pub mod result_bag;
 pub mod runner;
 pub mod scenario;
 pub mod settings;

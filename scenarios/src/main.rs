@@ -41,6 +41,9 @@ enum Command {
         /// Also write each robot's sensor streams as a ROS 1 bag (DIR/NAME.bag).
         #[arg(long, value_name = "DIR")]
         bag_out: Option<PathBuf>,
+        /// Do not write the team's result as a ROS 1 bag (result.bag in the report directory).
+        #[arg(long)]
+        no_result_bag: bool,
     },
     /// Run one robot as a ROS 1 node (rosrust); ROS remappings (`__ns:=/alpha`, `a:=b`) may follow.
     Ros {
@@ -81,6 +84,9 @@ enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
+        /// Do not write the team's result as a ROS 1 bag (result.bag in the report directory).
+        #[arg(long)]
+        no_result_bag: bool,
     },
     /// Check a robot's inputs (topics, frames, mounts from tf, stamps, classes) from a bag or a
     /// live master, with a verdict per input; ROS remappings (`points:=cloud`, `__ns:=/alpha`)
@@ -307,8 +313,9 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     init_logging(&cli.command);
     match cli.command {
-        Command::Run { scenario, out, seed, quiet, bag_out } => {
-            match cli::run_cmd::execute(cli::run_cmd::Options { scenario, out, seed, quiet, bag_out }) {
+        Command::Run { scenario, out, seed, quiet, bag_out, no_result_bag } => {
+            let result_bag = !no_result_bag;
+            match cli::run_cmd::execute(cli::run_cmd::Options { scenario, out, seed, quiet, bag_out, result_bag }) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("sgm run: {e:#}");
@@ -325,8 +332,9 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Replay { bags, config, out, quiet } => {
-            match cli::replay_cmd::execute(cli::replay_cmd::Options { bags, config, out, quiet }) {
+        Command::Replay { bags, config, out, quiet, no_result_bag } => {
+            let result_bag = !no_result_bag;
+            match cli::replay_cmd::execute(cli::replay_cmd::Options { bags, config, out, quiet, result_bag }) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("sgm replay: {e:#}");

@@ -7,6 +7,7 @@
 //! The report is the scenarios' report; trajectory errors need a ground-truth topic.
 
 use crate::report::{series_point, RobotTruth, RunRecord, TruthTrack};
+use crate::result_bag::ResultBag;
 use crate::runner::RunOutcome;
 use crate::scenario::Scenario;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
@@ -142,6 +143,20 @@ pub async fn replay(
     bags: &[PathBuf],
     progress: Option<&ProgressBar>,
 ) -> Result<ReplayOutcome, RunError> {
+    replay_with(scenario, bags, progress, None).await
+}
+
+/// As [`replay`], also writing the team's result as a ROS 1 bag at `result_bag`
+/// ([`crate::result_bag`]), stamped by the bags' clock.
+pub async fn replay_with(
+    scenario: &Scenario,
+    bags: &[PathBuf],
+    progress: Option<&ProgressBar>,
+    result_bag: Option<&std::path::Path>,
+) -> Result<ReplayOutcome, RunError> {
+    let classes = sgm_model::perception::classes::ClassTable::new(scenario.fusion.classes.clone())
+        .map_err(|e| RunError::Input(format!("fusion.classes: {e}")))?;
+    let mut result: Option<ResultBag> = None;
     let wall = Instant::now();
     if bags.is_empty() {
         return Err(RunError::Input("no bag given".into()));
@@ -251,7 +266,18 @@ pub async fn replay(
         team.settle(t).await;
         last_t = t;
         if step % report_every == 0 {
-            observations.push(team.observe(t).await?);
+            let observation = team.observe(t).await?;
+            if let Some(path) = result_bag {
+                let result = match &mut result {
+                    Some(result) => result,
+                    None => result.insert(
+                        ResultBag::create(path, &names, &ros, classes.clone(), epoch.unwrap_or(Epoch { sec: 0 }))
+                            .map_err(RunError::Input)?,
+                    ),
+                };
+                result.observe(&observation).map_err(RunError::Input)?;
+            }
+            observations.push(observation);
             crate::memory::release_free_pages();
             memory.extend(crate::memory::sample(t));
         }
@@ -320,6 +346,14 @@ pub async fn replay(
     // The truth is known only now (read from the bags as they went): the series is made here.
     let series = observations.iter().map(|o| series_point(o, &truths)).collect();
     let last = observations.pop().unwrap_or_default();
+    if let Some(path) = result_bag {
+        let result = match result {
+            Some(result) => result,
+            None => ResultBag::create(path, &names, &ros, classes, epoch.unwrap_or(Epoch { sec: 0 }))
+                .map_err(RunError::Input)?,
+        };
+        result.finish(&maps, &last).map_err(RunError::Input)?;
+    }
     let record = RunRecord {
         scenario: format!("replay of {}", names.join(", ")),
         seed,

@@ -10,6 +10,7 @@
 
 use crate::bag_out::{BagRecorder, RecordedFrame};
 use crate::report::{series_point, Observation, RobotTruth, RunRecord, TruthTrack};
+use crate::result_bag::ResultBag;
 use crate::scenario::Scenario;
 use crate::sim::camera::{camera_from_body, camera_model, mislabels, noisy_labels, render, segmenter_ids};
 use crate::sim::false_factors::FalseFactors;
@@ -65,6 +66,25 @@ pub async fn run_recording(
     progress: Option<&ProgressBar>,
     bag_out: Option<&Path>,
 ) -> Result<RunOutcome, RunError> {
+    run_with(scenario, progress, RunOutputs { bag_out, result_bag: None }).await
+}
+
+/// What a run writes beside its outcome.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunOutputs<'a> {
+    /// Each robot's sensor streams as a ROS 1 bag, into this directory (`NAME.bag`).
+    pub bag_out: Option<&'a Path>,
+    /// The team's result as a ROS 1 bag ([`crate::result_bag`]), at this path.
+    pub result_bag: Option<&'a Path>,
+}
+
+/// As [`run`], with the outputs `outputs` asks for.
+pub async fn run_with(
+    scenario: &Scenario,
+    progress: Option<&ProgressBar>,
+    outputs: RunOutputs<'_>,
+) -> Result<RunOutcome, RunError> {
+    let bag_out = outputs.bag_out;
     let wall = Instant::now();
     let seed = scenario.scenario.seed;
     let routes: Vec<Route> = scenario.robots.iter().enumerate().map(|(k, r)| Route::of(r, k, seed)).collect();
@@ -80,6 +100,15 @@ pub async fn run_recording(
     if let Some(dir) = &snapshots {
         team.keep_snapshots(dir.path(), &scenario.persistence)?;
     }
+    let mut result = match outputs.result_bag {
+        Some(path) => {
+            let classes = sgm_model::perception::classes::ClassTable::new(scenario.fusion.classes.clone())
+                .map_err(|e| RunError::Input(format!("fusion.classes: {e}")))?;
+            let epoch = sgm_bridge::convert::time::SCENARIO_EPOCH;
+            Some(ResultBag::create(path, &names, &scenario.ros, classes, epoch).map_err(RunError::Input)?)
+        }
+        None => None,
+    };
     let mut recorder = match bag_out {
         Some(dir) => Some(BagRecorder::new(dir, &scenario.ros, names).map_err(RunError::Input)?),
         None => None,
@@ -195,6 +224,9 @@ pub async fn run_recording(
         team.snapshot_due(t).await?;
         if step % report_every == 0 || step == steps {
             last = team.observe(t).await?;
+            if let Some(result) = result.as_mut() {
+                result.observe(&last).map_err(RunError::Input)?;
+            }
             // A robot's world is placed on the truth at its first step.
             for (truth, robot) in truths.iter_mut().zip(&robots) {
                 truth.truth_from_world = robot.odometry.truth_from_world;
@@ -212,6 +244,9 @@ pub async fn run_recording(
     }
 
     let maps = team.maps().await?;
+    if let Some(result) = result {
+        result.finish(&maps, &last).map_err(RunError::Input)?;
+    }
     let optimisers = team.optimiser_statuses().await?;
     for (truth, robot) in truths.iter_mut().zip(&robots) {
         (truth.frames, truth.raw_bytes, truth.raw_max_bytes) = (robot.frames, robot.raw_bytes, robot.raw_max_bytes);

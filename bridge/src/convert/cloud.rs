@@ -219,6 +219,24 @@ pub fn cloud_msg(
     }
 }
 
+/// The semantic map: the keyframes' labelled points of `graphs`, each placed in the header's
+/// frame by its `frame_from_graph` (the identity for the robot's own), one point per `voxel_m`
+/// voxel (the first label), coloured by class.
+pub fn semantic_map(
+    header: &std_msgs::Header,
+    graphs: &[(&sgm_model::scene_graph::SceneGraph, sgm_model::geometry::Pose3)],
+    classes: &sgm_model::perception::classes::ClassTable,
+    voxel_m: f64,
+) -> sensor_msgs::PointCloud2 {
+    let mut voxels = sgm_model::scene_graph::LabelledVoxels::new(voxel_m);
+    for (graph, frame_from_graph) in graphs {
+        voxels.insert_graph(graph, frame_from_graph);
+    }
+    let (points, labels): (Vec<_>, Vec<_>) = voxels.points().map(|(p, l)| (p.cast::<f32>(), l.0)).unzip();
+    let colour = |l: u16| classes.get(sgm_model::scene_graph::LabelId(l)).map_or([128, 128, 128], |c| c.colour);
+    cloud_msg(header.clone(), &points, Some(&labels), colour)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,11 +1,11 @@
-//! `sgm replay --bag A.bag --bag B.bag [--config FILE] [--out DIR] [--quiet]`: replays
+//! `sgm replay --bag A.bag --bag B.bag [--config FILE] [--out DIR] [--quiet] [--no-result-bag]`: replays
 //! recorded missions through the robots with no ROS master and writes the scenarios' report,
 //! plus `bags.json` (per robot: messages refused by topic, and the synchroniser's counts).
 
 use super::run_cmd::{fresh_run_dir, progress_bar, summary};
 use anyhow::{Context, Result};
 use sgm_bridge::tf::mounts::MountSource;
-use sgm_scenarios::replay::replay;
+use sgm_scenarios::replay::replay_with;
 use sgm_scenarios::report;
 use sgm_scenarios::scenario::{RobotSpec, Scenario};
 use std::path::PathBuf;
@@ -15,6 +15,8 @@ pub struct Options {
     pub config: Option<String>,
     pub out: Option<PathBuf>,
     pub quiet: bool,
+    /// Write `result.bag` into the report directory.
+    pub result_bag: bool,
 }
 
 pub fn execute(options: Options) -> Result<()> {
@@ -37,13 +39,19 @@ pub fn execute(options: Options) -> Result<()> {
     let bar = progress_bar(options.quiet, "{prefix} {pos} steps, {elapsed} wall");
     bar.set_prefix(format!("replaying {} bags", options.bags.len()));
     let system = actix_rt::System::new();
-    let outcome = system.block_on(replay(&scenario, &options.bags, Some(&bar))).context("the replay failed")?;
+    let result_bag = options.result_bag.then(|| dir.join(super::run_cmd::RESULT_BAG));
+    let outcome = system
+        .block_on(replay_with(&scenario, &options.bags, Some(&bar), result_bag.as_deref()))
+        .context("the replay failed")?;
     bar.finish_and_clear();
     let report = report::write(&outcome.run, &dir).context("writing the report")?;
     let bags = serde_json::to_string_pretty(&outcome.bags).context("bag statistics")?;
     std::fs::write(dir.join("bags.json"), bags)
         .with_context(|| format!("writing {}", dir.join("bags.json").display()))?;
     print!("{}", summary(&report, &outcome.run.timing, &dir));
+    if let Some(path) = &result_bag {
+        println!("result bag (RViz: bridge/ros/sgm/rviz/team.rviz): {}", path.display());
+    }
     for b in &outcome.bags {
         let refused: u64 = b.refused.values().sum();
         println!(

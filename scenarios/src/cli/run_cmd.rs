@@ -1,11 +1,12 @@
-//! `sgm run [SCENARIO] [--out DIR] [--seed N] [--quiet]`: runs a scenario (a library name or a
-//! TOML file; default `quickstart`) on the virtual clock and writes its report directory
-//! (default: a fresh folder under `runs/`). Prints a one-screen summary.
+//! `sgm run [SCENARIO] [--out DIR] [--seed N] [--quiet] [--bag-out DIR] [--no-result-bag]`:
+//! runs a scenario (a library name or a TOML file; default `quickstart`) on the virtual clock
+//! and writes its report directory (default: a fresh folder under `runs/`), with the team's
+//! result as `result.bag` for RViz. Prints a one-screen summary.
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use sgm_scenarios::report::{self, Report};
-use sgm_scenarios::runner::{run_recording, Timing};
+use sgm_scenarios::runner::{run_with, RunOutputs, Timing};
 use sgm_scenarios::scenario::Scenario;
 use std::path::{Path, PathBuf};
 
@@ -15,7 +16,12 @@ pub struct Options {
     pub seed: Option<u64>,
     pub quiet: bool,
     pub bag_out: Option<PathBuf>,
+    /// Write `result.bag` into the report directory.
+    pub result_bag: bool,
 }
+
+/// The result bag's name in a report directory.
+pub const RESULT_BAG: &str = "result.bag";
 
 /// `runs/NAME`, or with `-2`, `-3`, … if taken.
 pub fn fresh_run_dir(name: &str) -> PathBuf {
@@ -40,13 +46,17 @@ pub fn execute(options: Options) -> Result<()> {
     let bar = progress_bar(options.quiet, "{prefix} [{bar:40}] {pos}/{len} steps, {elapsed} wall, eta {eta}");
     bar.set_prefix(format!("{} (seed {})", scenario.scenario.name, scenario.scenario.seed));
     let system = actix_rt::System::new();
-    let outcome =
-        system.block_on(run_recording(&scenario, Some(&bar), options.bag_out.as_deref())).context("the run failed")?;
+    let result_bag = options.result_bag.then(|| dir.join(RESULT_BAG));
+    let outputs = RunOutputs { bag_out: options.bag_out.as_deref(), result_bag: result_bag.as_deref() };
+    let outcome = system.block_on(run_with(&scenario, Some(&bar), outputs)).context("the run failed")?;
     bar.finish_and_clear();
     let report = report::write(&outcome, &dir).context("writing the report")?;
     print!("{}", summary(&report, &outcome.timing, &dir));
     if let Some(bags) = &options.bag_out {
         println!("bags: {}", bags.display());
+    }
+    if let Some(path) = &result_bag {
+        println!("result bag (RViz: bridge/ros/sgm/rviz/team.rviz): {}", path.display());
     }
     Ok(())
 }

@@ -11,6 +11,7 @@ pub mod plots;
 mod truth;
 mod tum;
 
+pub(crate) use figures::reference_from;
 pub use figures::{compute, series_point, AlignmentReport, MessageRow, Report, RobotReport, SeriesPoint};
 pub use truth::TruthTrack;
 
