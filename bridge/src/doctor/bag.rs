@@ -20,5 +20,5 @@ pub fn examine_bag(path: &Path, config: &NodeConfig) -> Result<DoctorReport, Doc
             BagItem::Failed(e) => return Err(DoctorError(e.to_string())),
         }
     }
-    Ok(doctor.finish(format!("bag {}", path.display())))
+    Ok(doctor.finish(format!("bag {}", path.display()), true))
 }

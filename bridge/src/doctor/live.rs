@@ -97,5 +97,5 @@ pub fn examine_live(config: &NodeConfig, duration: Duration) -> Result<DoctorRep
     }
     drop((subscribers, tf_listeners));
     let uri = std::env::var("ROS_MASTER_URI").unwrap_or_else(|_| "the default master".into());
-    Ok(d.finish(format!("master {uri}, {:.0} s listened", duration.as_secs_f64())))
+    Ok(d.finish(format!("master {uri}, {:.0} s listened", duration.as_secs_f64()), false))
 }

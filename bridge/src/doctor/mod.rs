@@ -126,6 +126,8 @@ pub struct Doctor {
     camera: Option<CameraModel>,
     epoch: Option<Epoch>,
     frames: u64,
+    /// Clouds still waiting for partners when a live window closed (not judged).
+    pending: u64,
     health: HealthConfig,
 }
 
@@ -175,6 +177,7 @@ impl Doctor {
             camera: None,
             epoch: None,
             frames: 0,
+            pending: 0,
             health: config.ros.health.clone(),
         })
     }
@@ -256,11 +259,16 @@ impl Doctor {
         }
     }
 
-    /// The input has ended: every waiting cloud settled, the findings judged over the whole
-    /// span, a verdict per input. `source` names what was read.
-    pub fn finish(mut self, source: String) -> DoctorReport {
+    /// The verdicts: `ended` when the input has ended (a bag: every waiting cloud is settled),
+    /// not when a live window closed on streams that go on (clouds still waiting for their
+    /// partners are left out). `source` names what was read.
+    pub fn finish(mut self, source: String, ended: bool) -> DoctorReport {
         let epoch = self.epoch.unwrap_or(Epoch { sec: 0 });
-        self.frames += self.sync.finish(epoch).len() as u64;
+        if ended {
+            self.frames += self.sync.finish(epoch).len() as u64;
+        } else {
+            self.pending = self.sync.pending() as u64;
+        }
         let span = self.stamps.values().filter_map(|s| Some((s.first?, s.last?))).fold(None, |acc, (f, l)| match acc {
             None => Some((f, l)),
             Some((a, b)) => Some((f64::min(a, f), f64::max(b, l))),
@@ -365,7 +373,7 @@ mod tests {
     fn healthy_inputs_are_ok() {
         let mut d = Doctor::new(&config()).unwrap();
         feed(&mut d, 8, 0);
-        let report = d.finish("test".into());
+        let report = d.finish("test".into(), true);
         assert_eq!(report.verdict, Verdict::Ok, "{}", report.text());
         assert!(report.text().contains("10 clouds on points, 10.0 Hz, 32 points each"), "{}", report.text());
         assert!(report.text().contains("camera from tf (alpha/base_link ← alpha/camera)"), "{}", report.text());
@@ -384,12 +392,12 @@ mod tests {
             "points",
             Ok(Payload::Cloud(at(0.0), Scan { points: vec![], labels: None, dropped_non_finite: 0 })),
         );
-        let report = no_odometry.finish("test".into());
+        let report = no_odometry.finish("test".into(), true);
         assert_eq!(report.verdict, Verdict::Fail);
         let odometry = report.inputs.iter().find(|v| v.input == "odometry").unwrap();
         assert_eq!(odometry.problems[0], "no message on odometry");
 
-        let report = d.finish("test".into());
+        let report = d.finish("test".into(), true);
         let text = report.text();
         assert_eq!(
             verdicts(&report),
@@ -407,5 +415,25 @@ mod tests {
         assert!(text.contains("1 of 11 messages on labels refused (last: unsupported encoding `yuv422`"), "{text}");
         assert!(text.contains("label images are not 8×2 as camera_info says"), "{text}");
         assert!(text.contains("carry ids [classes] does not know (999)"), "{text}");
+    }
+
+    /// A live window closes while the last cloud still waits for its odometry: not a drop.
+    #[test]
+    fn a_cloud_waiting_when_a_live_window_closes_is_not_judged() {
+        let last_cloud = |d: &mut Doctor| {
+            let scan = Scan { points: vec![Point3::new(5.0, 0.0, 0.0); 32], labels: None, dropped_non_finite: 0 };
+            d.observe("points", Ok(Payload::Cloud(at(1.05), scan)));
+        };
+        let mut live = Doctor::new(&config()).unwrap();
+        feed(&mut live, 8, 0);
+        last_cloud(&mut live);
+        let report = live.finish("test".into(), false);
+        assert_eq!(report.verdict, Verdict::Ok, "{}", report.text());
+        let mut ended = Doctor::new(&config()).unwrap();
+        feed(&mut ended, 8, 0);
+        last_cloud(&mut ended);
+        let report = ended.finish("test".into(), true);
+        let frames = report.inputs.iter().find(|v| v.input == "frames").unwrap();
+        assert_eq!(frames.verdict, Verdict::Warn, "{}", report.text());
     }
 }

@@ -191,7 +191,8 @@ pub(super) fn judge(d: &Doctor, tf: &TfStatus, findings: &[Finding]) -> Vec<Inpu
 
     let mut j = Judged::new();
     let s = &d.sync.counts;
-    let clouds = d.tallies.get("points").map_or(0, |t| t.accepted);
+    // Clouds still waiting for their partners when a live window closed are not judged.
+    let clouds = d.tallies.get("points").map_or(0, |t| t.accepted).saturating_sub(d.pending);
     if clouds > 0 && d.frames == 0 {
         j.fail(format!(
             "none of {clouds} clouds became a frame: no_odometry {}, no_image {}, no_camera_info {}, no_lidar_mount {}",
