@@ -109,15 +109,29 @@ fn bounded<M: RosMsg + Layout>(framed: &[u8]) -> Option<M> {
 }
 
 /// The node's subscriptions: the bytes of a received message (after TCPROS's length prefix) as
-/// each subscribed type — PointCloud2, Image, CameraInfo, Odometry, the team's Envelope —
-/// through `bounded::Bounded` (the layout and size check, then rosrust's decoder) and, when
-/// that accepts them, through the same checks and conversions as the live node (`Inputs`).
+/// each subscribed type — PointCloud2, Image (ids or a palette's colours), CameraInfo,
+/// Odometry, TFMessage, the team's Envelope — through `bounded::Bounded` (the layout and size
+/// check, then rosrust's decoder) and, when that accepts them, through the same checks and
+/// conversions as the live node (`Inputs`; a TFMessage into a robot's tf tree and mounts).
 /// The same bytes as a request to the node's Deliver service (`bounded_deliver`).
 pub fn ros_messages(data: &[u8]) {
     let mut framed = (data.len() as u32).to_le_bytes().to_vec();
     framed.extend_from_slice(data);
     let config = RosConfig { labels: LabelSource::Cloud, ..RosConfig::default() };
-    let inputs = Inputs::new(&config, "alpha", 1);
+    let mut inputs = Inputs::new(&config, "alpha", 1);
+    // Colour label images read back through the built-in classes' palette.
+    if let Ok(colours) = sgm_actors::config::RobotConfig::default().colour_ids() {
+        inputs = inputs.with_colours(colours);
+    }
+    if let Some(m) = bounded::<sgm_bridge::msg::tf2_msgs::TFMessage>(&framed) {
+        // Every transform into a robot's tf tree, and its mounts resolved.
+        if let (Ok(payload), Ok(mut sync)) =
+            (inputs.tf(&m, true), sgm_bridge::sync::Synchroniser::for_robot(&config, &inputs))
+        {
+            sync.feed(sgm_bridge::convert::time::Epoch { sec: 0 }, payload);
+            let _ = sync.tf();
+        }
+    }
     if let Some(m) = bounded::<sensor_msgs::PointCloud2>(&framed) {
         let _ = inputs.cloud(&m);
     }
