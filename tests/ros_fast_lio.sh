@@ -20,24 +20,19 @@
 # 127.0.0.1; every process started here is stopped by PID.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-SGM=${SGM:-target/release/sgm}
-WORK=$(mktemp -d /tmp/sgm-fast-lio.XXXXXX)
-export ROS_MASTER_URI=http://127.0.0.1:11311 ROS_IP=127.0.0.1 ROS_HOME=$WORK/roshome
-mkdir -p "$ROS_HOME"
-PIDS=()
-cleanup() {
-  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
-  for pid in "${PIDS[@]}"; do wait "$pid" 2>/dev/null || true; done
+# shellcheck source=tests/ros_common.sh
+. tests/ros_common.sh
+ros_script ros_fast_lio
+# A failure shows the tail of each robot's roslaunch output.
+fail() {
+  echo "ros fast_lio FAILED: $*" >&2
+  for f in "$WORK"/roslaunch_*.log; do [ -e "$f" ] && tail -n 30 "$f" >&2; done
+  exit 1
 }
-trap cleanup EXIT
-fail() { echo "ros fast_lio FAILED: $*" >&2; for f in "$WORK"/roslaunch_*.log; do [ -e "$f" ] && tail -n 30 "$f" >&2; done; exit 1; }
-
+export ROS_PACKAGE_PATH=$ROS_PACKAGE_PATH:$PWD/tests/ros_packages
 # The simulated camera speaks ADE20K-150 ids, as the segmenter config/fast_lio.toml names.
 SGM__CLASSES__SEGMENTER=ade20k_150 "$SGM" run quickstart --quiet --out "$WORK/run" --bag-out "$WORK/bags" >/dev/null
-(umask 077 && head -c 32 /dev/urandom | od -An -vtx1 | tr -d ' \n' > "$WORK/team.key")
-export ROS_PACKAGE_PATH=$PWD/bridge/ros:$PWD/tests/ros_packages:${ROS_PACKAGE_PATH:-/usr/share}
-SGM_PATH=$(cd "$(dirname "$SGM")" && pwd)
-if [ "$(basename "$SGM")" = sgm ]; then SGM_PATH="$SGM_PATH:$PATH"; else export SGM_BIN="$SGM_PATH/$(basename "$SGM")"; SGM_PATH=$PATH; fi
+team_key
 export FAST_LIO_STUB_BAGS=$WORK/bags FAST_LIO_STUB_RATE=${FAST_LIO_STUB_RATE:-3}
 
 echo "== fast_lio_robot.launch: roslaunch's check, its nodes"
@@ -49,9 +44,7 @@ PY
 NODES=$(roslaunch --nodes sgm fast_lio_robot.launch robot:=alpha id:=1 | tr '\n' ' ')
 [ "$NODES" = "/alpha/laserMapping /alpha/sgm_alpha " ] || fail "roslaunch --nodes: $NODES"
 
-ss -ltn | grep ':11311 ' >/dev/null && fail "port 11311 busy"
-rosmaster --core -p 11311 >"$ROS_HOME/master.log" 2>&1 & PIDS+=($!)
-for _ in $(seq 100); do rostopic list >/dev/null 2>&1 && break; sleep 0.1; done
+start_master
 # The global /tf as RViz would see it: every (parent, child) pair, recorded while the robots run.
 /usr/bin/python3 - "$WORK/tf_pairs.txt" <<'PY' & PIDS+=($!)
 import sys, rospy

@@ -11,25 +11,14 @@
 # listens on 127.0.0.1; every process started here is stopped by PID.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-SGM=${SGM:-target/release/sgm}
-WORK=$(mktemp -d /tmp/sgm-rviz.XXXXXX)
-export ROS_MASTER_URI=http://127.0.0.1:11311 ROS_IP=127.0.0.1 ROS_HOME=$WORK/roshome
-mkdir -p "$ROS_HOME"
-PIDS=()
-cleanup() {
-  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
-  for pid in "${PIDS[@]}"; do wait "$pid" 2>/dev/null || true; done
-}
-trap cleanup EXIT
-fail() { echo "ros rviz FAILED: $*" >&2; exit 1; }
+# shellcheck source=tests/ros_common.sh
+. tests/ros_common.sh
+ros_script ros_rviz
 stop() { kill -TERM "$1" 2>/dev/null || true; wait "$1" 2>/dev/null || true; }
 
 "$SGM" run quickstart --quiet --out "$WORK/run" --bag-out "$WORK/bags" >/dev/null
 rosbag check "$WORK/run/result.bag" >/dev/null || fail "rosbag check result.bag"
-(umask 077 && head -c 32 /dev/urandom | od -An -vtx1 | tr -d ' \n' > "$WORK/team.key")
-export ROS_PACKAGE_PATH=$PWD/bridge/ros:${ROS_PACKAGE_PATH:-/usr/share}
-SGM_PATH=$(cd "$(dirname "$SGM")" && pwd)
-if [ "$(basename "$SGM")" = sgm ]; then SGM_PATH="$SGM_PATH:$PATH"; else export SGM_BIN="$SGM_PATH/$(basename "$SGM")"; SGM_PATH=$PATH; fi
+team_key
 RVIZ_CONFIG=$PWD/bridge/ros/sgm/rviz/team.rviz
 [ -f "$RVIZ_CONFIG" ] || fail "no $RVIZ_CONFIG"
 
@@ -41,9 +30,7 @@ Xvfb ":$DISPLAY_N" -screen 0 1280x800x24 -nolisten tcp >"$WORK/xvfb.log" 2>&1 & 
 export DISPLAY=":$DISPLAY_N" LIBGL_ALWAYS_SOFTWARE=1
 for _ in $(seq 50); do [ -e "/tmp/.X11-unix/X$DISPLAY_N" ] && break; sleep 0.1; done
 
-ss -ltn | grep ':11311 ' >/dev/null && fail "port 11311 busy"
-rosmaster --core -p 11311 >"$ROS_HOME/master.log" 2>&1 & PIDS+=($!)
-for _ in $(seq 100); do rostopic list >/dev/null 2>&1 && break; sleep 0.1; done
+start_master
 
 # start_rviz: RViz on the package's configuration (before the data: markers are not latched).
 start_rviz() {

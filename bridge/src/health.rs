@@ -174,6 +174,23 @@ pub struct Observed<'a> {
     pub objects: Option<usize>,
 }
 
+/// The checks over a whole stream, judged at its end (one window: every cloud) — a replayed
+/// bag, the doctor's span: what `sync` and `inputs` saw from `since` to `now`, with `objects`
+/// confirmed objects (none: not judged). Findings are logged once, as a node's are.
+pub fn judge_whole_stream(
+    config: &HealthConfig,
+    sync: &crate::sync::Synchroniser,
+    inputs: &BTreeMap<String, TopicTally>,
+    objects: Option<usize>,
+    since: Stamp,
+    now: Stamp,
+) -> Vec<Finding> {
+    let tf = sync.tf();
+    let missing = sync.missing_mount();
+    let observed = Observed { sync: &sync.counts, inputs, tf: &tf, missing_mount: missing.as_deref(), objects };
+    Health::new(HealthConfig { window_frames: 1, ..config.clone() }).mapping_since(since).update(now, &observed)
+}
+
 /// Where the current window started.
 #[derive(Clone, Debug, Default)]
 struct WindowStart {

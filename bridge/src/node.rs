@@ -326,8 +326,13 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             .map_err(ros_error)?
         };
 
-        let inputs =
-            Inputs::new(&ros, &robot_name, id).with_colours(config.robot.colour_ids().map_err(NodeError::Config)?);
+        let colours = config.robot.colour_ids().map_err(NodeError::Config)?;
+        for (rgb, ids) in colours.ambiguous() {
+            tracing::info!(robot = %robot_name, colour = %sgm_model::perception::colour_ids::hex(*rgb), ?ids,
+                "colour label images: this colour paints several classes of the segmenter's palette and reads as \
+                 the first; set it in [classes.palette] to choose");
+        }
+        let inputs = Inputs::new(&ros, &robot_name, id).with_colours(colours);
         let side = Arc::new(SensorSide {
             sync: Mutex::new(Synchroniser::for_robot(&ros, &inputs).map_err(NodeError::Ros)?),
             inputs,

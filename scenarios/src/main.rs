@@ -47,19 +47,8 @@ enum Command {
     },
     /// Run one robot as a ROS 1 node (rosrust); ROS remappings (`__ns:=/alpha`, `a:=b`) may follow.
     Ros {
-        /// The robot's name (node sgm_NAME; `{robot}` in topics and frames).
-        #[arg(long)]
-        robot: String,
-        /// The robot's id, unique in the team (default: the configuration's robot.id).
-        #[arg(long)]
-        id: Option<u16>,
-        /// Robot configuration file (TOML: the robot's sections and [ros]).
-        #[arg(long, conflicts_with = "scenario")]
-        config: Option<PathBuf>,
-        /// Take the robot's configuration from a scenario (library name or file) instead:
-        /// its shared sections, [ros], and this robot's name and id from [[robots]].
-        #[arg(long)]
-        scenario: Option<String>,
+        #[command(flatten)]
+        robot: cli::ros_cmd::RobotArgs,
         /// Start even with a public team key (the built-in default, or one printed in the book or
         /// the shipped configurations), with a warning: for development on a private network
         /// only. Without it such a key is refused; set comms.team_key_file to a key of your own.
@@ -92,18 +81,8 @@ enum Command {
     /// live master, with a verdict per input; ROS remappings (`points:=cloud`, `__ns:=/alpha`)
     /// may follow. Exit status 1 when an input fails.
     Doctor {
-        /// The robot's name (`{robot}` in topics and frames; its namespace with --live).
-        #[arg(long)]
-        robot: String,
-        /// The robot's id (default: the configuration's robot.id).
-        #[arg(long)]
-        id: Option<u16>,
-        /// Robot configuration file (TOML: the robot's sections and [ros]), as `sgm ros` takes it.
-        #[arg(long, conflicts_with = "scenario")]
-        config: Option<PathBuf>,
-        /// Take the robot's configuration from a scenario (library name or file) instead.
-        #[arg(long)]
-        scenario: Option<String>,
+        #[command(flatten)]
+        robot: cli::ros_cmd::RobotArgs,
         /// A bag of the robot's inputs.
         #[arg(long, conflicts_with = "live", required_unless_present = "live")]
         bag: Option<PathBuf>,
@@ -323,8 +302,8 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Ros { robot, id, config, scenario, development_key, remappings: _ } => {
-            match cli::ros_cmd::execute(cli::ros_cmd::Options { robot, id, config, scenario, development_key }) {
+        Command::Ros { robot, development_key, remappings: _ } => {
+            match cli::ros_cmd::execute(cli::ros_cmd::Options { robot, development_key }) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("sgm ros: {e:#}");
@@ -342,9 +321,8 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Doctor { robot, id, config, scenario, bag, live, duration, json, remappings: _ } => {
-            let options =
-                cli::doctor_cmd::Options { robot, id, config, scenario, bag, live, duration_s: duration, json };
+        Command::Doctor { robot, bag, live, duration, json, remappings: _ } => {
+            let options = cli::doctor_cmd::Options { robot, bag, live, duration_s: duration, json };
             match cli::doctor_cmd::execute(options) {
                 Ok(true) => ExitCode::SUCCESS,
                 Ok(false) => ExitCode::from(1),

@@ -19,7 +19,7 @@ use sgm_actors::transport::InProcessRadio;
 use sgm_bridge::bag::reader::{read_bag, BagItem, BagSource, Payload};
 use sgm_bridge::config::LabelSource;
 use sgm_bridge::convert::time::Epoch;
-use sgm_bridge::health::{Health, HealthConfig, Observed};
+use sgm_bridge::health::judge_whole_stream;
 use sgm_bridge::sync::{SyncCounts, Synchroniser};
 use sgm_bridge::timeline::TimelineCounts;
 use sgm_model::geometry::Pose3;
@@ -309,24 +309,15 @@ pub async fn replay_with(
             raw_bytes: r.raw_bytes,
             raw_max_bytes: r.raw_max_bytes,
         });
-        // The checks over the whole bag, judged at its end (one window: every cloud).
-        let whole_bag = HealthConfig { window_frames: 1, ..ros.health.clone() };
+        // The checks over the whole bag, judged at its end; mission time counts from the bags'
+        // epoch, the first message's whole second.
         let confirmed = observations
             .last()
             .and_then(|o| o.maps.get(k))
             .and_then(|m| m.as_ref())
             .map_or(0, |(map, _, _)| map.objects.iter().filter(|o| o.confirmed).count());
-        // Mission time counts from the bags' epoch, the first message's whole second.
+        let health = judge_whole_stream(&ros.health, &r.sync, &r.inputs, Some(confirmed), 0.0, last_t);
         let tf = r.sync.tf();
-        let missing_mount = r.sync.missing_mount();
-        let observed = Observed {
-            sync: &r.sync.counts,
-            inputs: &r.inputs,
-            tf: &tf,
-            missing_mount: missing_mount.as_deref(),
-            objects: Some(confirmed),
-        };
-        let health = Health::new(whole_bag).mapping_since(0.0).update(last_t, &observed);
         bag_stats.push(BagStats {
             sync: r.sync.counts.clone(),
             timeline: r.sync.timeline().clone(),

@@ -12,7 +12,7 @@ mod verdicts;
 use crate::config::LabelSource;
 use crate::convert::time::Epoch;
 use crate::error::InputError;
-use crate::health::{Finding, Health, HealthConfig, Observed, TopicTally};
+use crate::health::{judge_whole_stream, Finding, HealthConfig, TopicTally};
 use crate::inputs::{Inputs, Payload};
 use crate::node::NodeConfig;
 use crate::sync::Synchroniser;
@@ -274,17 +274,8 @@ impl Doctor {
             Some((a, b)) => Some((f64::min(a, f), f64::max(b, l))),
         });
         let (first, last) = span.unwrap_or((0.0, 0.0));
+        let findings = judge_whole_stream(&self.health, &self.sync, &self.tallies, None, first, last);
         let tf = self.sync.tf();
-        let missing = self.sync.missing_mount();
-        let observed = Observed {
-            sync: &self.sync.counts,
-            inputs: &self.tallies,
-            tf: &tf,
-            missing_mount: missing.as_deref(),
-            objects: None,
-        };
-        let whole = HealthConfig { window_frames: 1, ..self.health.clone() };
-        let findings = Health::new(whole).mapping_since(first).update(last, &observed);
         let inputs = verdicts::judge(&self, &tf, &findings);
         let verdict = inputs.iter().map(|v| v.verdict).max().unwrap_or(Verdict::Fail);
         DoctorReport { robot: self.robot, source, span_s: last - first, inputs, findings, verdict }

@@ -3,17 +3,14 @@
 //! (`sgm_bridge::doctor`). Exit status 0 when nothing failed (warnings allowed), 1 when an
 //! input failed, 2 when the doctor could not run.
 
-use super::ros_cmd::node_config;
+use super::ros_cmd::RobotArgs;
 use anyhow::{bail, Context, Result};
 use sgm_bridge::doctor::{self, Verdict};
 use std::path::PathBuf;
 use std::time::Duration;
 
 pub struct Options {
-    pub robot: String,
-    pub id: Option<u16>,
-    pub config: Option<PathBuf>,
-    pub scenario: Option<String>,
+    pub robot: RobotArgs,
     pub bag: Option<PathBuf>,
     pub live: bool,
     pub duration_s: f64,
@@ -22,7 +19,7 @@ pub struct Options {
 
 /// Runs the doctor; `Ok(true)` when no input failed.
 pub fn execute(options: Options) -> Result<bool> {
-    let config = node_config(&options.robot, options.id, options.config.as_deref(), options.scenario.as_deref())?;
+    let config = options.robot.node_config()?;
     let report = match (&options.bag, options.live) {
         (Some(bag), false) => doctor::bag::examine_bag(bag, &config)?,
         (None, true) => {
@@ -33,7 +30,7 @@ pub fn execute(options: Options) -> Result<bool> {
             let ns_given =
                 std::env::args().any(|a| a.starts_with("__ns:=")) || std::env::var_os("ROS_NAMESPACE").is_some();
             if !ns_given {
-                std::env::set_var("ROS_NAMESPACE", format!("/{}", options.robot));
+                std::env::set_var("ROS_NAMESPACE", format!("/{}", options.robot.robot));
             }
             doctor::live::examine_live(&config, Duration::from_secs_f64(options.duration_s))?
         }

@@ -7,18 +7,41 @@ use sgm_bridge::node::{self, NodeConfig, PublicKeys};
 use sgm_scenarios::scenario::Scenario;
 use std::path::{Path, PathBuf};
 
-pub struct Options {
+/// Which robot, configured how: what `sgm ros` and `sgm doctor` share.
+#[derive(clap::Args, Clone, Debug)]
+pub struct RobotArgs {
+    /// The robot's name (node sgm_NAME; `{robot}` in topics and frames; with `sgm doctor --live`,
+    /// its namespace).
+    #[arg(long)]
     pub robot: String,
+    /// The robot's id, unique in the team (default: the configuration's robot.id).
+    #[arg(long)]
     pub id: Option<u16>,
+    /// Robot configuration file (TOML: the robot's sections and [ros]).
+    #[arg(long, conflicts_with = "scenario")]
     pub config: Option<PathBuf>,
+    /// Take the robot's configuration from a scenario (library name or file) instead:
+    /// its shared sections, [ros], and this robot's name and id from [[robots]].
+    #[arg(long)]
     pub scenario: Option<String>,
+}
+
+impl RobotArgs {
+    /// The robot's node configuration.
+    pub fn node_config(&self) -> Result<NodeConfig> {
+        node_config(&self.robot, self.id, self.config.as_deref(), self.scenario.as_deref())
+    }
+}
+
+pub struct Options {
+    pub robot: RobotArgs,
     /// Start even with a public team key (a loud warning).
     pub development_key: bool,
 }
 
 /// Robot `robot`'s node configuration: from a file (or the defaults), or from a scenario's
 /// robot of that name; `id` overrides the configuration's.
-pub fn node_config(robot: &str, id: Option<u16>, config: Option<&Path>, scenario: Option<&str>) -> Result<NodeConfig> {
+fn node_config(robot: &str, id: Option<u16>, config: Option<&Path>, scenario: Option<&str>) -> Result<NodeConfig> {
     let mut node = match scenario {
         Some(name) => {
             let scenario = Scenario::load(name)?;
@@ -38,7 +61,7 @@ pub fn node_config(robot: &str, id: Option<u16>, config: Option<&Path>, scenario
 }
 
 pub fn execute(options: Options) -> Result<()> {
-    let config = node_config(&options.robot, options.id, options.config.as_deref(), options.scenario.as_deref())?;
+    let config = options.robot.node_config()?;
     // The node runs for hours on wall time, with no observations to give free pages back at.
     let _release = sgm_scenarios::memory::release_free_pages_every(sgm_scenarios::memory::RELEASE_INTERVAL)
         .context("starting the thread that gives free memory back")?;

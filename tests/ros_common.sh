@@ -1,0 +1,44 @@
+# Shared by the ROS test scripts that source it (tests/ros_fast_lio.sh, tests/ros_rviz.sh),
+# after `set -euo pipefail` and a `cd` to the repository root:
+#   ros_script NAME   a work directory /tmp/sgm-NAME.XXXXXX ($WORK), a ROS environment on
+#                     127.0.0.1 ($ROS_HOME in it), PIDS stopped (TERM, then waited for) at exit,
+#                     `fail` naming the script, $SGM (default target/release/sgm), the ROS
+#                     package on ROS_PACKAGE_PATH and $SGM_PATH: a PATH on which roslaunch's
+#                     sgm_node finds $SGM (or SGM_BIN set);
+#   start_master      rosmaster --core on 127.0.0.1:11311 (refused if the port is busy);
+#   team_key          a team key as the book makes it, in $WORK/team.key.
+ros_script() {
+  SCRIPT_NAME=$1
+  SGM=${SGM:-target/release/sgm}
+  WORK=$(mktemp -d "/tmp/sgm-$1.XXXXXX")
+  export ROS_MASTER_URI=http://127.0.0.1:11311 ROS_IP=127.0.0.1 ROS_HOME=$WORK/roshome
+  mkdir -p "$ROS_HOME"
+  PIDS=()
+  trap ros_script_cleanup EXIT
+  export ROS_PACKAGE_PATH=$PWD/bridge/ros:${ROS_PACKAGE_PATH:-/usr/share}
+  SGM_PATH=$(cd "$(dirname "$SGM")" && pwd)
+  if [ "$(basename "$SGM")" = sgm ]; then
+    SGM_PATH="$SGM_PATH:$PATH"
+  else
+    export SGM_BIN="$SGM_PATH/$(basename "$SGM")"
+    SGM_PATH=$PATH
+  fi
+}
+
+ros_script_cleanup() {
+  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
+  for pid in "${PIDS[@]}"; do wait "$pid" 2>/dev/null || true; done
+}
+
+fail() { echo "$SCRIPT_NAME FAILED: $*" >&2; exit 1; }
+
+start_master() {
+  ss -ltn | grep ':11311 ' >/dev/null && fail "port 11311 busy"
+  rosmaster --core -p 11311 >"$ROS_HOME/master.log" 2>&1 & PIDS+=($!)
+  for _ in $(seq 100); do rostopic list >/dev/null 2>&1 && return 0; sleep 0.1; done
+  fail "rosmaster did not start"
+}
+
+team_key() {
+  (umask 077 && head -c 32 /dev/urandom | od -An -vtx1 | tr -d ' \n' > "$WORK/team.key")
+}
