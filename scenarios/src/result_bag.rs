@@ -16,7 +16,7 @@
 use crate::report::Observation;
 use sgm_bridge::bag::writer::BagWriter;
 use sgm_bridge::config::RosConfig;
-use sgm_bridge::convert::cloud::semantic_map;
+use sgm_bridge::convert::cloud::voxels_msg;
 use sgm_bridge::convert::geometry::transform_msg;
 use sgm_bridge::convert::markers::{keyframe_path, map_markers};
 use sgm_bridge::convert::time::Epoch;
@@ -26,7 +26,7 @@ use sgm_bridge::msg::tf2_msgs::TFMessage;
 use sgm_bridge::team_frames::{team_transform, WorldFrames};
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::classes::ClassTable;
-use sgm_model::scene_graph::{RobotId, SceneGraph};
+use sgm_model::scene_graph::{LabelledVoxels, RobotId, SceneGraph};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -122,21 +122,25 @@ impl ResultBag {
     /// and closes the bag; returns its path.
     pub fn finish(mut self, maps: &[SceneGraph], last: &Observation) -> Result<PathBuf, String> {
         let time = self.epoch.time(last.t);
+        // The team map from the robots' voxels (each keyframe point is voxelised once).
+        let mut team = LabelledVoxels::new(self.map_voxel_m);
         for (k, map) in maps.iter().enumerate() {
+            let mut voxels = LabelledVoxels::new(self.map_voxel_m);
+            voxels.insert_graph(map, &Pose3::identity());
             let header = Header { seq: 0, stamp: time, frame_id: self.worlds[k].clone() };
-            let cloud = semantic_map(&header, &[(map, Pose3::identity())], &self.classes, self.map_voxel_m);
             let topic = self.topic(2, k);
-            self.writer.write(&topic, time, &cloud).map_err(|e| self.io(e))?;
+            self.writer.write(&topic, time, &voxels_msg(&header, &voxels, &self.classes)).map_err(|e| self.io(e))?;
+            if let Some(first_from_robot) = crate::report::reference_from(last, k) {
+                for (p, label) in voxels.points() {
+                    team.insert(first_from_robot * p, *label);
+                }
+            }
         }
         if let Some(first) = self.worlds.first() {
-            let placed: Vec<(&SceneGraph, Pose3)> = maps
-                .iter()
-                .enumerate()
-                .filter_map(|(k, map)| Some((map, crate::report::reference_from(last, k)?)))
-                .collect();
             let header = Header { seq: 0, stamp: time, frame_id: first.clone() };
-            let team = semantic_map(&header, &placed, &self.classes, self.map_voxel_m);
-            self.writer.write(TEAM_MAP_TOPIC, time, &team).map_err(|e| self.io(e))?;
+            self.writer
+                .write(TEAM_MAP_TOPIC, time, &voxels_msg(&header, &team, &self.classes))
+                .map_err(|e| self.io(e))?;
         }
         let path = self.path.clone();
         self.writer.finish().map_err(|e| format!("{}: {e}", path.display()))?;

@@ -232,6 +232,15 @@ pub fn semantic_map(
     for (graph, frame_from_graph) in graphs {
         voxels.insert_graph(graph, frame_from_graph);
     }
+    voxels_msg(header, &voxels, classes)
+}
+
+/// Labelled voxels as a cloud in the header's frame, coloured by class.
+pub fn voxels_msg(
+    header: &std_msgs::Header,
+    voxels: &sgm_model::scene_graph::LabelledVoxels,
+    classes: &sgm_model::perception::classes::ClassTable,
+) -> sensor_msgs::PointCloud2 {
     let (points, labels): (Vec<_>, Vec<_>) = voxels.points().map(|(p, l)| (p.cast::<f32>(), l.0)).unzip();
     let colour = |l: u16| classes.get(sgm_model::scene_graph::LabelId(l)).map_or([128, 128, 128], |c| c.colour);
     cloud_msg(header.clone(), &points, Some(&labels), colour)
