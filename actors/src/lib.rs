@@ -67,7 +67,6 @@ pub mod journal;
 pub mod matcher;
 pub mod messages;
 pub mod optimiser;
-pub mod place_candidates;
 pub mod progress;
 pub mod protocol;
 pub mod quiescence;

@@ -16,16 +16,19 @@ use crate::clock::Clock;
 use crate::config::{Association, MatcherSection};
 use crate::containment::contained;
 use crate::messages::*;
-use crate::place_candidates::{EvenPlaces, PlaceCandidate, PlaceCandidates};
-use crate::protocol::{Matched, Neighbour, Protocol, RetryConfig, Wait};
+use crate::protocol::{Matched, Neighbour, Protocol, ProtocolStage, RetryConfig, Wait};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use nalgebra::Point3;
-use sgm_model::geometry::{pose_error, Pose3};
+use sgm_model::geometry::Pose3;
+use sgm_model::matching::alignment::{
+    coarse_to_fine, evenly, judge_round, neighbourhood, refuted_recently, register_round, yaw_turn, LocalView,
+    RemoteView, RoundConfig, RoundVerdict,
+};
+use sgm_model::matching::place_candidates::{EvenPlaces, PlaceCandidate, PlaceCandidates};
 use sgm_model::matching::scan_context::{Place, ScanContext};
 use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
 use sgm_model::perception::icp::{register, IcpConfig};
 use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS};
-use sgm_model::perception::structure_check::structure_agreement;
 use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, SemanticScan, Stamp};
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{ObjectData, RefusalReason};
@@ -50,7 +53,8 @@ pub struct GetNeighbours;
 #[derive(Clone, Debug, PartialEq)]
 pub struct NeighbourStatus {
     pub robot: RobotId,
-    pub state: &'static str,
+    /// Where its protocol stands (none only while a handler that failed is being restarted).
+    pub state: Option<ProtocolStage>,
     pub local_from_remote: Option<Pose3>,
     /// When it first reached `Aligned`.
     pub first_aligned: Option<f64>,
@@ -63,6 +67,21 @@ pub struct NeighbourStatus {
 struct LocalKeyframeData {
     world_from_body: Pose3,
     scan: Arc<SemanticScan>,
+}
+
+/// A local keyframe as registration sees it.
+fn local_view(k: &LocalKeyframeData) -> LocalView<'_> {
+    LocalView { world_from_body: &k.world_from_body, points_in_body: &k.scan.points_in_body }
+}
+
+/// A neighbour keyframe as registration sees it.
+fn remote_view(k: &NeighbourKeyframe) -> RemoteView<'_> {
+    RemoteView {
+        id: k.id,
+        world_from_body: &k.world_from_body,
+        covariance: &k.covariance,
+        points_in_body: &k.points_in_body,
+    }
 }
 
 struct NeighbourEntry {
@@ -114,15 +133,6 @@ pub struct NeighbourMemory {
     pub refuted: Vec<(Pose3, Stamp)>,
 }
 
-/// At most `n` of `ids`, spread evenly over them (deterministic).
-fn evenly(ids: BTreeSet<KeyframeId>, n: usize) -> BTreeSet<KeyframeId> {
-    if ids.len() <= n {
-        return ids;
-    }
-    let all: Vec<KeyframeId> = ids.into_iter().collect();
-    (0..n).map(|i| all[i * all.len() / n]).collect()
-}
-
 /// Drops held neighbour keyframes outside `round`, lowest ids first, until at most `cap` are
 /// held; the ids dropped.
 fn hold_at_most(
@@ -136,36 +146,6 @@ fn hold_at_most(
         held.remove(k);
     }
     victims
-}
-
-/// The pose with the smallest summed distance to the others (translation in m plus rotation in
-/// rad × 10 m): a robust average of a handful of estimates.
-fn medoid(poses: &[Pose3]) -> Option<Pose3> {
-    let distance = |a: &Pose3, b: &Pose3| {
-        let e = a.inverse() * b;
-        e.translation.vector.norm() + 10.0 * e.rotation.angle()
-    };
-    poses
-        .iter()
-        .map(|p| (p, poses.iter().map(|q| distance(p, q)).sum::<f64>()))
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|(p, _)| *p)
-}
-
-/// How long a refuted transform is remembered, s.
-const REFUTED_FOR_S: f64 = 120.0;
-
-/// Whether `transform` lands within 2 m and 5° of one refuted less than [`REFUTED_FOR_S`] ago.
-fn refuted_recently(refuted: &[(Pose3, Stamp)], transform: &Pose3, now: Stamp) -> bool {
-    refuted.iter().any(|(t, when)| {
-        let e = pose_error(transform, t);
-        now - when < REFUTED_FOR_S && e.translation_m < 2.0 && e.max_axis_rotation_deg() < 5.0
-    })
-}
-
-/// A turn by `yaw` about z, rad.
-fn yaw_turn(yaw: f64) -> Pose3 {
-    Pose3::from_parts(Default::default(), nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, yaw))
 }
 
 pub struct Matcher {
@@ -382,12 +362,12 @@ impl Matcher {
         };
         let (c, guess) = candidate;
         let k = self.config.keyframe_neighbourhood as u32;
-        let around = |id: KeyframeId| (id.0.saturating_sub(k)..=id.0.saturating_add(k)).map(KeyframeId);
-        let remote_ids: BTreeSet<KeyframeId> = around(c.remote).filter(|id| entry.places.knows_remote(*id)).collect();
+        let remote_ids: BTreeSet<KeyframeId> =
+            neighbourhood([c.remote], k).into_iter().filter(|id| entry.places.knows_remote(*id)).collect();
         let mut round = evenly(remote_ids, self.config.max_keyframes_per_alignment.max(1));
         round.insert(c.remote);
         let local_targets: BTreeSet<KeyframeId> =
-            around(c.local).filter(|id| self.keyframes.contains_key(id)).collect();
+            neighbourhood([c.local], k).into_iter().filter(|id| self.keyframes.contains_key(id)).collect();
         let wanted: BTreeSet<KeyframeId> =
             round.iter().filter(|id| !entry.keyframes.contains_key(id)).copied().collect();
         let retry = self.retry.clone();
@@ -405,30 +385,6 @@ impl Matcher {
         } else if let Some(links) = &self.links {
             links.request_keyframes.do_send(RequestKeyframes { robot, keyframes: wanted.into_iter().collect() });
         }
-    }
-
-    /// Scan Context association: the round's neighbour keyframe registered onto its local one,
-    /// first with `coarse_correspondence_m` from the descriptor's yaw, then as fine as keyframe
-    /// ICP; the local_from_remote it implies, or `None` when either stage fails.
-    fn coarse_to_fine(&self, entry: &NeighbourEntry, pair: &PlaceCandidate, fine: &IcpConfig) -> Option<Pose3> {
-        let local = self.keyframes.get(&pair.local)?;
-        let remote = entry.keyframes.get(&pair.remote)?;
-        let target: Vec<Point3<f64>> = local.scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
-        let initial = yaw_turn(-pair.yaw);
-        let coarse = IcpConfig {
-            max_correspondence_distance_m: self.config.scan_context.coarse_correspondence_m,
-            max_iterations: fine.max_iterations * 2,
-            ..fine.clone()
-        };
-        let mut local_from_remote_body = initial;
-        for config in [&coarse, fine] {
-            let result = register(&remote.points_in_body, &target, &local_from_remote_body, config).ok()?;
-            if !result.converged {
-                return None;
-            }
-            local_from_remote_body = result.target_from_source;
-        }
-        Some(local.world_from_body * local_from_remote_body * remote.world_from_body.inverse())
     }
 
     fn on_object_clouds(&mut self, msg: NeighbourObjectClouds) {
@@ -458,12 +414,7 @@ impl Matcher {
             }
         }
         // Neighbour keyframes that observed the matched objects, ± the neighbourhood.
-        let k = self.config.keyframe_neighbourhood as u32;
-        let around: BTreeSet<KeyframeId> = observed_in
-            .values()
-            .flatten()
-            .flat_map(|id| (id.0.saturating_sub(k)..=id.0.saturating_add(k)).map(KeyframeId))
-            .collect();
+        let around = neighbourhood(observed_in.values().flatten().copied(), self.config.keyframe_neighbourhood as u32);
         let round = evenly(around, self.config.max_keyframes_per_alignment);
         let retry = self.retry.clone();
         let entry = self.entry(msg.robot);
@@ -493,7 +444,8 @@ impl Matcher {
         }
     }
 
-    /// Every requested keyframe arrived or was reported unavailable: register them and align.
+    /// Every requested keyframe arrived or was reported unavailable: register them and align
+    /// (`model::matching::alignment`).
     fn finish_alignment(&mut self, robot: RobotId) {
         let now = self.clock.now();
         let Some(entry) = self.neighbours.get(&robot) else { return };
@@ -505,80 +457,66 @@ impl Matcher {
             Some((_, targets)) => targets.clone(),
             _ => n.state.pairs.iter().filter_map(|(l, _)| self.local.observed_in.get(l)).flatten().copied().collect(),
         };
-        let mut factors = Vec::new();
-        let mut neighbour_keyframes = Vec::new();
-        let mut implied = Vec::new();
         let keyframe_icp = IcpConfig {
             voxel_m: self.config.keyframe_voxel_m,
             max_iterations: self.config.keyframe_max_iterations,
             ..self.config.icp.clone()
         };
         if let Some((pair, _)) = &entry.place_round {
-            if let Some(refined) = self.coarse_to_fine(entry, pair, &keyframe_icp) {
+            let (local, remote) = (self.keyframes.get(&pair.local), entry.keyframes.get(&pair.remote));
+            let coarse = self.config.scan_context.coarse_correspondence_m;
+            if let Some(refined) = local
+                .zip(remote)
+                .and_then(|(l, r)| coarse_to_fine(&local_view(l), &remote_view(r), pair.yaw, coarse, &keyframe_icp))
+            {
                 local_from_remote = refined;
             }
         }
-        let (check, min_agreement) = (&self.config.structure_check, self.config.min_structure_agreement);
-        // Several neighbour keyframes usually register to one local keyframe: widen it once.
-        let mut targets: BTreeMap<KeyframeId, Vec<Point3<f64>>> = BTreeMap::new();
-        for (id, kf) in entry.keyframes.iter().filter(|(id, _)| entry.round.contains(id)) {
-            let in_local = local_from_remote * kf.world_from_body;
-            let nearest = local_ids.iter().filter_map(|l| self.keyframes.get(l).map(|d| (*l, d))).min_by(|a, b| {
-                let da = (a.1.world_from_body.translation.vector - in_local.translation.vector).norm();
-                let db = (b.1.world_from_body.translation.vector - in_local.translation.vector).norm();
-                da.total_cmp(&db)
-            });
-            let Some((local_id, local)) = nearest else { continue };
-            let target = targets
-                .entry(local_id)
-                .or_insert_with(|| local.scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect());
-            let initial = local.world_from_body.inverse() * in_local;
-            let Ok(result) = register(&kf.points_in_body, target, &initial, &keyframe_icp) else { continue };
-            if !result.converged {
-                continue;
-            }
-            let agreement = structure_agreement(&kf.points_in_body, target, &result.target_from_source, check);
-            if agreement.is_none_or(|a| a < min_agreement) {
-                continue;
-            }
-            neighbour_keyframes.push((*id, kf.world_from_body, kf.covariance));
-            factors.push((local_id, *id, result.target_from_source, result.information));
-            implied.push(local.world_from_body * result.target_from_source * kf.world_from_body.inverse());
-        }
+        let targets = local_ids.iter().filter_map(|id| Some((*id, local_view(self.keyframes.get(id)?)))).collect();
+        let round = entry.keyframes.iter().filter(|(id, _)| entry.round.contains(id)).map(|(_, k)| remote_view(k));
+        let config = RoundConfig {
+            icp: &keyframe_icp,
+            structure: &self.config.structure_check,
+            min_structure_agreement: self.config.min_structure_agreement,
+        };
+        let registered = register_round(&targets, round, &local_from_remote, &config);
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
-        if factors.len() < self.config.min_keyframe_factors && entry.round_incomplete {
-            // Keyframes were lost on the way: too few to judge the match, which is tried again.
-            tracing::info!(robot = %self.robot, neighbour = %robot, factors = factors.len(), "alignment round incomplete");
-            if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
-                entry.protocol = Some(n.gave_up(now).into());
+        let factors = registered.factors.len();
+        match judge_round(&registered, self.config.min_keyframe_factors, entry.round_incomplete, &local_from_remote) {
+            RoundVerdict::Incomplete => {
+                // Keyframes were lost on the way: too few to judge the match, which is tried again.
+                tracing::info!(robot = %self.robot, neighbour = %robot, factors, "alignment round incomplete");
+                if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
+                    entry.protocol = Some(n.gave_up(now).into());
+                }
+                entry.match_again = true;
             }
-            entry.match_again = true;
-            return;
-        }
-        if factors.len() < self.config.min_keyframe_factors {
-            tracing::info!(robot = %self.robot, neighbour = %robot, factors = factors.len(), "object match refuted");
-            entry.refuted.push((n.state.local_from_remote, now));
-            if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
-                entry.protocol = Some(n.refuted(now).into());
+            RoundVerdict::Refuted => {
+                tracing::info!(robot = %self.robot, neighbour = %robot, factors, "object match refuted");
+                entry.refuted.push((n.state.local_from_remote, now));
+                if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
+                    entry.protocol = Some(n.refuted(now).into());
+                }
             }
-            return;
-        }
-        // Each registration implies a local_from_remote; their medoid is robust to one that
-        // slid along a degenerate direction.
-        if let Some(m) = medoid(&implied) {
-            local_from_remote = m;
-        }
-        if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
-            entry.protocol = Some(n.aligned(local_from_remote, now).into());
-            entry.first_aligned.get_or_insert(now);
-        }
-        // Aligned is final: no later round reads the neighbour's clouds.
-        let released: Vec<KeyframeId> = std::mem::take(&mut entry.keyframes).into_keys().collect();
-        entry.round.clear();
-        self.release(robot, released);
-        tracing::info!(robot = %self.robot, neighbour = %robot, factors = factors.len(), "aligned");
-        if let (Some(links), false) = (&self.links, factors.is_empty()) {
-            links.optimiser.do_send(InterRobotConstraints { robot, local_from_remote, neighbour_keyframes, factors });
+            RoundVerdict::Aligned(local_from_remote) => {
+                if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
+                    entry.protocol = Some(n.aligned(local_from_remote, now).into());
+                    entry.first_aligned.get_or_insert(now);
+                }
+                // Aligned is final: no later round reads the neighbour's clouds.
+                let released: Vec<KeyframeId> = std::mem::take(&mut entry.keyframes).into_keys().collect();
+                entry.round.clear();
+                self.release(robot, released);
+                tracing::info!(robot = %self.robot, neighbour = %robot, factors, "aligned");
+                if let (Some(links), false) = (&self.links, registered.factors.is_empty()) {
+                    links.optimiser.do_send(InterRobotConstraints {
+                        robot,
+                        local_from_remote,
+                        neighbour_keyframes: registered.neighbour_keyframes,
+                        factors: registered.factors,
+                    });
+                }
+            }
         }
     }
 }
@@ -832,7 +770,7 @@ impl Handler<GetNeighbours> for Matcher {
                 .iter()
                 .map(|(robot, e)| NeighbourStatus {
                     robot: *robot,
-                    state: e.protocol.as_ref().map_or("?", Protocol::name),
+                    state: e.protocol.as_ref().map(Protocol::stage),
                     local_from_remote: e.protocol.as_ref().and_then(|p| p.local_from_remote().copied()),
                     first_aligned: e.first_aligned,
                     keyframes_held: e.keyframes.len(),

@@ -225,14 +225,42 @@ macro_rules! into_protocol {
 }
 into_protocol!(Discovered, ObjectsReceived, Matched, KeyframesRequested, Aligned);
 
-impl Protocol {
-    pub fn name(&self) -> &'static str {
+/// Where a neighbour's protocol stands: the state's name, without its data.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
+pub enum ProtocolStage {
+    Discovered,
+    ObjectsReceived,
+    Matched,
+    KeyframesRequested,
+    Aligned,
+}
+
+impl ProtocolStage {
+    pub fn name(self) -> &'static str {
         match self {
-            Protocol::Discovered(_) => "Discovered",
-            Protocol::ObjectsReceived(_) => "ObjectsReceived",
-            Protocol::Matched(_) => "Matched",
-            Protocol::KeyframesRequested(_) => "KeyframesRequested",
-            Protocol::Aligned(_) => "Aligned",
+            ProtocolStage::Discovered => "Discovered",
+            ProtocolStage::ObjectsReceived => "ObjectsReceived",
+            ProtocolStage::Matched => "Matched",
+            ProtocolStage::KeyframesRequested => "KeyframesRequested",
+            ProtocolStage::Aligned => "Aligned",
+        }
+    }
+}
+
+impl std::fmt::Display for ProtocolStage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl Protocol {
+    pub fn stage(&self) -> ProtocolStage {
+        match self {
+            Protocol::Discovered(_) => ProtocolStage::Discovered,
+            Protocol::ObjectsReceived(_) => ProtocolStage::ObjectsReceived,
+            Protocol::Matched(_) => ProtocolStage::Matched,
+            Protocol::KeyframesRequested(_) => ProtocolStage::KeyframesRequested,
+            Protocol::Aligned(_) => ProtocolStage::Aligned,
         }
     }
 

@@ -14,6 +14,7 @@ use sgm_actors::comms::GetCommsStatus;
 use sgm_actors::config::RobotConfig;
 use sgm_actors::matcher::GetNeighbours;
 use sgm_actors::messages::{FrameLabels, SensorFrame, Tick};
+use sgm_actors::protocol::ProtocolStage;
 use sgm_actors::supervisor::{start_robot, RobotHandle};
 use sgm_actors::transport::{InProcessRadio, PerfectLinks};
 use sgm_model::geometry::{pose_error, pose_from_yaw_translation, Pose3};
@@ -95,7 +96,7 @@ fn assert_aligned(robots: &[Robot], neighbours: &[Vec<sgm_actors::matcher::Neigh
     for (i, local) in robots.iter().enumerate() {
         for n in &neighbours[i] {
             let remote = robots.iter().find(|r| r.handle.robot == n.robot).unwrap();
-            assert_eq!(n.state, "Aligned", "robot {i}: {n:?}");
+            assert_eq!(n.state, Some(ProtocolStage::Aligned), "robot {i}: {n:?}");
             let e = pose_error(&n.local_from_remote.unwrap(), &truth_local_from_remote(local, remote));
             assert!(e.translation_m < 0.2 && e.max_axis_rotation_deg() < 1.0, "robot {i} ← {}: {e:?}", n.robot);
         }
@@ -141,7 +142,7 @@ async fn two_robots_align_though_one_panics_mid_mission() {
             let remote = robots.iter().find(|r| r.handle.robot == n.robot).unwrap();
             let estimate = n.local_from_remote.unwrap_or_else(|| panic!("robot {i}: {n:?} {status:?}"));
             let e = pose_error(&estimate, &truth_local_from_remote(local, remote));
-            assert_eq!(n.state, "Aligned", "{n:?}");
+            assert_eq!(n.state, Some(ProtocolStage::Aligned), "{n:?}");
             assert!(e.translation_m < 0.2 && e.max_axis_rotation_deg() < 1.0, "robot {i}: {e:?}");
         }
         assert_eq!(neighbours.len(), 1);

@@ -98,7 +98,7 @@ mod tests {
     fn aligned(robot: u16, x: f64) -> NeighbourStatus {
         NeighbourStatus {
             robot: RobotId(robot),
-            state: "Aligned",
+            state: Some(sgm_actors::protocol::ProtocolStage::Aligned),
             local_from_remote: Some(Pose3::translation(x, 0.0, 0.0)),
             first_aligned: Some(1.0),
             keyframes_held: 0,

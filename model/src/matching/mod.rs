@@ -6,6 +6,7 @@
 //! difference.
 
 mod affinity;
+pub mod alignment;
 mod candidates;
 mod config;
 mod graph;
@@ -14,6 +15,7 @@ pub mod lap;
 mod matcher;
 mod outcome;
 pub mod paper_baseline;
+pub mod place_candidates;
 pub mod scan_context;
 pub mod significance;
 mod spectral;

@@ -9,6 +9,7 @@ use super::{Observation, RobotTruth, RunRecord};
 use crate::sim::radio::RadioStats;
 use nalgebra::Point3;
 use serde::Serialize;
+use sgm_actors::protocol::ProtocolStage;
 use sgm_model::eval::ate::ate;
 use sgm_model::geometry::{pose_error, Pose3};
 use sgm_model::scene_graph::RobotId;
@@ -165,7 +166,10 @@ pub(crate) fn reference_from(observation: &Observation, k: usize) -> Option<Pose
     }
     let Some(Some((_, neighbours, _))) = observation.maps.first() else { return None };
     let id = RobotId(k as u16 + 1);
-    neighbours.iter().find(|n| n.robot == id && n.state == "Aligned").and_then(|n| n.local_from_remote)
+    neighbours
+        .iter()
+        .find(|n| n.robot == id && n.state == Some(ProtocolStage::Aligned))
+        .and_then(|n| n.local_from_remote)
 }
 
 fn positions(samples: &[(f64, Pose3, Pose3)], transform: &Pose3) -> (Vec<Point3<f64>>, Vec<Point3<f64>>) {
@@ -335,7 +339,7 @@ pub fn compute(record: &RunRecord) -> Report {
             alignments.push(AlignmentReport {
                 local: local.name.clone(),
                 remote: remote.name.clone(),
-                state: n.state.to_string(),
+                state: n.state.map_or("?".into(), |s| s.to_string()),
                 first_aligned_s: n.first_aligned,
                 translation_error_m: error.map(|e| e.translation_m),
                 translation_error_xyz_m: xyz,

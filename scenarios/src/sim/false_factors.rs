@@ -17,6 +17,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, UnitSphere};
 use sgm_actors::messages::InterRobotConstraints;
+use sgm_actors::protocol::ProtocolStage;
 use sgm_model::geometry::Pose3;
 use sgm_model::optim::manifold::Manifold;
 use sgm_model::scene_graph::{KeyframeId, RobotId};
@@ -83,7 +84,7 @@ impl FalseFactors {
             let neighbour_id = RobotId(*r as u16 + 1);
             let Some(local_from_remote) = neighbours
                 .iter()
-                .find(|s| s.robot == neighbour_id && s.state == "Aligned")
+                .find(|s| s.robot == neighbour_id && s.state == Some(ProtocolStage::Aligned))
                 .and_then(|s| s.local_from_remote)
             else {
                 continue;

@@ -4,11 +4,45 @@
 //! neighbour descriptor queries the local keyframes (Kim & Kim's ring-key pre-selection, then
 //! the column-shift distance, `model::matching::scan_context::retrieve`).
 
-use crate::config::ScanContextSection;
-use sgm_model::geometry::Pose3;
-use sgm_model::matching::scan_context::{retrieve, Place};
-use sgm_model::scene_graph::KeyframeId;
+use crate::geometry::Pose3;
+use crate::matching::scan_context::{retrieve, Place, ScanContextConfig};
+use crate::scene_graph::KeyframeId;
+use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
+
+/// The Scan Context baseline's association (`association = "scan_context"`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ScanContextSection {
+    /// Descriptor shape: `rings`, `sectors`, `max_range_m`, `height_offset_m`. Defaults
+    /// 20, 60, 80 m, 2 m (Kim & Kim).
+    #[serde(flatten)]
+    pub descriptor: ScanContextConfig,
+    /// A keyframe pair is a candidate below this column-shift distance. Default 0.13 (Kim &
+    /// Kim's released code: "0.1–0.2 is fine" for 20 × 60 descriptors).
+    pub max_distance: f64,
+    /// Neighbour keyframes compared in full per query, the nearest by ring key. Default 10.
+    pub ring_key_candidates: usize,
+    /// Correspondence distance of the coarse ICP stage from the descriptor's yaw, m (the
+    /// fine stage uses `icp.max_correspondence_distance_m`). Default 5.
+    pub coarse_correspondence_m: f64,
+    /// Descriptors kept at most: ours, and each neighbour's. Beyond it every second one is
+    /// dropped (in keyframe order, the newest kept), so what stays spans the whole run, thinner
+    /// the older it is. A 20 × 60 descriptor is 4.8 KB. Default 1000.
+    pub max_places: usize,
+}
+
+impl Default for ScanContextSection {
+    fn default() -> Self {
+        Self {
+            descriptor: ScanContextConfig::default(),
+            max_distance: 0.13,
+            ring_key_candidates: 10,
+            coarse_correspondence_m: 5.0,
+            max_places: 1000,
+        }
+    }
+}
 
 /// A local and a neighbour keyframe that look like the same place.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -185,9 +219,9 @@ impl PlaceCandidates {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::pose_from_rpy_translation;
+    use crate::matching::scan_context::ScanContext;
     use nalgebra::{Point3, Vector3};
-    use sgm_model::geometry::pose_from_rpy_translation;
-    use sgm_model::matching::scan_context::ScanContext;
 
     const SECTOR: f64 = std::f64::consts::TAU / 60.0;
     const MAX: usize = 1000;
