@@ -42,7 +42,7 @@ pub fn examine_live(config: &NodeConfig, duration: Duration) -> Result<DoctorRep
     rosrust::try_init_with_options(&format!("sgm_doctor_{robot}_{}", std::process::id()), false)
         .map_err(|e| DoctorError(format!("no ROS master at ROS_MASTER_URI: {e}")))?;
     crate::bounded::set_max_message_bytes(config.ros.max_message_bytes);
-    let first = Doctor::new(config)?;
+    let first = Doctor::new(config)?.live();
     let topics = first.topics().clone();
     let doctor: Shared = Arc::new(Mutex::new(Some(first)));
     let mut subscribers = vec![

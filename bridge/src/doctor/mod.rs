@@ -126,8 +126,13 @@ pub struct Doctor {
     camera: Option<CameraModel>,
     epoch: Option<Epoch>,
     frames: u64,
-    /// Clouds still waiting for partners when a live window closed (not judged).
+    /// Clouds still waiting for partners when a live window closed, and clouds heard before
+    /// the window's first odometry pose (not judged: the window cut them off).
     pending: u64,
+    /// Listening to streams that began before: clouds before the first pose are not judged.
+    live: bool,
+    /// An odometry pose has been heard.
+    odometry_heard: bool,
     health: HealthConfig,
 }
 
@@ -178,8 +183,16 @@ impl Doctor {
             epoch: None,
             frames: 0,
             pending: 0,
+            live: false,
+            odometry_heard: false,
             health: config.ros.health.clone(),
         })
+    }
+
+    /// Listening to live streams that began before (a window, not a whole mission).
+    pub fn live(mut self) -> Self {
+        self.live = true;
+        self
     }
 
     /// The checks of this robot's inputs (for feeding messages through them).
@@ -221,6 +234,16 @@ impl Doctor {
             if let Some(name) = static_name(input) {
                 self.stamps.entry(name).or_default().add(epoch.stamp(t));
             }
+        }
+        match &payload {
+            Payload::Odometry(..) => self.odometry_heard = true,
+            // A live window opened between this cloud's odometry and the cloud: it cannot be placed,
+            // through no fault of the streams.
+            Payload::Cloud(..) if self.live && !self.odometry_heard => {
+                self.pending += 1;
+                return;
+            }
+            _ => {}
         }
         match &payload {
             Payload::Cloud(_, scan) => self.points += scan.points.len() as u64,
@@ -267,7 +290,7 @@ impl Doctor {
         if ended {
             self.frames += self.sync.finish(epoch).len() as u64;
         } else {
-            self.pending = self.sync.pending() as u64;
+            self.pending += self.sync.pending() as u64;
         }
         let span = self.stamps.values().filter_map(|s| Some((s.first?, s.last?))).fold(None, |acc, (f, l)| match acc {
             None => Some((f, l)),
@@ -408,14 +431,18 @@ mod tests {
         assert!(text.contains("carry ids [classes] does not know (999)"), "{text}");
     }
 
-    /// A live window closes while the last cloud still waits for its odometry: not a drop.
+    /// A live window opens after a cloud's odometry, or closes while the last cloud still waits
+    /// for its odometry: neither is a drop.
     #[test]
     fn a_cloud_waiting_when_a_live_window_closes_is_not_judged() {
         let last_cloud = |d: &mut Doctor| {
             let scan = Scan { points: vec![Point3::new(5.0, 0.0, 0.0); 32], labels: None, dropped_non_finite: 0 };
             d.observe("points", Ok(Payload::Cloud(at(1.05), scan)));
         };
-        let mut live = Doctor::new(&config()).unwrap();
+        let mut live = Doctor::new(&config()).unwrap().live();
+        // The window opens between a frame's odometry and its cloud: that cloud is not judged.
+        let early = Scan { points: vec![Point3::new(5.0, 0.0, 0.0); 32], labels: None, dropped_non_finite: 0 };
+        live.observe("points", Ok(Payload::Cloud(at(-0.1), early)));
         feed(&mut live, 8, 0);
         last_cloud(&mut live);
         let report = live.finish("test".into(), false);
