@@ -28,7 +28,6 @@ use common::table_cells;
 use std::collections::BTreeSet;
 
 const WIRE: &str = include_str!("../../book/src/wire.md");
-const COMMS_SOURCE: &str = include_str!("../../actors/src/comms.rs");
 
 /// The key of the chapter's examples: bytes 0x00, 0x01, …, 0x1f.
 const EXAMPLE_KEY: &str = "000102030405060708090a0b0c0d0e0f101112131415161718191a1b1c1d1e1f";
@@ -298,17 +297,6 @@ fn smallest_envelope_limit() -> usize {
     hi
 }
 
-/// The number right after `prefix` in `source` (digits and `_`).
-fn number_after(source: &str, prefix: &str, file: &str) -> f64 {
-    let at = source.find(prefix).unwrap_or_else(|| panic!("{file} no longer contains `{prefix}`"));
-    let digits: String = source[at + prefix.len()..]
-        .chars()
-        .take_while(|c| c.is_ascii_digit() || *c == '_')
-        .filter(|c| *c != '_')
-        .collect();
-    digits.parse().unwrap_or_else(|_| panic!("{file}: no number after `{prefix}`"))
-}
-
 /// The code's value of a limit, by the name the chapter's table gives it.
 fn code_value(name: &str) -> Option<f64> {
     let limits = WireLimits::default();
@@ -334,9 +322,7 @@ fn code_value(name: &str) -> Option<f64> {
         "SIZE_STEP_M" => SIZE_STEP_M,
         // An f32: its shortest decimal form, as written.
         "DESCRIPTOR_HEIGHT_STEP_M" => DESCRIPTOR_HEIGHT_STEP_M.to_string().parse().ok()?,
-        "Comms::receive" => {
-            number_after(COMMS_SOURCE, "self.config.limits.max_ids * ", "actors/src/comms.rs") * limits.max_ids as f64
-        }
+        "responses::QUEUED_PER_MAX_ID" => (sgm_actors::comms::responses::QUEUED_PER_MAX_ID * limits.max_ids) as f64,
         "PeerConfig::queue" => sgm_bridge::transport::peer::PeerConfig::default().queue as f64,
         "PeerConfig::call_timeout_s" => sgm_bridge::transport::peer::PeerConfig::default().call_timeout_s,
         "call::MAX_HEADER_BYTES" => sgm_bridge::transport::call::MAX_HEADER_BYTES as f64,
@@ -375,7 +361,7 @@ const LIMIT_NAMES: [&str; 34] = [
     "KDF_LANES",
     "SIZE_STEP_M",
     "DESCRIPTOR_HEIGHT_STEP_M",
-    "Comms::receive",
+    "responses::QUEUED_PER_MAX_ID",
     "PeerConfig::queue",
     "PeerConfig::call_timeout_s",
     "call::MAX_HEADER_BYTES",

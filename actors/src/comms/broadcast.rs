@@ -1,0 +1,205 @@
+//! What Comms broadcasts to everyone, as plain state: ObjectData when the object layer changed
+//! significantly (an object moved more than `significant_move_m`, or objects came or went),
+//! when a neighbour needs it again (first heard, or back from silence), or after
+//! `object_data_refresh_s` without a broadcast — at most once per `object_data_interval_s`. An
+//! unchanged map goes out again under its old revision, which a neighbour holding it ignores.
+//! Revisions never repeat, also after a restart without a snapshot: a new one is at least the
+//! clock in whole seconds. With the Scan Context baseline, keyframe descriptors instead, at the
+//! same pace, in envelopes of at most `limits.max_ids`.
+
+use crate::config::CommsConfig;
+use crate::messages::LocalObjects;
+use nalgebra::Point3;
+use sgm_model::scene_graph::{ObjectId, Stamp};
+use sgm_model::wire::messages::{KeyframeDescriptors, ObjectData, WireDescriptor};
+use std::collections::BTreeMap;
+
+/// The object-data broadcast.
+#[derive(Clone, Debug)]
+pub struct ObjectBroadcast {
+    /// Off when the Matcher associates by descriptors.
+    enabled: bool,
+    revision: u32,
+    latest: Option<LocalObjects>,
+    /// The centroids of the last broadcast, to judge what is significant.
+    centroids: BTreeMap<ObjectId, Point3<f64>>,
+    change_pending: bool,
+    /// Someone needs the current ObjectData again (a new or returning neighbour).
+    repeat_pending: bool,
+    last: Option<Stamp>,
+}
+
+impl Default for ObjectBroadcast {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            revision: 0,
+            latest: None,
+            centroids: BTreeMap::new(),
+            change_pending: false,
+            repeat_pending: false,
+            last: None,
+        }
+    }
+}
+
+impl ObjectBroadcast {
+    pub fn disabled() -> Self {
+        Self { enabled: false, ..Self::default() }
+    }
+
+    /// Off from now on (everything else kept).
+    pub fn disable(&mut self) {
+        self.enabled = false;
+    }
+
+    /// Continues from a snapshot's revision.
+    pub fn with_revision(mut self, revision: u32) -> Self {
+        self.revision = revision;
+        self
+    }
+
+    pub fn revision(&self) -> u32 {
+        self.revision
+    }
+
+    /// The object layer now; whether it changed significantly since the last broadcast.
+    pub fn objects(&mut self, objects: LocalObjects, significant_move_m: f64) {
+        let significant = objects
+            .objects
+            .iter()
+            .any(|o| self.centroids.get(&o.id).is_none_or(|c| (c - o.centroid).norm() > significant_move_m))
+            || objects.objects.len() != self.centroids.len();
+        self.change_pending |= significant;
+        self.latest = Some(objects);
+    }
+
+    /// A neighbour needs the current object data again.
+    pub fn repeat(&mut self) {
+        self.repeat_pending = true;
+    }
+
+    /// The ObjectData to broadcast now, if any is due (see the module documentation).
+    pub fn due(&mut self, now: Stamp, config: &CommsConfig) -> Option<ObjectData> {
+        let since = self.last.map(|t| now - t);
+        let due = since.is_none_or(|s| s >= config.object_data_interval_s);
+        let stale = since.is_some_and(|s| s >= config.object_data_refresh_s);
+        if !self.enabled || !due || !(self.change_pending || self.repeat_pending || stale) {
+            return None;
+        }
+        let objects = self.latest.as_ref()?;
+        if self.change_pending || self.revision == 0 {
+            self.revision = (self.revision + 1).max(now.clamp(0.0, f64::from(u32::MAX)) as u32);
+        }
+        let data = ObjectData::quantise(
+            self.revision,
+            config.centroid_resolution_mm,
+            objects.objects.iter().map(|o| (o.id, o.label, o.centroid, o.size.unwrap_or_default())),
+        );
+        self.centroids = objects.objects.iter().map(|o| (o.id, o.centroid)).collect();
+        self.change_pending = false;
+        self.repeat_pending = false;
+        self.last = Some(now);
+        Some(data)
+    }
+}
+
+/// The keyframe descriptors not yet broadcast (the Scan Context baseline).
+#[derive(Clone, Debug, Default)]
+pub struct DescriptorBroadcast {
+    pending: Vec<WireDescriptor>,
+    last: Option<Stamp>,
+}
+
+impl DescriptorBroadcast {
+    pub fn push(&mut self, descriptor: WireDescriptor) {
+        self.pending.push(descriptor);
+    }
+
+    /// The envelopes' contents due now: every pending descriptor, in chunks of `max_ids`, at
+    /// most once per `object_data_interval_s`.
+    pub fn due(&mut self, now: Stamp, config: &CommsConfig) -> Vec<KeyframeDescriptors> {
+        let due = self.last.is_none_or(|t| now - t >= config.object_data_interval_s);
+        if self.pending.is_empty() || !due {
+            return Vec::new();
+        }
+        self.last = Some(now);
+        let pending = std::mem::take(&mut self.pending);
+        pending.chunks(config.limits.max_ids.max(1)).map(|c| KeyframeDescriptors { descriptors: c.to_vec() }).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sgm_model::matching::GraphObject;
+    use sgm_model::scene_graph::LabelId;
+
+    fn objects(xs: &[f64]) -> LocalObjects {
+        LocalObjects {
+            objects: xs
+                .iter()
+                .enumerate()
+                .map(|(k, x)| GraphObject {
+                    id: ObjectId(k as u32),
+                    label: LabelId(2),
+                    centroid: Point3::new(*x, 0.0, 0.0),
+                    size: None,
+                })
+                .collect(),
+            ..LocalObjects::default()
+        }
+    }
+
+    fn config() -> CommsConfig {
+        CommsConfig {
+            object_data_interval_s: 2.0,
+            object_data_refresh_s: 30.0,
+            significant_move_m: 0.5,
+            ..CommsConfig::default()
+        }
+    }
+
+    /// Rate-limited, sent on significant change only, again when a neighbour needs it or after
+    /// the refresh, its revision new only when the map changed (and at least the clock).
+    #[test]
+    fn object_data_goes_out_on_change_repeat_or_refresh() {
+        let c = config();
+        let mut b = ObjectBroadcast::default();
+        assert!(b.due(0.0, &c).is_none(), "nothing to send yet");
+        b.objects(objects(&[1.0, 5.0]), c.significant_move_m);
+        let first = b.due(100.0, &c).unwrap();
+        assert_eq!((first.revision, first.objects.len()), (100, 2));
+        b.objects(objects(&[1.2, 5.0]), c.significant_move_m);
+        assert!(b.due(103.0, &c).is_none(), "a small move is not significant");
+        b.objects(objects(&[1.2, 6.0]), c.significant_move_m);
+        assert!(b.due(101.0, &c).is_none(), "rate limit");
+        assert_eq!(b.due(103.0, &c).unwrap().revision, 103);
+        b.repeat();
+        assert_eq!(b.due(105.5, &c).unwrap().revision, 103, "repeated under its revision");
+        assert!(b.due(120.0, &c).is_none());
+        assert_eq!(b.due(135.5, &c).unwrap().revision, 103, "refreshed");
+        assert!(ObjectBroadcast::disabled().due(0.0, &c).is_none());
+    }
+
+    #[test]
+    fn descriptors_go_out_in_chunks_at_the_same_pace() {
+        let mut c = config();
+        c.limits.max_ids = 2;
+        let mut d = DescriptorBroadcast::default();
+        let descriptor = |k| {
+            WireDescriptor::quantise(
+                sgm_model::scene_graph::KeyframeId(k),
+                &sgm_model::geometry::Pose3::identity(),
+                &sgm_model::matching::scan_context::ScanContext { rings: 2, sectors: 3, cells: vec![0.5; 6] },
+            )
+        };
+        for k in 0..3 {
+            d.push(descriptor(k));
+        }
+        assert_eq!(d.due(0.0, &c).iter().map(|m| m.descriptors.len()).collect::<Vec<_>>(), [2, 1]);
+        d.push(descriptor(3));
+        assert!(d.due(1.0, &c).is_empty(), "rate limit");
+        assert_eq!(d.due(2.0, &c).len(), 1);
+    }
+}
