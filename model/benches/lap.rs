@@ -4,7 +4,7 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sgm_model::matching::lap::{solve, CostMatrix};
+use sgm_model::spatial::lap::{solve, CostMatrix};
 use std::hint::black_box;
 
 fn lap(c: &mut Criterion) {

@@ -11,6 +11,8 @@
 //! * **full 3-D** (Umeyama 1991 without scale, i.e. weighted Kabsch): H = Σ w_k b_k a_kᵀ,
 //!   H = U Σ Vᵀ, R = V diag(1, 1, det(V Uᵀ)) Uᵀ, t = p̄ − R q̄.
 
+pub mod lie;
+
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 /// A rigid transform in 3-D. Name values `a_from_b`.

@@ -5,11 +5,19 @@
 //! byte buffers. The crate layering and naming follow `DESIGN.md`: transforms are `a_from_b`, the
 //! paper's α is `local`, β is `remote`.
 //!
-//! - [`geometry`]: rigid transforms and weighted rigid fits (planar and 3D).
+//! The modules, lowest first; each uses only those above it in this list (the book's
+//! architecture chapter draws it):
+//! - [`geometry`]: rigid transforms, weighted rigid fits (planar and 3D), and SE(2)/SE(3) as Lie
+//!   groups (`geometry::lie`).
+//! - [`spatial`]: kd-tree, voxel grid and linear assignment, for the layers below.
 //! - [`scene_graph`]: keyframe, object and semantic layers with their cross-layer links (§IV-A).
-//! - [`matching`]: object-graph matching and transform estimation (§IV-B, §IV-C, eqs. 5–8).
-//! - [`eval`]: metrics and the paper's synthetic matching protocol (§V-A).
-//! - [`snapshot`]: the versioned, checksummed frame of map snapshots on disk.
+//! - [`perception`]: segmentation to objects, keyframes, the object tracker, ICP (§IV-A, §IV-E).
+//! - [`matching`]: object-graph matching and transform estimation (§IV-B, §IV-C, eqs. 5–8), and
+//!   the keyframe alignment that confirms it (§IV-D).
+//! - [`optim`]: the pose-graph solver on faer (§IV-F); [`wire`]: the radio protocol;
+//!   [`eval`]: metrics and the paper's synthetic matching protocol (§V-A); [`pcd`], [`snapshot`]:
+//!   file formats.
+//!
 
 pub mod eval;
 pub mod geometry;
@@ -19,4 +27,5 @@ pub mod pcd;
 pub mod perception;
 pub mod scene_graph;
 pub mod snapshot;
+pub mod spatial;
 pub mod wire;

@@ -13,7 +13,6 @@
 use super::affinity::{self, AffinityParams};
 use super::candidates::{candidates, Candidate};
 use super::labels::LabelSimilarity;
-use super::lap::{self, CostMatrix};
 use super::outcome::*;
 use super::significance::log10_nfa_adaptive;
 use super::spectral::principal_eigenvector;
@@ -21,6 +20,7 @@ use super::verification::{max_displacement, Evaluation, Scorer};
 use super::vertex::VertexCompare;
 use super::{MatcherConfig, ObjectGraph};
 use crate::geometry::{fit_rigid, minor_axis_spread, Correspondence, RigidModel};
+use crate::spatial::lap::{self, CostMatrix};
 use nalgebra::Point3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -11,7 +11,6 @@ mod candidates;
 mod config;
 mod graph;
 mod labels;
-pub mod lap;
 mod matcher;
 mod outcome;
 pub mod paper_baseline;

@@ -4,10 +4,10 @@
 //! the minimum eigenvector value, and a planar least-squares transform from every assignment
 //! kept, with no verification. Success needs ≥ 3 assignments.
 
-use super::lap::{self, CostMatrix};
 use super::{LabelSimilarity, ObjectGraph};
 use crate::geometry::{fit_rigid, Correspondence, Pose3, RigidModel};
 use crate::scene_graph::ObjectId;
+use crate::spatial::lap::{self, CostMatrix};
 
 /// Result of the dense paper formulation.
 #[derive(Clone, Debug)]

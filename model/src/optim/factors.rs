@@ -80,7 +80,7 @@ impl<G: Manifold<D>, const D: usize> Prior<G, D> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::optim::lie::{se2_exp, se3_exp, Tangent2, Tangent3};
+    use crate::geometry::lie::{se2_exp, se3_exp, Tangent2, Tangent3};
     use nalgebra::{Isometry2, Isometry3};
     use proptest::prelude::*;
 

@@ -1,7 +1,7 @@
 //! The variables of a pose graph: SE(2) (D = 3) and SE(3) (D = 6) behind one trait, so that
 //! factors and the solver are written once.
 
-use super::lie::*;
+use crate::geometry::lie::*;
 use nalgebra::{Isometry2, Isometry3, SMatrix, SVector};
 
 /// A pose group with a D-dimensional tangent space (GTSAM's chart: T ⊕ ξ = T · Exp(ξ)).

@@ -4,7 +4,6 @@
 pub mod factors;
 pub mod g2o;
 pub mod graph;
-pub mod lie;
 pub mod manifold;
 pub mod marginals;
 pub mod robust;

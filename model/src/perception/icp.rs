@@ -15,10 +15,10 @@
 //! perturbation of `target_from_source`: H_right = Adᵀ H Ad), usable as a between factor.
 
 use super::normals;
-use super::point_tree::PointTree;
-use super::voxel::downsample;
+use crate::geometry::lie::{se3_adjoint, se3_exp, Matrix6, Tangent3};
 use crate::geometry::Pose3;
-use crate::optim::lie::{se3_adjoint, se3_exp, Matrix6, Tangent3};
+use crate::spatial::point_tree::PointTree;
+use crate::spatial::voxel::downsample;
 use nalgebra::{Matrix3, Point3, Vector3};
 
 /// Error metric.

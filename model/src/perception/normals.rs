@@ -2,7 +2,7 @@
 //! eigenvector of the smallest eigenvalue of their covariance. Points with fewer than 3
 //! neighbours, or on a line, get no normal.
 
-use super::point_tree::PointTree;
+use crate::spatial::point_tree::PointTree;
 use nalgebra::{Matrix3, Point3, Vector3};
 
 /// Normal of every point (`None` where undetermined) from its `k` nearest neighbours within

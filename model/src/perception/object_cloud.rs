@@ -2,9 +2,9 @@
 //! the keyframes that observed it, inside its box grown by a margin, in the world frame, voxel
 //! downsampled.
 
-use super::voxel::downsample;
 use crate::geometry::Pose3;
 use crate::scene_graph::LabelId;
+use crate::spatial::voxel::downsample;
 use nalgebra::{Point3, Vector3};
 
 /// Object clouds are built from at most this many keyframes that saw the object — the latest:

@@ -13,8 +13,8 @@
 //! the ground alone cannot reveal, scores low.
 
 use crate::geometry::Pose3;
-use crate::perception::point_tree::PointTree;
-use crate::perception::voxel::downsample;
+use crate::spatial::point_tree::PointTree;
+use crate::spatial::voxel::downsample;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 

@@ -7,8 +7,8 @@
 //! become new objects; an object is confirmed after `confirm_after` sightings.
 
 use super::clustering::ObjectCandidate;
-use crate::matching::lap::{self, CostMatrix};
 use crate::scene_graph::{KeyframeId, ObjectId, SceneGraph, SceneGraphError};
+use crate::spatial::lap::{self, CostMatrix};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 

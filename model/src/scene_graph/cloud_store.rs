@@ -16,7 +16,7 @@
 //! answers such a request with `RefusalReason::Unknown` ("unknown, or its cloud was evicted").
 
 use super::{KeyframeId, LabelId, SemanticScan};
-use crate::perception::point_tree::PointTree;
+use crate::spatial::point_tree::PointTree;
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
