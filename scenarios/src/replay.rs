@@ -6,13 +6,13 @@
 //! radio model (its range needs positions: from the bags' ground truth when they have it).
 //! The report is the scenarios' report; trajectory errors need a ground-truth topic.
 
-use crate::report::{series_point, RobotTruth, RunRecord, TruthTrack};
+use crate::record::{RobotTruth, RunOutcome, RunRecord, Timing, TruthTrack};
+use crate::report::series_point;
 use crate::result_bag::ResultBag;
-use crate::runner::RunOutcome;
 use crate::scenario::Scenario;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
 use crate::sim::world::World;
-use crate::team::{RunError, Team, Timing};
+use crate::team::{RunError, Team};
 use indicatif::ProgressBar;
 use serde::Serialize;
 use sgm_actors::transport::InProcessRadio;
@@ -118,7 +118,7 @@ impl BagRobot {
             };
             match &payload {
                 Payload::Cloud(_, scan) => {
-                    let raw = scan.points.len() as u64 * crate::runner::RAW_BYTES_PER_POINT;
+                    let raw = scan.points.len() as u64 * crate::record::RAW_BYTES_PER_POINT;
                     self.raw_bytes += raw;
                     self.raw_max_bytes = self.raw_max_bytes.max(raw);
                 }

@@ -13,7 +13,7 @@
 //! Frames are the `[ros]` section's (`{robot}/odom`, `{robot}/base_link` by default), stamps
 //! the mission's clock from `epoch`.
 
-use crate::report::Observation;
+use crate::observation::Observation;
 use sgm_bridge::bag::writer::BagWriter;
 use sgm_bridge::config::RosConfig;
 use sgm_bridge::convert::cloud::voxels_msg;

@@ -9,7 +9,10 @@
 //! crashes or `persistence.directory` is set.
 
 use crate::bag_out::{BagRecorder, RecordedFrame};
-use crate::report::{series_point, Observation, RobotTruth, RunRecord, TruthTrack};
+use crate::observation::Observation;
+use crate::record::Timing;
+use crate::record::{RobotTruth, RunOutcome, RunRecord, TruthTrack, RAW_BYTES_PER_POINT};
+use crate::report::series_point;
 use crate::result_bag::ResultBag;
 use crate::scenario::Scenario;
 use crate::sim::camera::{camera_from_body, camera_model, mislabels, noisy_labels, render, segmenter_ids};
@@ -18,27 +21,18 @@ use crate::sim::lidar::Lidar;
 use crate::sim::odometry::Odometry;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
 use crate::sim::trajectory::Route;
-use crate::sim::world::{generate, World, NO_LABEL};
+use crate::sim::world::{generate, NO_LABEL};
+pub use crate::team::RunError;
 use crate::team::Team;
-pub use crate::team::{RunError, Timing};
 use indicatif::ProgressBar;
 use nalgebra::Point2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_actors::transport::InProcessRadio;
-use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, LabelId, RobotId, SceneGraph};
+use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, LabelId, RobotId};
 use std::path::Path;
 use std::time::{Duration, Instant};
-
-/// A finished run: everything the report is made of.
-pub struct RunOutcome {
-    pub record: RunRecord,
-    pub world: World,
-    /// Each robot's final map (with its clouds), for the merged semantic map.
-    pub maps: Vec<SceneGraph>,
-    pub timing: Timing,
-}
 
 struct SimRobot {
     name: String,
@@ -50,10 +44,6 @@ struct SimRobot {
     raw_bytes: u64,
     raw_max_bytes: u64,
 }
-
-/// Bytes per point of a raw PointCloud2 (x, y, z, label as four 32-bit fields): what sending
-/// every scan would cost, the paper's "point-cloud raw" row.
-pub const RAW_BYTES_PER_POINT: u64 = 16;
 
 /// Runs `scenario` to its end. Must be called inside an actix system (`actix_rt::System`).
 pub async fn run(scenario: &Scenario, progress: Option<&ProgressBar>) -> Result<RunOutcome, RunError> {

@@ -7,7 +7,8 @@
 //! disk every `persistence.interval_s`; [`Team::crash`] takes a robot down with everything it
 //! held, and its next frame starts it again from its latest snapshot on disk.
 
-use crate::report::Observation;
+use crate::observation::Observation;
+use crate::record::Restart;
 use sgm_actors::clock::Clock;
 use sgm_actors::comms::GetCommsStatus;
 use sgm_actors::config::{PersistenceConfig, RobotConfig};
@@ -19,43 +20,8 @@ use sgm_actors::snapshot::SnapshotStore;
 use sgm_actors::supervisor::{start_robot_restored, RobotHandle};
 use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
 use sgm_actors::transport::InProcessRadio;
-use sgm_model::scene_graph::{KeyframeId, SceneGraph, Stamp};
-use std::collections::BTreeSet;
+use sgm_model::scene_graph::{SceneGraph, Stamp};
 use std::path::Path;
-use std::time::{Duration, Instant};
-
-/// Wall-clock facts of a run: kept out of the report so that the report is deterministic.
-#[derive(Clone, Debug, Default, serde::Serialize)]
-pub struct Timing {
-    pub wall_s: f64,
-    pub sim_s: f64,
-    pub realtime_factor: f64,
-    /// Time in handlers per actor kind, s (one thread: CPU time).
-    pub actor_busy_s: std::collections::BTreeMap<String, f64>,
-    /// Time producing sensor frames (simulating, or reading and decoding bags), s.
-    pub simulation_s: f64,
-    /// Resident memory at every observation, and its peak over the run, MiB (Linux).
-    pub memory: Vec<crate::memory::MemorySample>,
-    pub peak_resident_mb: Option<f64>,
-}
-
-impl Timing {
-    pub fn measure(wall: Instant, sim_s: f64, simulation: Duration, memory: Vec<crate::memory::MemorySample>) -> Self {
-        let wall_s = wall.elapsed().as_secs_f64();
-        Self {
-            memory,
-            peak_resident_mb: crate::memory::resident_mb().1,
-            wall_s,
-            sim_s,
-            realtime_factor: sim_s / wall_s.max(1e-9),
-            actor_busy_s: sgm_actors::containment::busy_time()
-                .into_iter()
-                .map(|(k, v)| (k.to_string(), v.as_secs_f64()))
-                .collect(),
-            simulation_s: simulation.as_secs_f64(),
-        }
-    }
-}
 
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
@@ -86,24 +52,6 @@ struct Member {
 struct Crash {
     at: Stamp,
     keyframes: usize,
-}
-
-/// One crash and restart of a robot, and what its snapshot carried over.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct Restart {
-    pub robot: String,
-    pub crashed_at: Stamp,
-    pub restarted_at: Stamp,
-    /// When the snapshot it continued from was taken (`None`: there was none, it started empty).
-    pub snapshot_taken_at: Option<Stamp>,
-    /// Keyframes in the map when it crashed.
-    pub keyframes_at_crash: usize,
-    /// Keyframes in the snapshot (the rest, made after it, died with the robot).
-    pub keyframes_in_snapshot: usize,
-    pub objects_in_snapshot: usize,
-    /// The snapshot's keyframe ids, to check that the final map still holds every one.
-    #[serde(skip)]
-    pub snapshot_keyframes: BTreeSet<KeyframeId>,
 }
 
 pub struct Team {

@@ -5,8 +5,9 @@
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
+use sgm_scenarios::record::Timing;
 use sgm_scenarios::report::{self, Report};
-use sgm_scenarios::runner::{run_with, RunOutputs, Timing};
+use sgm_scenarios::runner::{run_with, RunOutputs};
 use sgm_scenarios::scenario::Scenario;
 use std::path::{Path, PathBuf};
 

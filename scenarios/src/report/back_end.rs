@@ -2,7 +2,7 @@
 //! robots' Optimisers hold and reject, and how many of the false factors injected
 //! (`[[false_factors]]`) are among the rejected.
 
-use super::RunRecord;
+use crate::record::RunRecord;
 use serde::Serialize;
 use sgm_model::scene_graph::RobotId;
 use std::collections::BTreeSet;

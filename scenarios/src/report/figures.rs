@@ -5,7 +5,8 @@
 //! `local_from_remote`, merged into one, and aligned once. A robot the reference has not aligned
 //! cannot be merged: it is listed in `team_ate_robots` only once it is.
 
-use super::{Observation, RobotTruth, RunRecord};
+use crate::observation::Observation;
+use crate::record::{PairError, RobotTruth, RunRecord, SeriesPoint};
 use crate::sim::radio::RadioStats;
 use nalgebra::Point3;
 use serde::Serialize;
@@ -63,25 +64,6 @@ pub struct MessageRow {
     pub bytes_total: u64,
     pub bytes_mean: f64,
     pub bytes_max: u64,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct PairError {
-    pub local: String,
-    pub remote: String,
-    pub translation_error_m: f64,
-    pub rotation_error_deg: f64,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct SeriesPoint {
-    pub t: f64,
-    pub team_ate_rmse_m: Option<f64>,
-    /// Bytes sent by the whole team so far.
-    pub bytes_total: u64,
-    /// Bytes of clouds held by the whole team's maps (`tracker.cloud_store`).
-    pub cloud_bytes: u64,
-    pub alignments: Vec<PairError>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]

@@ -4,7 +4,8 @@
 //! given up + pending`, each id counted once); for each crash, what the snapshot carried over
 //! and whether the final map still holds every keyframe of it.
 
-use super::{Observation, RunRecord};
+use crate::observation::Observation;
+use crate::record::RunRecord;
 use serde::Serialize;
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]

@@ -3,7 +3,7 @@
 //! the reference robot's world, voxel-downsampled to 10 cm (one label per voxel: the first).
 
 use super::figures::reference_from;
-use crate::runner::RunOutcome;
+use crate::record::RunOutcome;
 use sgm_model::pcd::{write_pcd, DataFormat, FieldKind, PcdField, PointCloud};
 use sgm_model::scene_graph::LabelledVoxels;
 

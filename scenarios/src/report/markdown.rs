@@ -1,7 +1,7 @@
 //! `report.md`: the one-page summary, with the message table in the paper's Table 4 layout.
 
 use super::{MessageRow, Report};
-use crate::runner::Timing;
+use crate::record::Timing;
 use std::fmt::Write as _;
 
 fn metres(v: Option<f64>) -> String {

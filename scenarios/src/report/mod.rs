@@ -8,64 +8,13 @@ pub mod ledger;
 mod map_cloud;
 mod markdown;
 pub mod plots;
-mod truth;
 mod tum;
 
 pub(crate) use figures::reference_from;
-pub use figures::{compute, series_point, AlignmentReport, MessageRow, Report, RobotReport, SeriesPoint};
-pub use truth::TruthTrack;
+pub use figures::{compute, series_point, AlignmentReport, MessageRow, Report, RobotReport};
 
-use crate::runner::{RunOutcome, Timing};
-use crate::sim::radio::RadioStats;
-use sgm_actors::comms::CommsStatus;
-use sgm_actors::matcher::NeighbourStatus;
-use sgm_actors::tracker::MapSummary;
-use sgm_model::geometry::Pose3;
+use crate::record::{RunOutcome, Timing};
 use std::path::Path;
-
-/// One robot's truth: its trajectory and where its world frame is.
-#[derive(Clone, Debug)]
-pub struct RobotTruth {
-    pub name: String,
-    pub truth: TruthTrack,
-    /// p_true = truth_from_world · p_world.
-    pub truth_from_world: Pose3,
-    pub frames: u64,
-    pub raw_bytes: u64,
-    /// Largest single raw frame, bytes.
-    pub raw_max_bytes: u64,
-}
-
-/// What every robot knew at one time (`None`: not switched on yet).
-#[derive(Clone, Debug, Default)]
-pub struct Observation {
-    pub t: f64,
-    pub maps: Vec<Option<(MapSummary, Vec<NeighbourStatus>, CommsStatus)>>,
-}
-
-/// Everything the runner recorded.
-#[derive(Clone, Debug)]
-pub struct RunRecord {
-    pub scenario: String,
-    pub seed: u64,
-    pub sim_s: f64,
-    pub robots: Vec<RobotTruth>,
-    /// The series' points, one per observation (`report_interval_s`), in time order.
-    pub series: Vec<SeriesPoint>,
-    /// The last observation (at the end of the run), in full.
-    pub last: Observation,
-    pub radio: RadioStats,
-    /// The world's objects: (class id, centre).
-    pub world_objects: Vec<(u16, nalgebra::Point3<f64>)>,
-    /// Crashes and restarts from snapshots.
-    pub restarts: Vec<crate::team::Restart>,
-    /// Each robot's keyframe ids at the end (to show that no restored keyframe was lost).
-    pub final_keyframes: Vec<std::collections::BTreeSet<sgm_model::scene_graph::KeyframeId>>,
-    /// False inter-robot factors injected (`[[false_factors]]`).
-    pub false_factors: Vec<crate::sim::false_factors::InjectedFactor>,
-    /// Each robot's pose graph at the end (`None`: not running).
-    pub optimisers: Vec<Option<sgm_actors::optimiser::OptimiserStatus>>,
-}
 
 #[derive(Debug, thiserror::Error)]
 #[error("{path}: {message}")]

@@ -5,7 +5,7 @@
 //! (`fonts-dejavu-core`); without it the plots are drawn without text.
 
 use super::Report;
-use crate::runner::RunOutcome;
+use crate::record::RunOutcome;
 use plotters::prelude::*;
 use std::path::Path;
 use std::sync::OnceLock;

@@ -5,7 +5,7 @@
 //! to keep them apart; the ATE is unchanged.
 
 use super::figures::{reference_from, trajectory};
-use super::RunRecord;
+use crate::record::RunRecord;
 use sgm_model::geometry::Pose3;
 use std::fmt::Write as _;
 

@@ -6,6 +6,7 @@
 //! documents every key with its default and unit.
 
 pub mod library;
+pub mod shapes;
 mod validate;
 
 use serde::{Deserialize, Serialize};

@@ -1,7 +1,7 @@
 //! Range checks of a scenario; each failure is (key, value, allowed).
 
 use super::Scenario;
-use crate::sim::shapes::shape_of;
+use crate::scenario::shapes::shape_of;
 
 type Failure = (String, String, String);
 
@@ -42,7 +42,7 @@ impl Scenario {
         for (name, count) in &w.objects {
             let key = format!("world.objects.{name}");
             check(self.fusion.classes.iter().any(|c| &c.name == name), &key, count, "a class of [fusion].classes")?;
-            check(shape_of(name).is_some(), &key, count, crate::sim::shapes::KNOWN_SHAPES)?;
+            check(shape_of(name).is_some(), &key, count, crate::scenario::shapes::KNOWN_SHAPES)?;
             check(*count <= 100_000, &key, count, "≤ 100000")?;
         }
         check(within(w.min_spacing_m, 0.0, 100.0), "world.min_spacing_m", w.min_spacing_m, "0 ≤ x ≤ 100 m")?;

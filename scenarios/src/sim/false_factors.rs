@@ -10,7 +10,7 @@
 //! so the back end must tell the lie from the factor alone. Injection waits until `robot` has
 //! aligned `neighbour` (before that there is nothing in its graph to corrupt).
 
-use crate::report::Observation;
+use crate::observation::Observation;
 use crate::scenario::FalseFactorSpec;
 use nalgebra::{Matrix6, Vector3, Vector6};
 use rand::{Rng, SeedableRng};

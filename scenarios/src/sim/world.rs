@@ -1,8 +1,9 @@
 //! The world generator (seeded): ground, buildings or rooms, and objects of the scenario's
 //! classes placed with a minimum spacing, away from the robots' routes and from walls.
 
+use crate::scenario::shapes::{shape_of, Part};
 use crate::scenario::{WorldKind, WorldSpec};
-use crate::sim::shapes::{place, shape_of, Primitive, Solid};
+use crate::sim::shapes::{place, Primitive, Solid};
 use nalgebra::{Point2, Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -181,8 +182,8 @@ pub fn generate(spec: &WorldSpec, classes: &[ClassSpec], routes: &[Vec<Point2<f6
                 let top = shape
                     .iter()
                     .map(|part| match part {
-                        crate::sim::shapes::Part::Box { centre, half } => centre[2] + half[2],
-                        crate::sim::shapes::Part::Cylinder { z1, .. } => *z1,
+                        Part::Box { centre, half } => centre[2] + half[2],
+                        Part::Cylinder { z1, .. } => *z1,
                     })
                     .fold(0.0, f64::max);
                 world.objects.push(WorldObject {

@@ -1,0 +1,38 @@
+//! Wall-clock facts of a run, kept apart from the report so that the report stays
+//! deterministic (`timing.json`).
+
+use crate::memory::{resident_mb, MemorySample};
+use std::time::{Duration, Instant};
+
+/// Wall-clock facts of a run: kept out of the report so that the report is deterministic.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct Timing {
+    pub wall_s: f64,
+    pub sim_s: f64,
+    pub realtime_factor: f64,
+    /// Time in handlers per actor kind, s (one thread: CPU time).
+    pub actor_busy_s: std::collections::BTreeMap<String, f64>,
+    /// Time producing sensor frames (simulating, or reading and decoding bags), s.
+    pub simulation_s: f64,
+    /// Resident memory at every observation, and its peak over the run, MiB (Linux).
+    pub memory: Vec<MemorySample>,
+    pub peak_resident_mb: Option<f64>,
+}
+
+impl Timing {
+    pub fn measure(wall: Instant, sim_s: f64, simulation: Duration, memory: Vec<MemorySample>) -> Self {
+        let wall_s = wall.elapsed().as_secs_f64();
+        Self {
+            memory,
+            peak_resident_mb: resident_mb().1,
+            wall_s,
+            sim_s,
+            realtime_factor: sim_s / wall_s.max(1e-9),
+            actor_busy_s: sgm_actors::containment::busy_time()
+                .into_iter()
+                .map(|(k, v)| (k.to_string(), v.as_secs_f64()))
+                .collect(),
+            simulation_s: simulation.as_secs_f64(),
+        }
+    }
+}
