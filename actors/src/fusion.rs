@@ -140,7 +140,7 @@ impl Handler<SensorFrame> for Fusion {
             let candidates = cluster(&points, &clustered, &self.clustering);
             self.tracker.do_send(LabelledScan {
                 stamp: frame.stamp,
-                world_from_body: frame.world_from_body,
+                odom_from_body: frame.odom_from_body,
                 points_in_body: points,
                 labels: kept,
                 candidates,

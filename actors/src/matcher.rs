@@ -31,7 +31,7 @@ use sgm_model::perception::icp::{register, IcpConfig};
 use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS};
 use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, SemanticScan, Stamp};
 use sgm_model::wire::cloud_codec;
-use sgm_model::wire::messages::{ObjectData, RefusalReason};
+use sgm_model::wire::messages::{KeyframeRefusalReason, ObjectData};
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
@@ -105,7 +105,7 @@ struct NeighbourEntry {
     /// the object pairs).
     place_round: Option<(PlaceCandidate, BTreeSet<KeyframeId>)>,
     /// Comms reported the link down: nothing is matched, requested or retried until it is back.
-    link_down: bool,
+    link_up: bool,
     /// A keyframe of the current round was given up on (lost, not refused): too few factors
     /// then say nothing against the match.
     round_incomplete: bool,
@@ -228,7 +228,7 @@ impl Matcher {
             last_attempt: None,
             places: PlaceCandidates::default(),
             place_round: None,
-            link_down: false,
+            link_up: true,
             round_incomplete: false,
             match_again: false,
         })
@@ -260,7 +260,7 @@ impl Matcher {
         let Some(data) = &entry.objects else { return };
         let waiting = matches!(entry.protocol, Some(Protocol::ObjectsReceived(_)));
         let due = entry.last_attempt.is_none_or(|t| now - t >= self.config.match_interval_s);
-        if !waiting || !due || entry.link_down || self.config.association != Association::Objects {
+        if !waiting || !due || !entry.link_up || self.config.association != Association::Objects {
             return;
         }
         let remote_objects: Vec<GraphObject> = data
@@ -344,7 +344,7 @@ impl Matcher {
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
         let waiting = matches!(entry.protocol, Some(Protocol::ObjectsReceived(_)));
         let due = entry.last_attempt.is_none_or(|t| now - t >= self.config.match_interval_s);
-        if !waiting || !due || entry.link_down {
+        if !waiting || !due || !entry.link_up {
             return;
         }
         entry.last_attempt = Some(now);
@@ -692,7 +692,7 @@ impl Handler<KeyframesUnavailable> for Matcher {
         contained(ctx, "matcher", || {
             // Busy: given up after every retry, or refused for load; the keyframe was not
             // shown to be absent.
-            if msg.reason == RefusalReason::Busy {
+            if msg.reason == KeyframeRefusalReason::Busy {
                 self.entry(msg.robot).round_incomplete = true;
             }
             for id in msg.keyframes {
@@ -711,13 +711,13 @@ impl Handler<Tick> for Matcher {
             for robot in robots {
                 let Some(entry) = self.neighbours.get_mut(&robot) else { continue };
                 let Some(Protocol::Matched(mut n)) = entry.protocol.clone() else { continue };
-                if entry.link_down || !n.state.wait.expired(msg.now) {
+                if !entry.link_up || !n.state.wait.expired(msg.now) {
                     continue;
                 }
                 // Comms reports the link down after `link_timeout_s` of silence; until then the
                 // neighbour counts as heard, and a lost cloud response is asked for again at
                 // the same pace. (While it is down nothing is retried: see above.)
-                match n.state.wait.retry(msg.now, &self.retry, !entry.link_down) {
+                match n.state.wait.retry(msg.now, &self.retry, entry.link_up) {
                     Some(next) => {
                         n.state.wait = next;
                         entry.protocol = Some(n.clone().into());
@@ -745,7 +745,7 @@ impl Handler<LinkChanged> for Matcher {
             let now = self.clock.now();
             let retry = self.retry.clone();
             let entry = self.entry(msg.robot);
-            entry.link_down = !msg.up;
+            entry.link_up = msg.up;
             if !msg.up {
                 return;
             }

@@ -9,7 +9,7 @@ use sgm_model::matching::GraphObject;
 use sgm_model::perception::clustering::ObjectCandidate;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
 use sgm_model::scene_graph::{Keyframe, KeyframeEdge, KeyframeId, LabelId, ObjectId, RobotId, Stamp};
-use sgm_model::wire::messages::{ObjectCloud, ObjectData, RefusalReason};
+use sgm_model::wire::messages::{KeyframeRefusalReason, ObjectCloud, ObjectData};
 use sgm_model::wire::Message as WireMessage;
 use std::collections::BTreeMap;
 
@@ -23,12 +23,13 @@ pub enum FrameLabels {
 }
 
 /// One synchronised sensor frame: a LiDAR scan in the body frame, its labels, and the
-/// odometry pose of the body in the robot's world frame.
+/// odometry pose of the body (`odom_from_body`: the odometry's own estimate in the robot's
+/// world frame, before any optimisation; a keyframe's optimised pose is `world_from_body`).
 #[derive(Message, Clone, Debug)]
 #[rtype(result = "()")]
 pub struct SensorFrame {
     pub stamp: Stamp,
-    pub world_from_body: Pose3,
+    pub odom_from_body: Pose3,
     pub points_in_body: Vec<Point3<f64>>,
     pub labels: FrameLabels,
 }
@@ -38,7 +39,8 @@ pub struct SensorFrame {
 #[rtype(result = "()")]
 pub struct LabelledScan {
     pub stamp: Stamp,
-    pub world_from_body: Pose3,
+    /// The frame's odometry pose (see [`SensorFrame`]).
+    pub odom_from_body: Pose3,
     pub points_in_body: Vec<Point3<f64>>,
     pub labels: Vec<Option<LabelId>>,
     pub candidates: Vec<ObjectCandidate>,
@@ -122,7 +124,7 @@ pub struct NeighbourKeyframe {
 pub struct KeyframesUnavailable {
     pub robot: RobotId,
     pub keyframes: Vec<KeyframeId>,
-    pub reason: RefusalReason,
+    pub reason: KeyframeRefusalReason,
 }
 
 /// Comms → Matcher: a neighbour fell silent for `comms.link_timeout_s` (`up: false`), or was

@@ -24,11 +24,11 @@ impl Sensor {
 
     fn check(&self, frame: &SensorFrame) -> Result<(), &'static str> {
         let pose_finite = frame
-            .world_from_body
+            .odom_from_body
             .translation
             .vector
             .iter()
-            .chain(frame.world_from_body.rotation.coords.iter())
+            .chain(frame.odom_from_body.rotation.coords.iter())
             .all(|v| v.is_finite());
         if !frame.stamp.is_finite() || !pose_finite {
             return Err("non-finite stamp or pose");

@@ -187,7 +187,7 @@ mod tests {
     use super::*;
     use sgm_model::geometry::Pose3;
     use sgm_model::optim::graph::Graph3;
-    use sgm_model::perception::tracker::Tracker as ObjectTracker;
+    use sgm_model::perception::tracker::ObjectTracker;
     use sgm_model::scene_graph::{Keyframe, KeyframeId, SceneGraph};
 
     fn snapshot(name: &str, keyframes: u32) -> RobotSnapshot {

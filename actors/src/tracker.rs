@@ -15,15 +15,15 @@ use sgm_model::perception::classes::ClassTable;
 use sgm_model::perception::keyframes::is_keyframe;
 use sgm_model::perception::loop_closure;
 use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS, UNLABELLED};
-use sgm_model::perception::tracker::Tracker as ObjectTracker;
+use sgm_model::perception::tracker::ObjectTracker;
 use sgm_model::scene_graph::{
     CloudStoreStats, Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, ObjectId, RobotId, SceneGraph,
     SemanticScan,
 };
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{
-    expand_covariance, pack_covariance, KeyframeRefusal, KeyframeResponse, ObjectCloud, ObjectCloudResponse,
-    RefusalReason, WirePose,
+    expand_covariance, pack_covariance, KeyframeRefusal, KeyframeRefusalReason, KeyframeResponse, ObjectCloud,
+    ObjectCloudResponse, WirePose,
 };
 use sgm_model::wire::Message as WireMessage;
 use std::collections::BTreeMap;
@@ -185,9 +185,9 @@ impl Tracker {
     fn add_keyframe(&mut self, scan: &LabelledScan) -> Result<KeyframeId, String> {
         let id = KeyframeId(self.next_keyframe);
         let (world_from_body, odometry_edge) = match self.last_odometry {
-            None => (scan.world_from_body, None),
+            None => (scan.odom_from_body, None),
             Some((previous, odometry)) => {
-                let increment = odometry.inverse() * scan.world_from_body;
+                let increment = odometry.inverse() * scan.odom_from_body;
                 let optimised = self.graph.keyframe(previous).map(|k| k.world_from_body).unwrap_or(odometry);
                 let edge = KeyframeEdge {
                     kind: KeyframeEdgeKind::Odometry,
@@ -201,7 +201,7 @@ impl Tracker {
         };
         self.graph.add_keyframe(Keyframe { id, stamp: scan.stamp, world_from_body }).map_err(|e| e.to_string())?;
         self.next_keyframe += 1;
-        self.last_odometry = Some((id, scan.world_from_body));
+        self.last_odometry = Some((id, scan.odom_from_body));
         let semantic = SemanticScan {
             points_in_body: scan.points_in_body.iter().map(|p| p.cast::<f32>()).collect(),
             labels: scan.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect(),
@@ -319,7 +319,7 @@ impl Handler<LabelledScan> for Tracker {
     fn handle(&mut self, scan: LabelledScan, ctx: &mut Context<Self>) {
         contained(ctx, "tracker", || {
             let last = self.last_odometry.map(|(_, p)| p);
-            if is_keyframe(last.as_ref(), &scan.world_from_body, &self.config.keyframes) {
+            if is_keyframe(last.as_ref(), &scan.odom_from_body, &self.config.keyframes) {
                 match self.add_keyframe(&scan) {
                     Ok(_) => self.publish_objects(),
                     Err(e) => tracing::warn!(robot = %self.robot, stamp = scan.stamp, "keyframe not added: {e}"),
@@ -366,7 +366,7 @@ impl Handler<Serve> for Tracker {
                         }
                     }
                     if !unknown.is_empty() {
-                        let refusal = KeyframeRefusal { keyframes: unknown, reason: RefusalReason::Unknown };
+                        let refusal = KeyframeRefusal { keyframes: unknown, reason: KeyframeRefusalReason::Unknown };
                         links
                             .comms_outgoing
                             .do_send(Outgoing { to: robot, message: WireMessage::KeyframeRefusal(refusal) });

@@ -15,7 +15,7 @@ use sgm_actors::transport::{InProcessRadio, PerfectLinks, RadioModel};
 use sgm_model::geometry::Pose3;
 use sgm_model::scene_graph::{KeyframeId, RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
-use sgm_model::wire::messages::{pack_covariance, KeyframeRefusal, KeyframeResponse, RefusalReason, WirePose};
+use sgm_model::wire::messages::{pack_covariance, KeyframeRefusal, KeyframeRefusalReason, KeyframeResponse, WirePose};
 use sgm_model::wire::Message as WireMessage;
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Arc, Mutex};
@@ -57,7 +57,7 @@ impl RadioModel for PartitionedLinks {
 #[derive(Default)]
 struct Heard {
     served: BTreeMap<KeyframeId, usize>,
-    reported: BTreeMap<KeyframeId, RefusalReason>,
+    reported: BTreeMap<KeyframeId, KeyframeRefusalReason>,
     /// Descriptor deliveries: (sender, keyframe ids).
     descriptors: Vec<(RobotId, Vec<KeyframeId>)>,
     links: Vec<LinkChanged>,
@@ -132,7 +132,7 @@ impl Handler<Serve> for Map {
             self.comms.do_send(Outgoing { to: robot, message });
         }
         if !unknown.is_empty() {
-            let refusal = KeyframeRefusal { keyframes: unknown, reason: RefusalReason::Unknown };
+            let refusal = KeyframeRefusal { keyframes: unknown, reason: KeyframeRefusalReason::Unknown };
             self.comms.do_send(Outgoing { to: robot, message: WireMessage::KeyframeRefusal(refusal) });
         }
     }
@@ -233,7 +233,7 @@ async fn a_burst_over_perfect_links_is_bounded_served_once_and_the_rest_reported
             assert_eq!(o.heard.served.get(id), Some(&1), "{id:?}");
             assert!(!o.heard.reported.contains_key(id), "{id:?}");
         } else {
-            assert_eq!(o.heard.reported.get(id), Some(&RefusalReason::Unknown), "{id:?}");
+            assert_eq!(o.heard.reported.get(id), Some(&KeyframeRefusalReason::Unknown), "{id:?}");
         }
     }
     assert_eq!(o.heard.served.len() + o.heard.reported.len(), o.requested.len());

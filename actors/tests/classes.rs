@@ -83,7 +83,7 @@ fn fusion_maps_ade_ids_and_counts_an_unknown_one() {
         }
         let frame = SensorFrame {
             stamp: 1.0,
-            world_from_body: Pose3::identity(),
+            odom_from_body: Pose3::identity(),
             points_in_body: points,
             labels: FrameLabels::PerPoint(labels),
         };

@@ -54,7 +54,7 @@ async fn map_of_a_loop(loop_closure: bool) -> SceneGraph {
         let (points, labels) = scan(&world, &truth, &mut rng);
         robot.sensor.do_send(SensorFrame {
             stamp: t,
-            world_from_body: drift * truth,
+            odom_from_body: drift * truth,
             points_in_body: points,
             labels: FrameLabels::PerPoint(labels),
         });

@@ -68,11 +68,11 @@ async fn run_team(paths: Vec<(Vec<Point3<f64>>, Pose3)>, seconds: usize, panic_a
             r.handle.clock.advance_to(t);
             let (p, yaw) = position(&r.waypoints, t * 1.5);
             let truth_from_body = pose_from_yaw_translation(yaw, p.coords);
-            let world_from_body = r.truth_from_world.inverse() * truth_from_body;
+            let odom_from_body = r.truth_from_world.inverse() * truth_from_body;
             let (points, labels) = scan(&world, &truth_from_body, &mut rng);
             r.handle.sensor.do_send(SensorFrame {
                 stamp: t,
-                world_from_body,
+                odom_from_body,
                 points_in_body: points,
                 labels: FrameLabels::PerPoint(labels),
             });
@@ -190,7 +190,7 @@ async fn foreign_replayed_truncated_and_oversized_envelopes_are_refused_and_coun
         let (points, labels) = scan(&world, &pose, &mut rng);
         handle.sensor.do_send(SensorFrame {
             stamp: t,
-            world_from_body: pose,
+            odom_from_body: pose,
             points_in_body: points,
             labels: FrameLabels::PerPoint(labels),
         });

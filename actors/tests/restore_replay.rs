@@ -12,7 +12,7 @@ use sgm_actors::supervisor::{start_robot, start_robot_restored};
 use sgm_actors::transport::{InProcessRadio, PerfectLinks, Transport};
 use sgm_model::scene_graph::{KeyframeId, RobotId};
 use sgm_model::wire::messages::KeyframeRefusal;
-use sgm_model::wire::messages::RefusalReason;
+use sgm_model::wire::messages::KeyframeRefusalReason;
 use sgm_model::wire::{seal, Destination, Envelope, Message, Sequence, WireLimits, PROTOCOL_VERSION};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -35,7 +35,7 @@ fn from_robot_2(counter: u64) -> Vec<u8> {
         sequence: Sequence { incarnation: 0x5EED, counter }.to_bits(),
         message: Message::KeyframeRefusal(KeyframeRefusal {
             keyframes: vec![KeyframeId(0)],
-            reason: RefusalReason::Busy,
+            reason: KeyframeRefusalReason::Busy,
         }),
     };
     seal(&envelope, &key, &WireLimits::default()).unwrap()

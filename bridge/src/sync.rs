@@ -189,9 +189,9 @@ impl Synchroniser {
         self.latest = self.latest.max(t);
     }
 
-    pub fn odometry(&mut self, t: Stamp, world_from_body: Pose3) {
+    pub fn odometry(&mut self, t: Stamp, odom_from_body: Pose3) {
         self.saw(t);
-        if !push_bounded(&mut self.odometry, t, world_from_body, &mut self.counts.overflow) {
+        if !push_bounded(&mut self.odometry, t, odom_from_body, &mut self.counts.overflow) {
             self.counts.out_of_order += 1;
         }
         self.compare_odometry_with_tf();
@@ -457,7 +457,7 @@ impl Synchroniser {
                             *p = body_from_lidar * *p;
                         }
                     }
-                    frames.push(SensorFrame { stamp: t, world_from_body: pose, points_in_body: scan.points, labels });
+                    frames.push(SensorFrame { stamp: t, odom_from_body: pose, points_in_body: scan.points, labels });
                 }
                 Outcome::Wait if !stale => {
                     self.clouds.push_front((t, scan));
@@ -579,9 +579,9 @@ mod tests {
         let frames = s.ready();
         assert_eq!(frames.len(), 2);
         // Halfway: x = 1, yaw = 0.2 (closed form).
-        assert!((frames[0].world_from_body.translation.vector.x - 1.0).abs() < 1e-12);
-        assert!((frames[0].world_from_body.rotation.euler_angles().2 - 0.2).abs() < 1e-12);
-        assert_eq!(frames[1].world_from_body, p1);
+        assert!((frames[0].odom_from_body.translation.vector.x - 1.0).abs() < 1e-12);
+        assert!((frames[0].odom_from_body.rotation.euler_angles().2 - 0.2).abs() < 1e-12);
+        assert_eq!(frames[1].odom_from_body, p1);
         assert!(matches!(&frames[0].labels, FrameLabels::PerPoint(l) if l == &vec![Some(LabelId(3)); 2]));
     }
 

@@ -2,7 +2,7 @@
 //! (50 objects per 60 m × 60 m), noisy, half overlapping.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use sgm_model::eval::matching_protocol::{generate_pair, PairSpec, WorldSpec};
+use sgm_model::eval::matching_protocol::{generate_pair, PairSpec, SyntheticWorld};
 use sgm_model::matching::{match_graphs, LabelSimilarity, MatcherConfig};
 use std::hint::black_box;
 
@@ -11,7 +11,7 @@ fn matching(c: &mut Criterion) {
     let mut group = c.benchmark_group("match_graphs");
     for &(local, remote) in &[(8, 8), (15, 15), (35, 32), (150, 150), (400, 400)] {
         let overlap = local.min(remote) / 2;
-        let world = WorldSpec::with_density_for((local + remote - overlap).max(50));
+        let world = SyntheticWorld::with_density_for((local + remote - overlap).max(50));
         let spec = PairSpec { local, remote, overlap, noisy: true, mislabels: 0 };
         let pair = generate_pair(&world, &spec, 1);
         let labels = LabelSimilarity::uniform(world.classes as usize, config.mislabel_similarity);

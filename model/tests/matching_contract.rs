@@ -3,7 +3,7 @@
 
 use nalgebra::{Point3, Vector3};
 use proptest::prelude::*;
-use sgm_model::eval::matching_protocol::{generate_pair, PairSpec, WorldSpec};
+use sgm_model::eval::matching_protocol::{generate_pair, PairSpec, SyntheticWorld};
 use sgm_model::geometry::{pose_error, pose_from_yaw_translation, Pose3};
 use sgm_model::matching::{
     match_graphs, GraphObject, LabelSimilarity, MatchOutcome, MatcherConfig, ObjectGraph, RefusalReason,
@@ -52,7 +52,7 @@ proptest! {
         seed in 0u64..1000,
     ) {
         let spec = PairSpec { local: 20, remote: 20, overlap: 20, noisy: false, mislabels: 0 };
-        let pair = generate_pair(&WorldSpec::default(), &spec, seed);
+        let pair = generate_pair(&SyntheticWorld::default(), &spec, seed);
         // Re-express the remote graph in a further arbitrary frame.
         let moved_from_remote = pose_from_yaw_translation(yaw, Vector3::new(tx, ty, tz));
         let remote = ObjectGraph::new(
@@ -135,7 +135,7 @@ fn refuses_pairs_that_share_nothing() {
     let mut claims = 0;
     for seed in 0..200 {
         let spec = PairSpec { local: 35, remote: 32, overlap: 0, noisy: true, mislabels: 0 };
-        let pair = generate_pair(&WorldSpec::default(), &spec, seed);
+        let pair = generate_pair(&SyntheticWorld::default(), &spec, seed);
         if match_graphs(&pair.local, &pair.remote, &labels, &config).outcome.alignment().is_some() {
             claims += 1;
         }
@@ -148,7 +148,7 @@ fn refuses_pairs_that_share_nothing() {
 fn mislabelled_objects_still_match_through_label_confusion() {
     let config = MatcherConfig::default();
     let spec = PairSpec { local: 35, remote: 32, overlap: 17, noisy: false, mislabels: 9 };
-    let pair = generate_pair(&WorldSpec::default(), &spec, 4);
+    let pair = generate_pair(&SyntheticWorld::default(), &spec, 4);
     let soft = match_graphs(&pair.local, &pair.remote, &LabelSimilarity::uniform(6, 0.3), &config);
     let a = soft.outcome.alignment().expect("8 correctly labelled shared objects suffice");
     assert!(a.matches.iter().filter(|m| !m.same_label).count() >= 8, "mislabelled pairs are recovered");
@@ -162,7 +162,7 @@ fn mislabelled_objects_still_match_through_label_confusion() {
 fn same_input_gives_identical_output() {
     let config = MatcherConfig::default();
     let spec = PairSpec { local: 35, remote: 32, overlap: 17, noisy: true, mislabels: 3 };
-    let pair = generate_pair(&WorldSpec::default(), &spec, 9);
+    let pair = generate_pair(&SyntheticWorld::default(), &spec, 9);
     let labels = LabelSimilarity::uniform(6, 0.3);
     let a = match_graphs(&pair.local, &pair.remote, &labels, &config);
     let b = match_graphs(&pair.local, &pair.remote, &labels, &config);
@@ -177,7 +177,7 @@ fn large_graphs_match_at_the_paper_density() {
     let labels = LabelSimilarity::uniform(6, config.mislabel_similarity);
     for seed in 0..3 {
         let spec = PairSpec { local: 200, remote: 200, overlap: 100, noisy: true, mislabels: 0 };
-        let pair = generate_pair(&WorldSpec::with_density_for(300), &spec, seed);
+        let pair = generate_pair(&SyntheticWorld::with_density_for(300), &spec, seed);
         let report = match_graphs(&pair.local, &pair.remote, &labels, &config);
         let a = report.outcome.alignment().unwrap_or_else(|| panic!("seed {seed}: {:?}", report.outcome));
         let e = pose_error(&a.local_from_remote, &pair.local_from_remote);

@@ -17,7 +17,7 @@ use sgm_bridge::msg::std_msgs::Header;
 use sgm_bridge::msg::tf2_msgs::TFMessage;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
-use sgm_model::scene_graph::Stamp;
+use sgm_model::scene_graph::{RobotId, Stamp};
 use std::path::{Path, PathBuf};
 
 /// One simulated frame, as the sensors would publish it.
@@ -62,7 +62,7 @@ impl BagRecorder {
     }
 
     fn bag(&mut self, k: usize) -> Result<&mut RobotBag, String> {
-        let (name, id) = (&self.names[k], k as u16 + 1);
+        let (name, id) = (&self.names[k], RobotId::from_index(k).0);
         if self.bags[k].is_none() {
             let path = self.dir.join(format!("{name}.bag"));
             let writer = BagWriter::create(&path).map_err(|e| io_error(&path, e))?;

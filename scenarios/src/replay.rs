@@ -230,7 +230,7 @@ pub async fn replay_with(
         let limit = record_epoch_nanos + step * dt_nanos as u64;
         let mut frames = Vec::new();
         for (k, robot) in robots.iter_mut().enumerate() {
-            robot.pull(limit, &mut epoch, RobotId(k as u16 + 1), &shared)?;
+            robot.pull(limit, &mut epoch, RobotId::from_index(k), &shared)?;
             // At the bag's end no partner can come: settle every waiting cloud now, or the
             // replay would wait for it forever.
             let ready = if robot.stream.peek().is_none() {

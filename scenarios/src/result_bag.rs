@@ -110,7 +110,7 @@ impl ResultBag {
                     transform: transform_msg(&newest.world_from_body),
                 });
             }
-            tf.transforms.extend(team_transform(&header, RobotId(k as u16 + 1), neighbours, &self.frames));
+            tf.transforms.extend(team_transform(&header, RobotId::from_index(k), neighbours, &self.frames));
         }
         if !tf.transforms.is_empty() {
             self.writer.write("/tf", time, &tf).map_err(|e| self.io(e))?;

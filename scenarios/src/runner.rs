@@ -155,7 +155,7 @@ pub async fn run_with(
         for (k, robot) in robots.iter_mut().enumerate() {
             let Some(truth) = robot.route.pose_at(t) else { continue };
             team.advance(k, t);
-            let id = RobotId(k as u16 + 1);
+            let id = RobotId::from_index(k);
             shared.set_position(id, truth.translation.vector.into());
             let odometry = robot.odometry.step(&truth, &mut robot.rng);
             let spec = &scenario.robots[k];
@@ -198,8 +198,7 @@ pub async fn run_with(
                 };
                 recorder.record(k, recorded).map_err(RunError::Input)?;
             }
-            let sensor_frame =
-                SensorFrame { stamp: t, world_from_body: odometry, points_in_body: frame.points, labels };
+            let sensor_frame = SensorFrame { stamp: t, odom_from_body: odometry, points_in_body: frame.points, labels };
             team.frame(k, || scenario.robot_config(k), sensor_frame)?;
         }
         simulation += sim_started.elapsed();

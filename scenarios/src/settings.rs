@@ -11,7 +11,7 @@ pub enum SettingsError {
     #[error("{path}: {message}")]
     Load { path: String, message: String },
     #[error("{0}")]
-    Invalid(#[from] sgm_model::matching::ConfigError),
+    Invalid(#[from] sgm_model::matching::MatcherConfigError),
 }
 
 /// Loads the `[matcher]` section.

@@ -14,8 +14,8 @@ use sgm_actors::protocol::RetryConfig;
 use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId};
 use sgm_model::wire::cloud_codec::{self, CodecError};
 use sgm_model::wire::messages::{
-    KeyframeDescriptors, KeyframeRefusal, KeyframeRequest, KeyframeResponse, ObjectCloudRequest, ObjectCloudResponse,
-    ObjectData, RefusalReason, WireDescriptor, WireObject, WirePose, DESCRIPTOR_HEIGHT_STEP_M, SIZE_STEP_M,
+    KeyframeDescriptors, KeyframeRefusal, KeyframeRefusalReason, KeyframeRequest, KeyframeResponse, ObjectCloudRequest,
+    ObjectCloudResponse, ObjectData, WireDescriptor, WireObject, WirePose, DESCRIPTOR_HEIGHT_STEP_M, SIZE_STEP_M,
 };
 use sgm_model::wire::team_key::{KDF_LANES, KDF_MEMORY_KIB, KDF_PASSES};
 use sgm_model::wire::{
@@ -150,7 +150,7 @@ fn sample(kind: MessageKind) -> Message {
             cloud: vec![],
         }),
         MessageKind::KeyframeRefusal => {
-            Message::KeyframeRefusal(KeyframeRefusal { keyframes: vec![], reason: RefusalReason::Unknown })
+            Message::KeyframeRefusal(KeyframeRefusal { keyframes: vec![], reason: KeyframeRefusalReason::Unknown })
         }
         MessageKind::KeyframeDescriptors => Message::KeyframeDescriptors(KeyframeDescriptors { descriptors: vec![] }),
     }
@@ -178,9 +178,10 @@ fn largest(kind: MessageKind, limits: &WireLimits) -> Option<Envelope> {
             Message::ObjectCloudRequest(ObjectCloudRequest { objects: vec![ObjectId(u32::MAX); limits.max_ids] })
         }
         MessageKind::KeyframeRequest => Message::KeyframeRequest(KeyframeRequest { keyframes: ids(limits.max_ids) }),
-        MessageKind::KeyframeRefusal => {
-            Message::KeyframeRefusal(KeyframeRefusal { keyframes: ids(limits.max_ids), reason: RefusalReason::Busy })
-        }
+        MessageKind::KeyframeRefusal => Message::KeyframeRefusal(KeyframeRefusal {
+            keyframes: ids(limits.max_ids),
+            reason: KeyframeRefusalReason::Busy,
+        }),
         MessageKind::ObjectCloudResponse | MessageKind::KeyframeResponse | MessageKind::KeyframeDescriptors => {
             return None
         }

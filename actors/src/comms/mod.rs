@@ -39,7 +39,7 @@ use responses::Responses;
 use sgm_model::scene_graph::{RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{
-    unpack_covariance, KeyframeRequest, ObjectCloudRequest, RefusalReason, WireDescriptor,
+    unpack_covariance, KeyframeRefusalReason, KeyframeRequest, ObjectCloudRequest, WireDescriptor,
 };
 use sgm_model::wire::{Destination, Message as WireMessage, TeamKey};
 
@@ -201,7 +201,7 @@ impl Comms {
         if !overflow.is_empty() {
             self.status.keyframes_refused_locally += overflow.len() as u64;
             if let Some(links) = &self.links {
-                let reason = RefusalReason::Busy;
+                let reason = KeyframeRefusalReason::Busy;
                 links.unavailable.do_send(KeyframesUnavailable { robot: msg.robot, keyframes: overflow, reason });
             }
         }
@@ -213,7 +213,7 @@ impl Comms {
             let down = self.watch.is_down(robot);
             let heard_at = self.watch.last_heard(robot);
             let Some(q) = self.requests.get_mut(&robot) else { continue };
-            let flush = q.flush(now, down, heard_at, &self.config);
+            let flush = q.flush(now, !down, heard_at, &self.config);
             if !down {
                 self.status.max_keyframes_in_flight = self.status.max_keyframes_in_flight.max(flush.in_flight);
             }
@@ -226,7 +226,7 @@ impl Comms {
                     links.unavailable.do_send(KeyframesUnavailable {
                         robot,
                         keyframes: flush.given_up,
-                        reason: RefusalReason::Busy,
+                        reason: KeyframeRefusalReason::Busy,
                     });
                 }
             }
@@ -280,7 +280,7 @@ impl Comms {
                     // Outgoing budget spent: say so instead of dropping.
                     let refusal = sgm_model::wire::messages::KeyframeRefusal {
                         keyframes: r.keyframes,
-                        reason: RefusalReason::Busy,
+                        reason: KeyframeRefusalReason::Busy,
                     };
                     self.send(Destination::Robot(from), WireMessage::KeyframeRefusal(refusal));
                 } else {
@@ -312,13 +312,13 @@ impl Comms {
                         links.unavailable.do_send(KeyframesUnavailable {
                             robot: from,
                             keyframes: vec![r.keyframe],
-                            reason: RefusalReason::Unknown,
+                            reason: KeyframeRefusalReason::Unknown,
                         });
                     }
                 }
             }
             // Busy: the keyframes stay in flight and their timeouts retry with back-off.
-            WireMessage::KeyframeRefusal(r) if r.reason == RefusalReason::Busy => {}
+            WireMessage::KeyframeRefusal(r) if r.reason == KeyframeRefusalReason::Busy => {}
             WireMessage::KeyframeRefusal(r) => {
                 self.requests.entry(from).or_default().refused(&r.keyframes);
                 links.unavailable.do_send(KeyframesUnavailable {

@@ -91,11 +91,11 @@ impl KeyframeRequests {
         overflow
     }
 
-    /// What to send now. `link_down`: only a probe, once per `link_timeout_s`; otherwise
+    /// What to send now. Link down (`link_up` false): only a probe, once per `link_timeout_s`; otherwise
     /// timeouts retried (`heard_at`: when the neighbour was last heard) or given up, and the
     /// waiting keyframes asked once the coalescing window has passed, within the bound.
-    pub fn flush(&mut self, now: Stamp, link_down: bool, heard_at: Option<Stamp>, config: &CommsConfig) -> Flush {
-        if link_down {
+    pub fn flush(&mut self, now: Stamp, link_up: bool, heard_at: Option<Stamp>, config: &CommsConfig) -> Flush {
+        if !link_up {
             let mut flush = Flush { in_flight: self.in_flight.len(), ..Flush::default() };
             if self.last_probe.is_none_or(|t| now - t >= config.link_timeout_s) {
                 self.last_probe = Some(now);
@@ -231,9 +231,9 @@ mod tests {
         let c = config();
         let mut q = KeyframeRequests::default();
         assert!(q.want(ids(&[1, 2]), 0.0, &c).is_empty());
-        assert_eq!(q.flush(0.2, false, None, &c).requests, Vec::<Vec<KeyframeId>>::new(), "the window is open");
+        assert_eq!(q.flush(0.2, true, None, &c).requests, Vec::<Vec<KeyframeId>>::new(), "the window is open");
         assert!(q.want(ids(&[2, 3, 4, 5]), 0.3, &c).is_empty());
-        let f = q.flush(0.5, false, None, &c);
+        let f = q.flush(0.5, true, None, &c);
         assert_eq!(f.requests, vec![ids(&[1, 2]), ids(&[3])], "three in flight, two per request");
         assert_eq!(f.in_flight, 3);
         assert_eq!(q.want(ids(&[1, 6, 7, 8, 9]), 0.6, &c), ids(&[9]), "1 is in flight; 9 is one too many");
@@ -256,10 +256,10 @@ mod tests {
         };
         let mut q = KeyframeRequests::default();
         q.want(ids(&[7]), 0.0, &c);
-        q.flush(0.5, false, None, &c);
-        assert_eq!(q.flush(1.4, false, None, &c).requests, Vec::<Vec<KeyframeId>>::new(), "not yet expired");
-        assert_eq!(q.flush(1.5, false, None, &c).requests, vec![ids(&[7])], "retried");
-        let f = q.flush(3.6, false, None, &c);
+        q.flush(0.5, true, None, &c);
+        assert_eq!(q.flush(1.4, true, None, &c).requests, Vec::<Vec<KeyframeId>>::new(), "not yet expired");
+        assert_eq!(q.flush(1.5, true, None, &c).requests, vec![ids(&[7])], "retried");
+        let f = q.flush(3.6, true, None, &c);
         assert_eq!((f.requests.len(), f.given_up.clone()), (0, ids(&[7])), "given up after the retries");
         assert_eq!(q.ledger().given_up, 1);
         assert_eq!(q.response(KeyframeId(7)), ResponseFate::Take);
@@ -273,14 +273,14 @@ mod tests {
         let c = config();
         let mut q = KeyframeRequests::default();
         q.want(ids(&[1, 2, 3]), 0.0, &c);
-        q.flush(0.5, false, None, &c);
+        q.flush(0.5, true, None, &c);
         assert_eq!(q.owed_since(), Some(0.5));
-        assert_eq!(q.flush(100.0, true, None, &c).requests, vec![ids(&[1, 2])], "a probe");
-        assert!(q.flush(105.0, true, None, &c).requests.is_empty(), "once per link timeout");
-        assert!(q.flush(1000.0, true, None, &c).given_up.is_empty(), "nothing given up while down");
+        assert_eq!(q.flush(100.0, false, None, &c).requests, vec![ids(&[1, 2])], "a probe");
+        assert!(q.flush(105.0, false, None, &c).requests.is_empty(), "once per link timeout");
+        assert!(q.flush(1000.0, false, None, &c).given_up.is_empty(), "nothing given up while down");
         q.link_back(1001.0);
         assert_eq!(q.owed_since(), None);
-        assert_eq!(q.flush(1001.5, false, Some(1001.0), &c).requests, vec![ids(&[1, 2]), ids(&[3])]);
+        assert_eq!(q.flush(1001.5, true, Some(1001.0), &c).requests, vec![ids(&[1, 2]), ids(&[3])]);
         q.refused(&ids(&[2]));
         assert_eq!(q.ledger().refused, 1);
     }

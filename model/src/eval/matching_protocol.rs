@@ -29,7 +29,7 @@ pub enum ErrorOn {
 
 /// The world of the protocol.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct WorldSpec {
+pub struct SyntheticWorld {
     pub side_m: f64,
     pub objects: usize,
     pub classes: u16,
@@ -38,13 +38,13 @@ pub struct WorldSpec {
     pub noise_scale: f64,
 }
 
-impl Default for WorldSpec {
+impl Default for SyntheticWorld {
     fn default() -> Self {
         Self { side_m: 60.0, objects: 50, classes: 6, error_on: ErrorOn::Both, noise_scale: 1.0 }
     }
 }
 
-impl WorldSpec {
+impl SyntheticWorld {
     /// A world with the paper's object density (50 per 3600 m²) holding `objects` objects.
     pub fn with_density_for(objects: usize) -> Self {
         let base = Self::default();
@@ -81,7 +81,7 @@ struct WorldObject {
     size: Vector3<f64>,
 }
 
-fn world(spec: &WorldSpec, rng: &mut ChaCha8Rng) -> Vec<WorldObject> {
+fn world(spec: &SyntheticWorld, rng: &mut ChaCha8Rng) -> Vec<WorldObject> {
     (0..spec.objects)
         .map(|_| {
             let size = Vector3::new(rng.random_range(0.4..2.0), rng.random_range(0.4..2.0), rng.random_range(0.4..2.0));
@@ -145,7 +145,7 @@ fn make_graph(
     (graph, ids)
 }
 
-fn random_frame(spec: &WorldSpec, rng: &mut ChaCha8Rng) -> Pose3 {
+fn random_frame(spec: &SyntheticWorld, rng: &mut ChaCha8Rng) -> Pose3 {
     let origin = Vector3::new(
         rng.random_range(0.0..spec.side_m),
         rng.random_range(0.0..spec.side_m),
@@ -155,7 +155,7 @@ fn random_frame(spec: &WorldSpec, rng: &mut ChaCha8Rng) -> Pose3 {
 }
 
 /// Generates one trial pair. Needs `local + remote − overlap ≤ world.objects` when overlapping.
-pub fn generate_pair(world_spec: &WorldSpec, spec: &PairSpec, seed: u64) -> TrialPair {
+pub fn generate_pair(world_spec: &SyntheticWorld, spec: &PairSpec, seed: u64) -> TrialPair {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let objects = world(world_spec, &mut rng);
     let mut indices: Vec<usize> = (0..objects.len()).collect();
@@ -257,8 +257,8 @@ mod tests {
     #[test]
     fn pairs_are_deterministic_and_consistent_with_truth() {
         let spec = PairSpec { local: 35, remote: 32, overlap: 17, noisy: false, mislabels: 0 };
-        let a = generate_pair(&WorldSpec::default(), &spec, 7);
-        let b = generate_pair(&WorldSpec::default(), &spec, 7);
+        let a = generate_pair(&SyntheticWorld::default(), &spec, 7);
+        let b = generate_pair(&SyntheticWorld::default(), &spec, 7);
         assert_eq!(a.local, b.local);
         assert_eq!(a.true_pairs, b.true_pairs);
         assert_eq!((a.local.len(), a.remote.len(), a.true_pairs.len()), (35, 32, 17));
@@ -273,7 +273,7 @@ mod tests {
     #[test]
     fn mislabels_change_shared_labels_and_noise_stays_in_bounds() {
         let spec = PairSpec { local: 35, remote: 32, overlap: 17, noisy: true, mislabels: 12 };
-        let pair = generate_pair(&WorldSpec::default(), &spec, 3);
+        let pair = generate_pair(&SyntheticWorld::default(), &spec, 3);
         let changed = pair
             .true_pairs
             .iter()
@@ -291,8 +291,8 @@ mod tests {
     #[test]
     fn remote_only_error_leaves_the_local_graph_exact() {
         let spec = PairSpec { local: 20, remote: 20, overlap: 10, noisy: true, mislabels: 0 };
-        let world = WorldSpec { error_on: ErrorOn::RemoteOnly, ..WorldSpec::default() };
-        let exact = generate_pair(&WorldSpec::default(), &PairSpec { noisy: false, ..spec }, 5);
+        let world = SyntheticWorld { error_on: ErrorOn::RemoteOnly, ..SyntheticWorld::default() };
+        let exact = generate_pair(&SyntheticWorld::default(), &PairSpec { noisy: false, ..spec }, 5);
         let noisy = generate_pair(&world, &spec, 5);
         assert_eq!(exact.local, noisy.local, "the local graph carries no error");
         assert_ne!(exact.remote, noisy.remote);
@@ -301,7 +301,7 @@ mod tests {
     #[test]
     fn no_overlap_draws_an_independent_world() {
         let spec = PairSpec { local: 35, remote: 32, overlap: 0, noisy: true, mislabels: 0 };
-        let pair = generate_pair(&WorldSpec::default(), &spec, 11);
+        let pair = generate_pair(&SyntheticWorld::default(), &spec, 11);
         assert!(pair.true_pairs.is_empty());
         assert_eq!(pair.remote.len(), 32);
         let s = score_trial(&pair, None, &[]);

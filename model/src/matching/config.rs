@@ -106,7 +106,7 @@ impl Default for MatcherConfig {
 /// A configuration value outside its allowed range.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("matcher.{key} = {value} is out of range: {allowed}")]
-pub struct ConfigError {
+pub struct MatcherConfigError {
     pub key: String,
     pub value: String,
     pub allowed: &'static str,
@@ -114,12 +114,12 @@ pub struct ConfigError {
 
 impl MatcherConfig {
     /// Checks every key against its allowed range.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        fn check(ok: bool, key: &str, value: impl ToString, allowed: &'static str) -> Result<(), ConfigError> {
+    pub fn validate(&self) -> Result<(), MatcherConfigError> {
+        fn check(ok: bool, key: &str, value: impl ToString, allowed: &'static str) -> Result<(), MatcherConfigError> {
             if ok {
                 Ok(())
             } else {
-                Err(ConfigError { key: key.to_string(), value: value.to_string(), allowed })
+                Err(MatcherConfigError { key: key.to_string(), value: value.to_string(), allowed })
             }
         }
         let positive = |v: f64| v.is_finite() && v > 0.0;

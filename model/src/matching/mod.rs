@@ -22,7 +22,7 @@ mod verification;
 mod vertex;
 
 pub use affinity::SparseAffinity;
-pub use config::{ConfigError, LabelConfusion, MatcherConfig};
+pub use config::{LabelConfusion, MatcherConfig, MatcherConfigError};
 pub use graph::{GraphError, GraphObject, ObjectGraph};
 pub use labels::LabelSimilarity;
 pub use matcher::match_graphs;

@@ -31,7 +31,7 @@ impl Default for TrackerConfig {
 
 /// Tracker state: sightings per object (serialisable with the scene graph).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Tracker {
+pub struct ObjectTracker {
     sightings: BTreeMap<ObjectId, u32>,
 }
 
@@ -48,7 +48,7 @@ pub struct TrackUpdate {
 /// Cost of a forbidden association (different labels): never below c_max.
 const FORBIDDEN: f64 = 1e9;
 
-impl Tracker {
+impl ObjectTracker {
     pub fn sightings(&self, id: ObjectId) -> u32 {
         self.sightings.get(&id).copied().unwrap_or(0)
     }
@@ -129,7 +129,7 @@ mod tests {
     #[test]
     fn ids_survive_occlusion_and_neighbours_stay_apart() {
         let mut graph = SceneGraph::new();
-        let mut tracker = Tracker::default();
+        let mut tracker = ObjectTracker::default();
         let config = TrackerConfig::default();
         let world = [(1u16, 5.0, 2.0), (1, 5.0, 3.2), (2, 9.0, -2.0)];
         let mut ids_per_kf = Vec::new();
@@ -173,7 +173,7 @@ mod tests {
     #[test]
     fn far_or_other_label_candidates_become_new_objects() {
         let mut graph = SceneGraph::new();
-        let mut tracker = Tracker::default();
+        let mut tracker = ObjectTracker::default();
         let config = TrackerConfig::default();
         graph
             .add_keyframe(Keyframe {

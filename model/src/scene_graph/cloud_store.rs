@@ -13,7 +13,7 @@
 //!
 //! Only the cloud goes: the keyframe, its edges and its object links stay. Readers that find no
 //! scan (a neighbour asking for the keyframe, loop closure, object clouds) skip it; the wire
-//! answers such a request with `RefusalReason::Unknown` ("unknown, or its cloud was evicted").
+//! answers such a request with `KeyframeRefusalReason::Unknown` ("unknown, or its cloud was evicted").
 
 use super::{KeyframeId, LabelId, SemanticScan};
 use crate::spatial::point_tree::PointTree;

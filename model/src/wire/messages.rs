@@ -181,11 +181,11 @@ pub struct KeyframeResponse {
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct KeyframeRefusal {
     pub keyframes: Vec<KeyframeId>,
-    pub reason: RefusalReason,
+    pub reason: KeyframeRefusalReason,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub enum RefusalReason {
+pub enum KeyframeRefusalReason {
     /// No such keyframe, or its cloud was evicted.
     Unknown,
     /// The sender's outgoing budget is spent: ask again later.

@@ -5,7 +5,7 @@
 use super::Section;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
-use sgm_model::eval::matching_protocol::{generate_pair, score_trial, ErrorOn, PairSpec, TrialScore, WorldSpec};
+use sgm_model::eval::matching_protocol::{generate_pair, score_trial, ErrorOn, PairSpec, SyntheticWorld, TrialScore};
 use sgm_model::matching::paper_baseline::match_dense;
 use sgm_model::matching::{match_graphs, LabelSimilarity, MatchOutcome, MatcherConfig};
 use sgm_scenarios::settings::load_matcher_config;
@@ -80,7 +80,7 @@ impl Accumulator {
 struct Setup<'a> {
     reps: usize,
     seed: u64,
-    world: WorldSpec,
+    world: SyntheticWorld,
     config: &'a MatcherConfig,
     skip_dense: bool,
     progress: &'a ProgressBar,
@@ -136,12 +136,12 @@ pub struct Options {
 
 pub fn run(options: Options) -> anyhow::Result<Section> {
     let Options { reps, seed, config: config_path, skip_dense, error_on } = options;
-    let world = WorldSpec {
+    let world = SyntheticWorld {
         error_on: match error_on {
             ErrorOnArg::Both => ErrorOn::Both,
             ErrorOnArg::Remote => ErrorOn::RemoteOnly,
         },
-        ..WorldSpec::default()
+        ..SyntheticWorld::default()
     };
     anyhow::ensure!(reps > 0, "--reps must be at least 1");
     let config_path = config_path.as_deref();

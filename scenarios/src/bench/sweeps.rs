@@ -18,7 +18,7 @@
 use super::{aligned_right, duration_arg, load_cut, or_dash, radio_bytes, run_report, Section, WRONG_M};
 use serde::Serialize;
 use sgm_actors::config::Association;
-use sgm_model::eval::matching_protocol::{generate_pair, score_trial, PairSpec, WorldSpec};
+use sgm_model::eval::matching_protocol::{generate_pair, score_trial, PairSpec, SyntheticWorld};
 use sgm_model::geometry::pose_error;
 use sgm_model::matching::{match_graphs, LabelSimilarity, MatchOutcome, MatcherConfig};
 use sgm_scenarios::report::plots::{lines, Series};
@@ -167,7 +167,7 @@ fn centroid_noise(values: &[f64], reps: usize) -> Vec<Point> {
         .iter()
         .enumerate()
         .map(|(cell, &sigma)| {
-            let world = WorldSpec { noise_scale: sigma, ..WorldSpec::default() };
+            let world = SyntheticWorld { noise_scale: sigma, ..SyntheticWorld::default() };
             let labels = LabelSimilarity::uniform(world.classes as usize, config.mislabel_similarity);
             let spec = PairSpec { local: 35, remote: 32, overlap: 17, noisy: sigma > 0.0, mislabels: 0 };
             let (mut success, mut errors) = (0, Vec::new());

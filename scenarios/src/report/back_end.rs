@@ -31,7 +31,7 @@ pub fn compute(record: &RunRecord) -> BackEndReport {
     report.false_factors_rejected = record
         .false_factors
         .iter()
-        .filter(|f| rejected.contains(&(f.robot, RobotId(f.neighbour as u16 + 1), f.local, f.remote)))
+        .filter(|f| rejected.contains(&(f.robot, RobotId::from_index(f.neighbour), f.local, f.remote)))
         .count();
     report
 }

@@ -147,7 +147,7 @@ pub(crate) fn reference_from(observation: &Observation, k: usize) -> Option<Pose
         return Some(Pose3::identity());
     }
     let Some(Some((_, neighbours, _))) = observation.maps.first() else { return None };
-    let id = RobotId(k as u16 + 1);
+    let id = RobotId::from_index(k);
     neighbours
         .iter()
         .find(|n| n.robot == id && n.state == Some(ProtocolStage::Aligned))
@@ -196,7 +196,7 @@ fn pair_errors(observation: &Observation, robots: &[RobotTruth]) -> Vec<PairErro
     for (k, local) in robots.iter().enumerate() {
         let Some(Some((_, neighbours, _))) = observation.maps.get(k) else { continue };
         for n in neighbours {
-            let r = usize::from(n.robot.0).wrapping_sub(1);
+            let Some(r) = n.robot.index() else { continue };
             let (Some(remote), Some(estimate)) = (robots.get(r), n.local_from_remote) else { continue };
             let Some(truth) = true_local_from_remote(&fits, robots, k, r) else { continue };
             let e = pose_error(&estimate, &truth);
@@ -306,7 +306,7 @@ pub fn compute(record: &RunRecord) -> Report {
     for (k, local) in record.robots.iter().enumerate() {
         let Some(Some((_, neighbours, _))) = last.maps.get(k) else { continue };
         for n in neighbours {
-            let r = usize::from(n.robot.0).wrapping_sub(1);
+            let Some(r) = n.robot.index() else { continue };
             let Some(remote) = record.robots.get(r) else { continue };
             let truth = true_local_from_remote(&fits, &record.robots, k, r);
             let known = truth.and(n.local_from_remote);

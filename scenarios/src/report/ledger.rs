@@ -68,7 +68,7 @@ pub fn compute(record: &RunRecord, last: &Observation) -> Ledger {
             object_data_revision: comms.object_data_revision,
         });
         for n in neighbours {
-            let j = usize::from(n.robot.0).wrapping_sub(1);
+            let Some(j) = n.robot.index() else { continue };
             let Some(remote) = names.get(j) else { continue };
             let keyframes = comms.keyframe_ledger.get(&n.robot).cloned().unwrap_or_default();
             ledger.pairs.push(PairLedger {

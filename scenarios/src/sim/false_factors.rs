@@ -81,7 +81,7 @@ impl FalseFactors {
             else {
                 continue;
             };
-            let neighbour_id = RobotId(*r as u16 + 1);
+            let neighbour_id = RobotId::from_index(*r);
             let Some(local_from_remote) = neighbours
                 .iter()
                 .find(|s| s.robot == neighbour_id && s.state == Some(ProtocolStage::Aligned))

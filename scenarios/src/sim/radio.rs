@@ -66,7 +66,7 @@ impl Partition {
             .iter()
             .enumerate()
             .filter(|(_, n)| spec.robots.contains(n))
-            .map(|(k, _)| RobotId(k as u16 + 1))
+            .map(|(k, _)| RobotId::from_index(k))
             .collect();
         Self { start_s: spec.start_s, end_s: spec.end_s, side }
     }
