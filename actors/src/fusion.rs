@@ -1,10 +1,8 @@
-//! `Fusion` (paper §IV-A): LiDAR points take the class of their pixel in the segmented image
-//! (`model::perception::projection`), or keep per-point labels given upstream; the segmenter's
-//! pixel values become SGM classes (`[classes]`, `model::perception::label_map`: values it does
-//! not know are counted per value, logged once each, and carry no class); a vote among
-//! 3D neighbours undoes labels that bled across depth edges (`model::perception::label_vote`);
-//! classes that are not objects are cleared; points beyond range are dropped; objects are clustered per class
-//! (`model::perception::clustering`). Out: a [`LabelledScan`] to the Tracker.
+//! `Fusion` (paper §IV-A): a thin actor over `model::perception::scan_fusion::ScanFusion`.
+//! Points take the class of their pixel in the segmented image (`model::perception::projection`),
+//! or keep per-point labels given upstream; the scan is fused (the segmenter's values mapped to
+//! SGM classes, the label vote, ranges, clustering) and goes on as a [`LabelledScan`] to the
+//! Tracker. Pixel values `[classes]` does not know are logged once each and counted.
 
 use crate::config::FusionConfig;
 use crate::containment::contained;
@@ -12,21 +10,12 @@ use crate::messages::{FrameLabels, LabelledScan, SensorFrame};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use serde::{Deserialize, Serialize};
 use sgm_model::perception::classes::ClassTable;
-use sgm_model::perception::clustering::{cluster, ClusterConfig};
-use sgm_model::perception::label_map::{LabelMap, Mapped, UnknownLabels, NO_CLASS};
-use sgm_model::perception::label_vote::{vote, LabelVote};
+use sgm_model::perception::label_map::LabelMap;
 use sgm_model::perception::projection::label_points;
-use sgm_model::scene_graph::LabelId;
+use sgm_model::perception::scan_fusion::{ScanFusion, ScanFusionConfig};
 
 pub struct Fusion {
-    classes: ClassTable,
-    label_map: LabelMap,
-    status: FusionStatus,
-    clustering: ClusterConfig,
-    max_range_m: f64,
-    object_range_m: f64,
-    label_vote: LabelVote,
-    unknown: UnknownLabels,
+    fusion: ScanFusion,
     tracker: Recipient<LabelledScan>,
 }
 
@@ -59,41 +48,13 @@ impl Fusion {
     ) -> Self {
         let mut clustering = classes.cluster_config(config.cluster_tolerance_m);
         clustering.min_height_m = config.min_object_height_m;
-        Self {
-            classes,
-            status: FusionStatus { segmenter: label_map.segmenter().into(), ..FusionStatus::default() },
-            label_map,
-            unknown: UnknownLabels::default(),
+        let fusion_config = ScanFusionConfig {
             clustering,
             max_range_m: config.max_range_m,
             object_range_m: config.object_range_m,
             label_vote: config.label_vote.clone(),
-            tracker,
-        }
-    }
-
-    /// Pixel values → SGM classes; values of no class vote as [`NO_CLASS`], unknown ones are
-    /// counted and logged once each.
-    fn map_labels(&mut self, labels: Vec<Option<LabelId>>) -> Vec<Option<LabelId>> {
-        labels
-            .into_iter()
-            .map(|l| {
-                l.map(|LabelId(pixel)| match self.label_map.get(pixel) {
-                    Mapped::Class(class) => class,
-                    Mapped::Ignored => NO_CLASS,
-                    Mapped::Unknown => {
-                        if self.unknown.add(pixel) {
-                            tracing::warn!(
-                                segmenter = self.label_map.segmenter(),
-                                "label id {pixel} is in no class of [classes] (segmenter {}); its points are ignored",
-                                self.label_map.segmenter()
-                            );
-                        }
-                        NO_CLASS
-                    }
-                })
-            })
-            .collect()
+        };
+        Self { fusion: ScanFusion::new(classes, label_map, fusion_config), tracker }
     }
 }
 
@@ -119,31 +80,20 @@ impl Handler<SensorFrame> for Fusion {
                     }
                 }
             };
-            let labels = self.map_labels(labels);
-            let classes = &self.classes;
-            let labels =
-                vote(&frame.points_in_body, &labels, &self.label_vote, |l| classes.object_label(l.0).is_some());
-            let (r2, near) = (self.max_range_m * self.max_range_m, self.object_range_m * self.object_range_m);
-            let n = labels.len();
-            let (mut points, mut kept, mut clustered) =
-                (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
-            for (p, l) in frame.points_in_body.iter().zip(labels) {
-                let d2 = p.coords.norm_squared();
-                if p.coords.iter().all(|v| v.is_finite()) && d2 <= r2 {
-                    let label = l.and_then(|LabelId(id)| self.classes.object_label(id));
-                    points.push(*p);
-                    kept.push(label);
-                    // Objects are clustered from returns within the object range only.
-                    clustered.push(if d2 <= near { label } else { None });
-                }
+            let fused = self.fusion.fuse(&frame.points_in_body, labels);
+            for pixel in &fused.new_unknown_ids {
+                let segmenter = self.fusion.segmenter();
+                tracing::warn!(
+                    segmenter,
+                    "label id {pixel} is in no class of [classes] (segmenter {segmenter}); its points are ignored"
+                );
             }
-            let candidates = cluster(&points, &clustered, &self.clustering);
             self.tracker.do_send(LabelledScan {
                 stamp: frame.stamp,
                 odom_from_body: frame.odom_from_body,
-                points_in_body: points,
-                labels: kept,
-                candidates,
+                points_in_body: fused.points_in_body,
+                labels: fused.labels,
+                candidates: fused.candidates,
             });
         });
     }
@@ -152,11 +102,13 @@ impl Handler<SensorFrame> for Fusion {
 impl Handler<GetFusionStatus> for Fusion {
     type Result = MessageResult<GetFusionStatus>;
     fn handle(&mut self, _: GetFusionStatus, _: &mut Context<Self>) -> Self::Result {
-        let mut status = self.status.clone();
-        status.unknown_label_points = self.unknown.points;
-        status.unknown_label_ids = self.unknown.ids.clone();
-        status.unknown_label_other_points = self.unknown.other_points;
-        MessageResult(status)
+        let unknown = self.fusion.unknown();
+        MessageResult(FusionStatus {
+            segmenter: self.fusion.segmenter().into(),
+            unknown_label_points: unknown.points,
+            unknown_label_ids: unknown.ids.clone(),
+            unknown_label_other_points: unknown.other_points,
+        })
     }
 }
 

@@ -40,6 +40,8 @@ pub enum JournalError {
     Io { path: PathBuf, source: std::io::Error },
     #[error("{path}: {source}")]
     Damaged { path: PathBuf, source: SnapshotError },
+    #[error("{path}: not encoded: {source}")]
+    Encode { path: PathBuf, source: SnapshotError },
 }
 
 /// `<directory>/<robot>.replay`, written atomically (temporary file, flush, rename) by a thread
@@ -66,7 +68,7 @@ impl JournalFile {
                     entries = newer;
                 }
                 if let Err(e) = write_atomically(&target, &Reservations { entries }) {
-                    tracing::warn!(path = %target.display(), "replay journal not written: {e}");
+                    tracing::warn!("replay journal not written: {e}");
                 }
             }
         });
@@ -102,16 +104,21 @@ pub fn apply(snapshot: &mut RobotSnapshot, path: &Path) -> Result<usize, Journal
 
 impl ReplayJournal for JournalFile {
     fn write(&self, reservations: Vec<(u16, u32, u64)>) {
-        let _ = self.queue.send(reservations);
+        if self.queue.send(reservations).is_err() {
+            // The writer thread is gone (it only ends when its queue closes, or by a panic).
+            tracing::error!(path = %self.path.display(), "replay journal writer stopped: reservations not written");
+        }
     }
 }
 
-fn write_atomically(path: &Path, reservations: &Reservations) -> Result<(), String> {
-    let bytes = snapshot::encode(JOURNAL_KIND, reservations).map_err(|e| e.to_string())?;
+fn write_atomically(path: &Path, reservations: &Reservations) -> Result<(), JournalError> {
+    let bytes = snapshot::encode(JOURNAL_KIND, reservations)
+        .map_err(|source| JournalError::Encode { path: path.to_path_buf(), source })?;
     let tmp = path.with_extension("replay.tmp");
-    let mut file = File::create(&tmp).map_err(|e| format!("{}: {e}", tmp.display()))?;
-    file.write_all(&bytes).and_then(|()| file.sync_all()).map_err(|e| format!("{}: {e}", tmp.display()))?;
-    fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+    let io = |path: &Path, source| JournalError::Io { path: path.to_path_buf(), source };
+    let mut file = File::create(&tmp).map_err(|e| io(&tmp, e))?;
+    file.write_all(&bytes).and_then(|()| file.sync_all()).map_err(|e| io(&tmp, e))?;
+    fs::rename(&tmp, path).map_err(|e| io(path, e))
 }
 
 #[cfg(test)]

@@ -1,8 +1,10 @@
-//! `Tracker`: the robot's map (paper §IV-A, §IV-E). Selects keyframes (LIO-SAM thresholds),
-//! chains odometry increments onto the optimised poses, keeps the object layer (Hungarian LAP
-//! with c_max against nearby map objects, `model::perception::tracker`), detects intra-robot loop
-//! closures, and answers neighbours' requests for object clouds and keyframes. Owns the
-//! `SceneGraph`; a restart keeps it (the keyframe database survives).
+//! `Tracker`: the robot's map (paper §IV-A, §IV-E), a thin actor over
+//! `model::perception::mapper::Mapper`, which selects keyframes, chains odometry increments onto
+//! the optimised poses, keeps the object layer, detects intra-robot loop closures and fits the
+//! cloud budget. The actor sends on what the mapper returns (new keyframes to the Optimiser, the
+//! map's changes to the Matcher, confirmed objects to the Matcher and Comms) and answers
+//! neighbours' requests for object clouds and keyframes. A restart keeps the map (the keyframe
+//! database survives).
 
 use crate::config::{OptimiserConfig, TrackerSection};
 use crate::containment::contained;
@@ -12,14 +14,10 @@ use nalgebra::{Matrix6, Point3};
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::GraphObject;
 use sgm_model::perception::classes::ClassTable;
-use sgm_model::perception::keyframes::is_keyframe;
-use sgm_model::perception::loop_closure;
-use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS, UNLABELLED};
+use sgm_model::perception::mapper::{Mapper, MapperConfig, ScanInput};
+use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS};
 use sgm_model::perception::tracker::ObjectTracker;
-use sgm_model::scene_graph::{
-    CloudStoreStats, Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, ObjectId, RobotId, SceneGraph,
-    SemanticScan,
-};
+use sgm_model::scene_graph::{CloudStoreStats, Keyframe, KeyframeId, ObjectId, RobotId, SceneGraph, SceneGraphError};
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{
     expand_covariance, pack_covariance, KeyframeRefusal, KeyframeRefusalReason, KeyframeResponse, ObjectCloud,
@@ -92,21 +90,14 @@ type ScanRef<'a> = (&'a Pose3, &'a [Point3<f32>], &'a [sgm_model::scene_graph::L
 
 pub struct Tracker {
     robot: RobotId,
-    config: TrackerSection,
+    config: MapperConfig,
     classes: ClassTable,
-    odometry_information: Matrix6<f64>,
     cloud_resolution_m: f64,
     links: Option<TrackerLinks>,
-    graph: SceneGraph,
-    objects: ObjectTracker,
-    next_keyframe: u32,
-    /// Odometry pose of the latest keyframe (for increments).
-    last_odometry: Option<(KeyframeId, Pose3)>,
+    map: Mapper,
     /// The latest marginal covariance of each keyframe, as served: the wire's packed upper
     /// triangle (84 bytes, not a 288-byte `Matrix6<f64>`; one per keyframe, kept for hours).
     covariances: BTreeMap<KeyframeId, [f32; 21]>,
-    /// Stamp of the latest loop-closure attempt.
-    last_loop_attempt: Option<f64>,
     /// The newest frame handled, for latency measurement outside the robot.
     progress: crate::progress::FrameProgress,
 }
@@ -122,19 +113,15 @@ impl Tracker {
         let s = optimiser.odometry_sigmas;
         let odometry_information =
             Matrix6::from_diagonal(&nalgebra::Vector6::from_iterator(s.iter().map(|v| 1.0 / (v * v))));
+        let TrackerSection { keyframes, tracking, loop_closure, cloud_store } = config;
         Self {
             robot,
-            config,
+            config: MapperConfig { keyframes, tracking, loop_closure, cloud_store, odometry_information },
             classes,
-            odometry_information,
             cloud_resolution_m,
             links: None,
-            graph: SceneGraph::new(),
-            objects: ObjectTracker::default(),
-            next_keyframe: 0,
-            last_odometry: None,
+            map: Mapper::default(),
             covariances: BTreeMap::new(),
-            last_loop_attempt: None,
             progress: crate::progress::FrameProgress::default(),
         }
     }
@@ -142,12 +129,12 @@ impl Tracker {
     /// The state a snapshot keeps.
     pub fn freeze(&self) -> TrackerState {
         TrackerState {
-            graph: self.graph.clone(),
-            objects: self.objects.clone(),
-            next_keyframe: self.next_keyframe,
-            last_odometry: self.last_odometry,
+            graph: self.map.graph.clone(),
+            objects: self.map.objects.clone(),
+            next_keyframe: self.map.next_keyframe,
+            last_odometry: self.map.last_odometry,
             covariances: self.covariances.iter().map(|(k, p)| (*k, expand_covariance(p))).collect(),
-            last_loop_attempt: self.last_loop_attempt,
+            last_loop_attempt: self.map.last_loop_attempt,
         }
     }
 
@@ -160,93 +147,61 @@ impl Tracker {
 
     pub fn thawed(mut self, state: TrackerState) -> Self {
         let epoch = state.next_keyframe.div_ceil(KEYFRAME_ID_EPOCH).saturating_add(1);
-        self.next_keyframe = epoch.saturating_mul(KEYFRAME_ID_EPOCH);
-        self.graph = state.graph;
-        self.objects = state.objects;
-        self.last_odometry = state.last_odometry;
+        self.map = Mapper {
+            graph: state.graph,
+            objects: state.objects,
+            next_keyframe: epoch.saturating_mul(KEYFRAME_ID_EPOCH),
+            last_odometry: state.last_odometry,
+            last_loop_attempt: state.last_loop_attempt,
+        };
         self.covariances = state.covariances.iter().map(|(k, m)| (*k, pack_covariance(m))).collect();
-        self.last_loop_attempt = state.last_loop_attempt;
         self
     }
 
     fn local_objects(&self) -> LocalObjects {
         let mut out = LocalObjects::default();
-        for o in self.graph.objects() {
-            if !self.classes.is_matchable(o.label) || !self.objects.is_confirmed(o.id, &self.config.tracking) {
+        for o in self.map.graph.objects() {
+            if !self.classes.is_matchable(o.label) || !self.map.is_confirmed(o.id, &self.config) {
                 continue;
             }
-            let Some(centroid) = self.graph.centroid_in_world(o.id) else { continue };
+            let Some(centroid) = self.map.graph.centroid_in_world(o.id) else { continue };
             out.objects.push(GraphObject { id: o.id, label: o.label, centroid, size: Some(o.size) });
             out.observed_in.insert(o.id, o.observed_in.iter().copied().collect());
         }
         out
     }
 
-    fn add_keyframe(&mut self, scan: &LabelledScan) -> Result<KeyframeId, String> {
-        let id = KeyframeId(self.next_keyframe);
-        let (world_from_body, odometry_edge) = match self.last_odometry {
-            None => (scan.odom_from_body, None),
-            Some((previous, odometry)) => {
-                let increment = odometry.inverse() * scan.odom_from_body;
-                let optimised = self.graph.keyframe(previous).map(|k| k.world_from_body).unwrap_or(odometry);
-                let edge = KeyframeEdge {
-                    kind: KeyframeEdgeKind::Odometry,
-                    from: previous,
-                    to: KeyframeRef::Local(id),
-                    from_from_to: increment,
-                    information: self.odometry_information,
-                };
-                (optimised * increment, Some(edge))
-            }
+    /// Adds `scan` as a keyframe (`Mapper::add_keyframe`) and sends on what changed: the
+    /// keyframe and its edges to the Optimiser, its scan and the scans the cloud budget changed
+    /// to the Matcher.
+    fn add_keyframe(&mut self, scan: &LabelledScan) -> Result<KeyframeId, SceneGraphError> {
+        let input = ScanInput {
+            stamp: scan.stamp,
+            odom_from_body: &scan.odom_from_body,
+            points_in_body: &scan.points_in_body,
+            labels: &scan.labels,
+            candidates: &scan.candidates,
         };
-        self.graph.add_keyframe(Keyframe { id, stamp: scan.stamp, world_from_body }).map_err(|e| e.to_string())?;
-        self.next_keyframe += 1;
-        self.last_odometry = Some((id, scan.odom_from_body));
-        let semantic = SemanticScan {
-            points_in_body: scan.points_in_body.iter().map(|p| p.cast::<f32>()).collect(),
-            labels: scan.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect(),
-        };
-        self.graph.set_semantic_scan(id, semantic).map_err(|e| e.to_string())?;
-        let mut edges = Vec::new();
-        if let Some(edge) = odometry_edge {
-            self.graph.add_edge(edge.clone()).map_err(|e| e.to_string())?;
-            edges.push(edge);
-        }
-        self.objects.update(&mut self.graph, id, &scan.candidates, &self.config.tracking).map_err(|e| e.to_string())?;
-        let due = self.last_loop_attempt.is_none_or(|t| scan.stamp - t >= self.config.loop_closure.min_interval_s);
-        if due {
-            self.last_loop_attempt = Some(scan.stamp);
-        }
-        if let Some(edge) = due.then(|| loop_closure::detect(&self.graph, id, &self.config.loop_closure)).flatten() {
-            if self.graph.add_edge(edge.clone()).is_ok() {
-                edges.push(edge);
-            }
+        let added = self.map.add_keyframe(input, &self.classes, &self.config)?;
+        let (id, world_from_body) = (added.keyframe.id, added.keyframe.world_from_body);
+        if let Some(e) = &added.refused_loop {
+            tracing::warn!(robot = %self.robot, keyframe = id.0, "loop closure not added: {e}");
         }
         if let Some(links) = &self.links {
-            links
-                .optimiser
-                .do_send(NewKeyframe { keyframe: Keyframe { id, stamp: scan.stamp, world_from_body }, edges });
-            if let Some(scan) = self.graph.semantic_scan_shared(id) {
+            links.optimiser.do_send(NewKeyframe { keyframe: added.keyframe, edges: added.edges });
+            if let Some(scan) = added.scan {
                 links.matcher_keyframes.do_send(LocalKeyframe { id, world_from_body, scan });
             }
         }
-        self.fit_clouds();
+        if !added.scans_changed.is_empty() {
+            let stats = self.map.graph.cloud_stats();
+            tracing::debug!(robot = %self.robot, changed = added.scans_changed.len(), scans = stats.scans,
+                bytes = stats.bytes, "cloud store fitted to its budget");
+            if let Some(links) = &self.links {
+                links.matcher_scans.do_send(LocalScansChanged { changes: added.scans_changed });
+            }
+        }
         Ok(id)
-    }
-
-    /// Keeps the map's clouds within `tracker.cloud_store`; the Matcher follows the changes.
-    fn fit_clouds(&mut self) {
-        let classes = &self.classes;
-        let changes = self.graph.fit_clouds(&self.config.cloud_store, |l| classes.object_label(l.0).is_some());
-        if changes.is_empty() {
-            return;
-        }
-        let stats = self.graph.cloud_stats();
-        tracing::debug!(robot = %self.robot, changed = changes.len(), scans = stats.scans, bytes = stats.bytes,
-            "cloud store fitted to its budget");
-        if let Some(links) = &self.links {
-            links.matcher_scans.do_send(LocalScansChanged { changes });
-        }
     }
 
     fn publish_objects(&self) {
@@ -263,8 +218,8 @@ impl Tracker {
         keyframes: impl IntoIterator<Item = KeyframeId> + 'a,
     ) -> impl Iterator<Item = ScanRef<'a>> {
         keyframes.into_iter().filter_map(|k| {
-            let kf = self.graph.keyframe(k)?;
-            let scan = self.graph.semantic_scan(k)?;
+            let kf = self.map.graph.keyframe(k)?;
+            let scan = self.map.graph.semantic_scan(k)?;
             Some((&kf.world_from_body, &scan.points_in_body[..], &scan.labels[..]))
         })
     }
@@ -273,8 +228,8 @@ impl Tracker {
         let objects = ids
             .iter()
             .filter_map(|id| {
-                let o = self.graph.object(*id)?;
-                let centroid = self.graph.centroid_in_world(*id)?;
+                let o = self.map.graph.object(*id)?;
+                let centroid = self.map.graph.centroid_in_world(*id)?;
                 // The latest views that still hold a scan (older ones may have been evicted).
                 let views = self.scans_of(o.observed_in.iter().rev().copied()).take(MAX_VIEWS);
                 let points = object_cloud(views, o.label, &centroid, &o.size, 0.3, 0.1);
@@ -287,12 +242,12 @@ impl Tracker {
     }
 
     fn serve_keyframe(&self, id: KeyframeId) -> Option<WireMessage> {
-        let kf = self.graph.keyframe(id)?;
-        let scan = self.graph.semantic_scan(id)?;
+        let kf = self.map.graph.keyframe(id)?;
+        let scan = self.map.graph.semantic_scan(id)?;
         let points: Vec<Point3<f64>> = scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
         let cloud = cloud_codec::encode(&points, self.cloud_resolution_m).ok()?.bytes;
         let covariance = self.covariances.get(&id).copied().unwrap_or_else(|| {
-            pack_covariance(&self.odometry_information.try_inverse().unwrap_or_else(Matrix6::identity))
+            pack_covariance(&self.config.odometry_information.try_inverse().unwrap_or_else(Matrix6::identity))
         });
         Some(WireMessage::KeyframeResponse(KeyframeResponse {
             keyframe: id,
@@ -310,7 +265,7 @@ impl Actor for Tracker {
 
 impl Supervised for Tracker {
     fn restarting(&mut self, _: &mut Context<Self>) {
-        tracing::warn!(robot = %self.robot, keyframes = self.graph.keyframe_count(), "tracker restarting with its map");
+        tracing::warn!(robot = %self.robot, keyframes = self.map.graph.keyframe_count(), "tracker restarting with its map");
     }
 }
 
@@ -318,8 +273,7 @@ impl Handler<LabelledScan> for Tracker {
     type Result = ();
     fn handle(&mut self, scan: LabelledScan, ctx: &mut Context<Self>) {
         contained(ctx, "tracker", || {
-            let last = self.last_odometry.map(|(_, p)| p);
-            if is_keyframe(last.as_ref(), &scan.odom_from_body, &self.config.keyframes) {
+            if self.map.wants(&scan.odom_from_body, &self.config) {
                 match self.add_keyframe(&scan) {
                     Ok(_) => self.publish_objects(),
                     Err(e) => tracing::warn!(robot = %self.robot, stamp = scan.stamp, "keyframe not added: {e}"),
@@ -334,9 +288,7 @@ impl Handler<PosesOptimised> for Tracker {
     type Result = ();
     fn handle(&mut self, msg: PosesOptimised, ctx: &mut Context<Self>) {
         contained(ctx, "tracker", || {
-            let known: Vec<(KeyframeId, Pose3)> =
-                msg.poses.into_iter().filter(|(k, _)| self.graph.keyframe(*k).is_some()).collect();
-            if let Err(e) = self.graph.update_keyframe_poses(known.iter().map(|(k, p)| (*k, p))) {
+            if let Err(e) = self.map.apply_poses(&msg.poses) {
                 tracing::warn!(robot = %self.robot, "optimised poses not applied: {e}");
                 return;
             }
@@ -382,8 +334,8 @@ impl Handler<Republish> for Tracker {
     fn handle(&mut self, _: Republish, ctx: &mut Context<Self>) {
         contained(ctx, "tracker", || {
             let Some(links) = &self.links else { return };
-            for keyframe in self.graph.keyframes() {
-                let Some(scan) = self.graph.semantic_scan_shared(keyframe.id) else { continue };
+            for keyframe in self.map.graph.keyframes() {
+                let Some(scan) = self.map.graph.semantic_scan_shared(keyframe.id) else { continue };
                 links.matcher_keyframes.do_send(LocalKeyframe {
                     id: keyframe.id,
                     world_from_body: keyframe.world_from_body,
@@ -398,31 +350,31 @@ impl Handler<Republish> for Tracker {
 impl Handler<GetSceneGraph> for Tracker {
     type Result = MessageResult<GetSceneGraph>;
     fn handle(&mut self, _: GetSceneGraph, _: &mut Context<Self>) -> Self::Result {
-        MessageResult(self.graph.clone())
+        MessageResult(self.map.graph.clone())
     }
 }
 
 impl Handler<GetMapSummary> for Tracker {
     type Result = MessageResult<GetMapSummary>;
     fn handle(&mut self, _: GetMapSummary, _: &mut Context<Self>) -> Self::Result {
-        let objects = self
-            .graph
+        let graph = &self.map.graph;
+        let objects = graph
             .objects()
             .filter_map(|o| {
                 Some(MapObject {
                     id: o.id,
                     label: o.label,
-                    centroid: self.graph.centroid_in_world(o.id)?,
+                    centroid: graph.centroid_in_world(o.id)?,
                     size: o.size,
                     anchor: o.anchor,
-                    confirmed: self.objects.is_confirmed(o.id, &self.config.tracking),
+                    confirmed: self.map.is_confirmed(o.id, &self.config),
                 })
             })
             .collect();
         MessageResult(MapSummary {
-            keyframes: self.graph.keyframes().cloned().collect(),
+            keyframes: graph.keyframes().cloned().collect(),
             objects,
-            clouds: self.graph.cloud_stats(),
+            clouds: graph.cloud_stats(),
         })
     }
 }

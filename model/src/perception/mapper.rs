@@ -1,0 +1,273 @@
+//! The robot's own map as plain state (paper §IV-A, §IV-E): which scans become keyframes, how
+//! a keyframe is placed, the object layer, intra-robot loop closures and the cloud budget. The
+//! Tracker actor owns one and sends on what it returns.
+//!
+//! A new keyframe k is placed by chaining the odometry increment since the previous keyframe
+//! p onto p's *optimised* pose, so that corrections the pose graph made are kept:
+//!
+//!   Δ = odom_from_body(p)⁻¹ · odom_from_body(k),   world_from_body(k) = world_from_body(p) · Δ
+//!
+//! and the odometry edge p → k measures Δ with the configured odometry information. The first
+//! keyframe takes its odometry pose as is. Then the object layer is updated (Hungarian LAP
+//! against nearby map objects, [`ObjectTracker`]), a loop closure is looked for at most once per
+//! `loop_closure.min_interval_s` ([`loop_closure::detect`]), and the semantic layer is fitted
+//! to `cloud_store` (old scans compacted, then evicted).
+
+use super::classes::ClassTable;
+use super::clustering::ObjectCandidate;
+use super::keyframes::{is_keyframe, KeyframeConfig};
+use super::loop_closure::{self, LoopClosureConfig};
+use super::object_cloud::UNLABELLED;
+use super::tracker::{ObjectTracker, TrackerConfig};
+use crate::geometry::Pose3;
+use crate::scene_graph::cloud_store::{CloudChange, CloudStoreConfig};
+use crate::scene_graph::{
+    Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, LabelId, SceneGraph, SceneGraphError,
+    SemanticScan, Stamp,
+};
+use nalgebra::{Matrix6, Point3};
+use std::sync::Arc;
+
+/// What the mapper decides with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MapperConfig {
+    pub keyframes: KeyframeConfig,
+    pub tracking: TrackerConfig,
+    pub loop_closure: LoopClosureConfig,
+    pub cloud_store: CloudStoreConfig,
+    /// Information of an odometry edge (the inverse of its covariance over (ω, v)).
+    pub odometry_information: Matrix6<f64>,
+}
+
+/// One labelled scan, borrowed: the body's odometry pose and its points with their classes.
+#[derive(Clone, Copy, Debug)]
+pub struct ScanInput<'a> {
+    pub stamp: Stamp,
+    pub odom_from_body: &'a Pose3,
+    pub points_in_body: &'a [Point3<f64>],
+    pub labels: &'a [Option<LabelId>],
+    pub candidates: &'a [ObjectCandidate],
+}
+
+/// A keyframe the map took, and what changed with it.
+#[derive(Clone, Debug)]
+pub struct KeyframeAdded {
+    pub keyframe: Keyframe,
+    /// The odometry edge from the previous keyframe (none for the first) and a loop closure
+    /// found at this keyframe, in that order.
+    pub edges: Vec<KeyframeEdge>,
+    /// The keyframe's scan as the map holds it (shared, not copied).
+    pub scan: Option<Arc<SemanticScan>>,
+    /// A loop closure found but refused by the scene graph (it names a keyframe the graph no
+    /// longer accepts an edge to), for the caller to report.
+    pub refused_loop: Option<SceneGraphError>,
+    /// Scans the cloud budget compacted (`Some`) or evicted (`None`) afterwards.
+    pub scans_changed: Vec<CloudChange>,
+}
+
+/// The map and what continues it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Mapper {
+    pub graph: SceneGraph,
+    pub objects: ObjectTracker,
+    /// The id the next keyframe takes.
+    pub next_keyframe: u32,
+    /// The latest keyframe and its odometry pose (for increments).
+    pub last_odometry: Option<(KeyframeId, Pose3)>,
+    /// Stamp of the latest loop-closure attempt.
+    pub last_loop_attempt: Option<Stamp>,
+}
+
+impl Mapper {
+    /// Whether a scan at `odom_from_body` becomes a keyframe (LIO-SAM's distance and angle
+    /// thresholds against the latest keyframe's odometry pose).
+    pub fn wants(&self, odom_from_body: &Pose3, config: &MapperConfig) -> bool {
+        let last = self.last_odometry.map(|(_, p)| p);
+        is_keyframe(last.as_ref(), odom_from_body, &config.keyframes)
+    }
+
+    /// Adds `scan` as the next keyframe (see the module's equations). On an error the steps
+    /// already taken stay (a keyframe added before its scan was refused stays, and its id is not
+    /// reused).
+    pub fn add_keyframe(
+        &mut self,
+        scan: ScanInput<'_>,
+        classes: &ClassTable,
+        config: &MapperConfig,
+    ) -> Result<KeyframeAdded, SceneGraphError> {
+        let id = KeyframeId(self.next_keyframe);
+        let (world_from_body, odometry_edge) = match self.last_odometry {
+            None => (*scan.odom_from_body, None),
+            Some((previous, odometry)) => {
+                let increment = odometry.inverse() * scan.odom_from_body;
+                let optimised = self.graph.keyframe(previous).map(|k| k.world_from_body).unwrap_or(odometry);
+                let edge = KeyframeEdge {
+                    kind: KeyframeEdgeKind::Odometry,
+                    from: previous,
+                    to: KeyframeRef::Local(id),
+                    from_from_to: increment,
+                    information: config.odometry_information,
+                };
+                (optimised * increment, Some(edge))
+            }
+        };
+        let keyframe = Keyframe { id, stamp: scan.stamp, world_from_body };
+        self.graph.add_keyframe(keyframe.clone())?;
+        self.next_keyframe += 1;
+        self.last_odometry = Some((id, *scan.odom_from_body));
+        let semantic = SemanticScan {
+            points_in_body: scan.points_in_body.iter().map(|p| p.cast::<f32>()).collect(),
+            labels: scan.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect(),
+        };
+        self.graph.set_semantic_scan(id, semantic)?;
+        let mut edges = Vec::new();
+        if let Some(edge) = odometry_edge {
+            self.graph.add_edge(edge.clone())?;
+            edges.push(edge);
+        }
+        self.objects.update(&mut self.graph, id, scan.candidates, &config.tracking)?;
+        let due = self.last_loop_attempt.is_none_or(|t| scan.stamp - t >= config.loop_closure.min_interval_s);
+        if due {
+            self.last_loop_attempt = Some(scan.stamp);
+        }
+        let mut refused_loop = None;
+        if let Some(edge) = due.then(|| loop_closure::detect(&self.graph, id, &config.loop_closure)).flatten() {
+            match self.graph.add_edge(edge.clone()) {
+                Ok(()) => edges.push(edge),
+                Err(e) => refused_loop = Some(e),
+            }
+        }
+        let scan = self.graph.semantic_scan_shared(id);
+        let scans_changed = self.graph.fit_clouds(&config.cloud_store, |l| classes.object_label(l.0).is_some());
+        Ok(KeyframeAdded { keyframe, edges, scan, refused_loop, scans_changed })
+    }
+
+    /// Moves the keyframes the map knows to their optimised poses (others are ignored: they may
+    /// have been made after the solve started, or belong to a neighbour).
+    pub fn apply_poses(&mut self, poses: &[(KeyframeId, Pose3)]) -> Result<(), SceneGraphError> {
+        let known: Vec<&(KeyframeId, Pose3)> =
+            poses.iter().filter(|(k, _)| self.graph.keyframe(*k).is_some()).collect();
+        self.graph.update_keyframe_poses(known.into_iter().map(|(k, p)| (*k, p)))
+    }
+
+    /// Whether object `id` has been seen often enough to be shared and matched.
+    pub fn is_confirmed(&self, id: crate::scene_graph::ObjectId, config: &MapperConfig) -> bool {
+        self.objects.is_confirmed(id, &config.tracking)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::pose_from_yaw_translation;
+    use crate::perception::classes::ClassTable;
+    use nalgebra::Vector3;
+
+    fn config() -> MapperConfig {
+        MapperConfig {
+            keyframes: KeyframeConfig::default(),
+            tracking: TrackerConfig::default(),
+            loop_closure: LoopClosureConfig::default(),
+            cloud_store: CloudStoreConfig::default(),
+            odometry_information: Matrix6::identity() * 100.0,
+        }
+    }
+
+    fn scan_at<'a>(stamp: Stamp, pose: &'a Pose3, points: &'a [Point3<f64>]) -> ScanInput<'a> {
+        ScanInput { stamp, odom_from_body: pose, points_in_body: points, labels: &[], candidates: &[] }
+    }
+
+    #[test]
+    fn keyframes_chain_odometry_increments_onto_optimised_poses() {
+        let (config, classes) = (config(), ClassTable::default());
+        let mut mapper = Mapper::default();
+        let points = [Point3::new(1.0, 2.0, 0.5), Point3::new(-3.0, 0.0, 1.0)];
+        let labels = [None, None];
+        let odom0 = pose_from_yaw_translation(0.3, Vector3::new(1.0, 2.0, 0.0));
+        let first = ScanInput { labels: &labels, ..scan_at(0.0, &odom0, &points) };
+        let added = mapper.add_keyframe(first, &classes, &config).expect("first keyframe");
+        assert_eq!(added.keyframe.world_from_body, odom0, "the first keyframe takes its odometry pose");
+        assert!(added.edges.is_empty());
+        assert_eq!(added.scan.as_ref().map(|s| s.points_in_body.len()), Some(2));
+        // The optimiser moves keyframe 0; the next keyframe keeps the odometry increment from it.
+        let corrected = pose_from_yaw_translation(0.25, Vector3::new(1.2, 1.9, 0.0));
+        mapper.apply_poses(&[(KeyframeId(0), corrected), (KeyframeId(99), Pose3::identity())]).expect("poses");
+        let odom1 = odom0 * pose_from_yaw_translation(0.1, Vector3::new(2.0, 0.0, 0.0));
+        let second = mapper.add_keyframe(scan_at(1.0, &odom1, &[]), &classes, &config).expect("second");
+        let expected = corrected * pose_from_yaw_translation(0.1, Vector3::new(2.0, 0.0, 0.0));
+        assert!((second.keyframe.world_from_body.translation.vector - expected.translation.vector).norm() < 1e-12);
+        assert!(second.keyframe.world_from_body.rotation.angle_to(&expected.rotation) < 1e-12);
+        let edge = &second.edges[0];
+        assert_eq!(
+            (edge.kind, edge.from, edge.to),
+            (KeyframeEdgeKind::Odometry, KeyframeId(0), KeyframeRef::Local(KeyframeId(1)))
+        );
+        assert!((edge.from_from_to.translation.vector - Vector3::new(2.0, 0.0, 0.0)).norm() < 1e-12);
+        assert_eq!(edge.information, config.odometry_information);
+        assert_eq!(mapper.last_odometry, Some((KeyframeId(1), odom1)), "increments are taken between odometry poses");
+    }
+
+    #[test]
+    fn a_keyframe_only_past_the_thresholds_and_never_out_of_order() {
+        let (config, classes) = (config(), ClassTable::default());
+        let mut mapper = Mapper::default();
+        let origin = Pose3::identity();
+        assert!(mapper.wants(&origin, &config), "the first scan is always a keyframe");
+        mapper.add_keyframe(scan_at(0.0, &origin, &[]), &classes, &config).expect("first");
+        let near = pose_from_yaw_translation(0.0, Vector3::new(0.01, 0.0, 0.0));
+        assert!(!mapper.wants(&near, &config), "1 cm is below the distance threshold");
+        let far = pose_from_yaw_translation(0.0, Vector3::new(5.0, 0.0, 0.0));
+        assert!(mapper.wants(&far, &config));
+        // A stamp earlier than the latest keyframe's is refused by the scene graph: nothing is
+        // added, and the next keyframe still gets a fresh id.
+        let err = mapper.add_keyframe(scan_at(-1.0, &far, &[]), &classes, &config).expect_err("older stamp");
+        assert!(matches!(err, SceneGraphError::StampNotIncreasing { .. }), "{err}");
+        assert_eq!(mapper.graph.keyframe_count(), 1);
+        let next = mapper.add_keyframe(scan_at(2.0, &far, &[]), &classes, &config).expect("later stamp");
+        assert_eq!(next.keyframe.id, KeyframeId(1));
+    }
+
+    #[test]
+    fn a_revisit_closes_a_loop_at_most_once_per_interval() {
+        let (mut config, classes) = (config(), ClassTable::default());
+        config.loop_closure.min_interval_s = 5.0;
+        let mut mapper = Mapper::default();
+        // The walls of one room around the world's origin, seen from each keyframe's pose.
+        let room: Vec<Point3<f64>> = (0..400)
+            .map(|i| {
+                let a = f64::from(i) * std::f64::consts::TAU / 400.0;
+                Point3::new(6.0 * a.cos(), 4.0 * a.sin() + 0.5 * (3.0 * a).sin(), f64::from(i % 10) * 0.2)
+            })
+            .collect();
+        // Away beyond the 15 m search radius, back after 40 s (the time gap is 30 s), and once
+        // more 2 s later: within the interval, so not tried again.
+        let route = [
+            (0.0, 0.0, 0.0),
+            (5.0, 20.0, 0.0),
+            (10.0, 20.0, 20.0),
+            (15.0, 0.0, 20.0),
+            (40.0, 0.0, 0.3),
+            (42.0, 0.0, 0.6),
+        ];
+        let labels = vec![None; room.len()];
+        let mut loops = Vec::new();
+        for (t, x, y) in route {
+            let pose = pose_from_yaw_translation(0.0, Vector3::new(x, y, 0.0));
+            let body_from_world = pose.inverse();
+            let points: Vec<Point3<f64>> = room.iter().map(|p| body_from_world * p).collect();
+            let scan = ScanInput { labels: &labels, ..scan_at(t, &pose, &points) };
+            let added = mapper.add_keyframe(scan, &classes, &config).expect("add");
+            loops.extend(added.edges.into_iter().filter(|e| e.kind == KeyframeEdgeKind::Loop));
+        }
+        assert_eq!(mapper.last_loop_attempt, Some(40.0), "42 s is within the interval of 40 s");
+        assert_eq!(loops.len(), 1, "one loop, at the revisit: {loops:?}");
+        let ends = (loops[0].from, loops[0].to);
+        assert!(
+            ends == (KeyframeId(0), KeyframeRef::Local(KeyframeId(4)))
+                || ends == (KeyframeId(4), KeyframeRef::Local(KeyframeId(0))),
+            "between the first keyframe and the revisit: {ends:?}"
+        );
+        // Odometry is exact here: the loop measures the odometry's own increment.
+        assert!(loops[0].from_from_to.translation.vector.norm() - 0.3 < 0.05);
+    }
+}
