@@ -1,0 +1,143 @@
+//! Association: which neighbour's map overlaps ours, and the first estimate of the transform
+//! between them. By object-graph matching (`model::matching`, the paper) or, with
+//! `matcher.association = "scan_context"`, by Scan Context descriptors (the evaluation's
+//! Swarm-SC baseline).
+
+use super::*;
+
+impl Matcher {
+    /// Matches the neighbour's latest object data against ours; asks for object clouds on success.
+    pub(super) fn try_match(&mut self, robot: RobotId) {
+        let now = self.clock.now();
+        let min_matched = self.config.min_matched_objects;
+        let Some(entry) = self.neighbours.get(&robot) else { return };
+        let Some(data) = &entry.objects else { return };
+        let waiting = matches!(entry.protocol, Some(Protocol::ObjectsReceived(_)));
+        let due = entry.last_attempt.is_none_or(|t| now - t >= self.config.match_interval_s);
+        if !waiting || !due || !entry.link_up || self.config.association != Association::Objects {
+            return;
+        }
+        let remote_objects: Vec<GraphObject> = data
+            .objects
+            .iter()
+            .map(|o| GraphObject {
+                id: o.id,
+                label: o.label,
+                centroid: o.centroid_m(data.resolution_mm),
+                size: Some(o.size_m()),
+            })
+            .collect();
+        let (Ok(local), Ok(remote)) =
+            (ObjectGraph::new(self.local.objects.clone(), usize::MAX), ObjectGraph::new(remote_objects, usize::MAX))
+        else {
+            return;
+        };
+        let refuted = entry.refuted.clone();
+        if let Some(entry) = self.neighbours.get_mut(&robot) {
+            entry.last_attempt = Some(now);
+            entry.match_again = false;
+        }
+        let report = match_graphs(&local, &remote, &self.labels, &self.config.matching);
+        let alignment = match report.outcome {
+            MatchOutcome::Aligned(alignment) => alignment,
+            MatchOutcome::Refused(refusal) => {
+                tracing::debug!(robot = %self.robot, neighbour = %robot, reason = %refusal.reason, "object graphs not matched");
+                return;
+            }
+        };
+        if alignment.matches.len() < min_matched {
+            return;
+        }
+        if refuted_recently(&refuted, &alignment.local_from_remote, now) {
+            return;
+        }
+        let pairs: Vec<(ObjectId, ObjectId)> = alignment.matches.iter().map(|m| (m.local, m.remote)).collect();
+        let remote_ids: Vec<ObjectId> = pairs.iter().map(|p| p.1).collect();
+        let retry = self.retry.clone();
+        let Some(entry) = self.neighbours.get_mut(&robot) else { return };
+        if let Some(Protocol::ObjectsReceived(n)) = entry.protocol.take() {
+            entry.protocol = Some(n.matched(alignment.local_from_remote, pairs, now, &retry).into());
+        }
+        tracing::info!(robot = %self.robot, neighbour = %robot, matches = remote_ids.len(), "object graphs matched");
+        if let Some(links) = &self.links {
+            links.request_clouds.do_send(RequestObjectClouds { robot, objects: remote_ids });
+        }
+    }
+
+    /// Matches by the configured association (objects, or Scan Context descriptors).
+    pub(super) fn try_associate(&mut self, robot: RobotId) {
+        match self.config.association {
+            Association::ScanContext => self.try_match_places(robot),
+            _ => self.try_match(robot),
+        }
+    }
+
+    /// Sends the object-cloud request of a match again.
+    pub(super) fn ask_clouds_again(&self, robot: RobotId, matched: &Neighbour<Matched>) {
+        if let Some(links) = &self.links {
+            let objects = matched.state.pairs.iter().map(|p| p.1).collect();
+            links.request_clouds.do_send(RequestObjectClouds { robot, objects });
+        }
+    }
+
+    /// Scan Context association: our descriptors of `dropped` are gone; no neighbour's
+    /// candidates may name them.
+    pub(super) fn forget_places(&mut self, dropped: &[KeyframeId]) {
+        if dropped.is_empty() {
+            return;
+        }
+        for entry in self.neighbours.values_mut() {
+            entry.places.forget_local(dropped);
+        }
+    }
+
+    /// Scan Context association: compares the descriptors not yet compared and starts an
+    /// alignment round from the best candidate pair not refuted recently.
+    pub(super) fn try_match_places(&mut self, robot: RobotId) {
+        let now = self.clock.now();
+        let Some(entry) = self.neighbours.get_mut(&robot) else { return };
+        let waiting = matches!(entry.protocol, Some(Protocol::ObjectsReceived(_)));
+        let due = entry.last_attempt.is_none_or(|t| now - t >= self.config.match_interval_s);
+        if !waiting || !due || !entry.link_up {
+            return;
+        }
+        entry.last_attempt = Some(now);
+        entry.match_again = false;
+        entry.places.update(self.places.held(), &self.config.scan_context);
+        let candidate = loop {
+            let Some(c) = entry.places.take_best() else { return };
+            let (Some(local), Some(remote)) = (self.keyframes.get(&c.local), entry.places.remote_pose(c.remote)) else {
+                continue;
+            };
+            let guess = local.world_from_body * yaw_turn(-c.yaw) * remote.inverse();
+            if !refuted_recently(&entry.refuted, &guess, now) {
+                break (c, guess);
+            }
+        };
+        let (c, guess) = candidate;
+        let k = self.config.keyframe_neighbourhood as u32;
+        let remote_ids: BTreeSet<KeyframeId> =
+            neighbourhood([c.remote], k).into_iter().filter(|id| entry.places.knows_remote(*id)).collect();
+        let mut round = evenly(remote_ids, self.config.max_keyframes_per_alignment.max(1));
+        round.insert(c.remote);
+        let local_targets: BTreeSet<KeyframeId> =
+            neighbourhood([c.local], k).into_iter().filter(|id| self.keyframes.contains_key(id)).collect();
+        let wanted: BTreeSet<KeyframeId> =
+            round.iter().filter(|id| !entry.keyframes.contains_key(id)).copied().collect();
+        let retry = self.retry.clone();
+        if let Some(Protocol::ObjectsReceived(n)) = entry.protocol.take() {
+            let matched = n.matched(guess, Vec::new(), now, &retry);
+            entry.protocol = Some(matched.keyframes_requested(guess, wanted.clone(), now, &retry).into());
+        }
+        entry.round = round;
+        entry.round_incomplete = false;
+        entry.place_round = Some((c, local_targets));
+        tracing::info!(robot = %self.robot, neighbour = %robot, local = c.local.0, remote = c.remote.0,
+            distance = c.distance, "scan contexts matched");
+        if wanted.is_empty() {
+            self.finish_alignment(robot);
+        } else if let Some(links) = &self.links {
+            links.request_keyframes.do_send(RequestKeyframes { robot, keyframes: wanted.into_iter().collect() });
+        }
+    }
+}

@@ -1,0 +1,413 @@
+//! `Matcher` (paper §IV-C, §IV-D): per neighbour, the protocol of `crate::protocol`. Object data
+//! in → object-graph matching (`model::matching`) → with enough matched objects, the neighbour's
+//! object clouds → ICP of its object clouds onto ours (refines `local_from_remote`) → the
+//! neighbour keyframes that observed the matched objects, ± `keyframe_neighbourhood` → each
+//! registered by ICP to the nearest local keyframe that observed a matched object → inter-robot
+//! factors and the neighbour keyframes (with their marginal covariances) to the Optimiser.
+//!
+//! With `association = "scan_context"` (the evaluation's Swarm-SC baseline) the first two
+//! steps differ: every local keyframe's Scan Context descriptor goes to Comms for broadcast;
+//! a local and a neighbour keyframe whose descriptors agree give the first estimate,
+//! local_from_remote = W_l(k_l) · Rz(−yaw) · W_r(k_r)⁻¹ (same place, turned by the descriptor's
+//! yaw); the neighbour keyframes around k_r are requested, k_r is registered onto k_l coarse
+//! to fine, and the rest is as above with the local keyframes around k_l as targets.
+
+mod association;
+mod neighbour;
+mod rounds;
+
+pub use neighbour::{GetNeighbours, MatcherState, NeighbourMemory, NeighbourStatus};
+
+use crate::clock::Clock;
+use crate::config::{Association, MatcherSection};
+use crate::containment::contained;
+use crate::messages::*;
+use crate::protocol::{Matched, Neighbour, Protocol, ProtocolStage, RetryConfig, Wait};
+use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
+use nalgebra::Point3;
+use sgm_model::geometry::Pose3;
+use sgm_model::matching::alignment::{
+    coarse_to_fine, evenly, judge_round, neighbourhood, refuted_recently, register_round, yaw_turn, LocalView,
+    RemoteView, RoundConfig, RoundVerdict,
+};
+use sgm_model::matching::place_candidates::{EvenPlaces, PlaceCandidate, PlaceCandidates};
+use sgm_model::matching::scan_context::{Place, ScanContext};
+use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
+use sgm_model::perception::icp::{register, IcpConfig};
+use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS};
+use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, SemanticScan, Stamp};
+use sgm_model::wire::cloud_codec;
+use sgm_model::wire::messages::{KeyframeRefusalReason, ObjectData};
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
+
+use neighbour::{hold_at_most, NeighbourEntry};
+use rounds::LocalKeyframeData;
+
+/// Where the Matcher sends what it produces.
+#[derive(Clone)]
+pub struct MatcherLinks {
+    pub request_clouds: Recipient<RequestObjectClouds>,
+    pub request_keyframes: Recipient<RequestKeyframes>,
+    pub release_keyframes: Recipient<KeyframesReleased>,
+    pub share_descriptors: Recipient<ShareDescriptor>,
+    pub optimiser: Recipient<InterRobotConstraints>,
+}
+
+pub struct Matcher {
+    robot: RobotId,
+    config: MatcherSection,
+    retry: RetryConfig,
+    clock: Clock,
+    labels: LabelSimilarity,
+    links: Option<MatcherLinks>,
+    local: LocalObjects,
+    keyframes: BTreeMap<KeyframeId, LocalKeyframeData>,
+    /// Scan Context association only: our keyframes' descriptors, at most
+    /// `scan_context.max_places`, spread over the run.
+    places: EvenPlaces,
+    neighbours: BTreeMap<RobotId, NeighbourEntry>,
+}
+
+impl Matcher {
+    pub fn new(
+        robot: RobotId,
+        config: MatcherSection,
+        retry: RetryConfig,
+        clock: Clock,
+        labels: LabelSimilarity,
+    ) -> Self {
+        Self {
+            robot,
+            config,
+            retry,
+            clock,
+            labels,
+            links: None,
+            local: LocalObjects::default(),
+            keyframes: BTreeMap::new(),
+            places: EvenPlaces::default(),
+            neighbours: BTreeMap::new(),
+        }
+    }
+
+    pub fn freeze(&self) -> MatcherState {
+        let neighbours = self
+            .neighbours
+            .iter()
+            .map(|(robot, e)| NeighbourMemory {
+                robot: *robot,
+                protocol: e.protocol.clone(),
+                objects: e.objects.clone(),
+                keyframes: e.keyframes.values().cloned().collect(),
+                first_aligned: e.first_aligned,
+                refuted: e.refuted.clone(),
+            })
+            .collect();
+        MatcherState { neighbours }
+    }
+
+    pub fn thawed(mut self, state: MatcherState) -> Self {
+        let now = self.clock.now();
+        for memory in state.neighbours {
+            let entry = self.entry(memory.robot);
+            entry.protocol = memory.protocol.map(|p| p.settled(now)).or(entry.protocol.take());
+            entry.objects = memory.objects;
+            entry.keyframes = memory.keyframes.into_iter().map(|k| (k.id, k)).collect();
+            entry.first_aligned = memory.first_aligned;
+            entry.refuted = memory.refuted;
+            entry.match_again = true;
+        }
+        self
+    }
+
+    fn entry(&mut self, robot: RobotId) -> &mut NeighbourEntry {
+        let now = self.clock.now();
+        self.neighbours.entry(robot).or_insert_with(|| NeighbourEntry {
+            protocol: Some(Neighbour::discovered(robot, now).into()),
+            objects: None,
+            keyframes: BTreeMap::new(),
+            first_aligned: None,
+            observed_in: BTreeMap::new(),
+            refuted: Vec::new(),
+            round: BTreeSet::new(),
+            last_attempt: None,
+            places: PlaceCandidates::default(),
+            place_round: None,
+            link_up: true,
+            round_incomplete: false,
+            match_again: false,
+        })
+    }
+
+    /// Tells Comms that these neighbour keyframes are no longer held.
+    fn release(&self, robot: RobotId, keyframes: Vec<KeyframeId>) {
+        if let (Some(links), false) = (&self.links, keyframes.is_empty()) {
+            links.release_keyframes.do_send(KeyframesReleased { robot, keyframes });
+        }
+    }
+}
+
+impl Actor for Matcher {
+    type Context = Context<Self>;
+}
+
+impl Supervised for Matcher {
+    fn restarting(&mut self, _: &mut Context<Self>) {
+        tracing::warn!(robot = %self.robot, "matcher restarting with its neighbour states");
+        // A handler that panicked between taking a protocol state and putting the next one back
+        // left none: that neighbour starts over (its objects and keyframes are kept).
+        let now = self.clock.now();
+        for (robot, entry) in &mut self.neighbours {
+            if entry.protocol.is_none() {
+                entry.protocol = Some(Neighbour::discovered(*robot, now).into());
+            }
+        }
+    }
+}
+
+impl Handler<LocalObjects> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: LocalObjects, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            self.local = msg;
+            let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
+            for robot in robots {
+                self.try_match(robot);
+            }
+        });
+    }
+}
+
+impl Handler<LocalKeyframe> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: LocalKeyframe, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            let data = LocalKeyframeData { world_from_body: msg.world_from_body, scan: msg.scan.clone() };
+            self.keyframes.insert(msg.id, data);
+            if self.config.association == Association::ScanContext {
+                let points: Vec<Point3<f64>> = msg.scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
+                let descriptor = ScanContext::new(&points, &self.config.scan_context.descriptor);
+                if let Some(links) = &self.links {
+                    let (keyframe, world_from_body) = (msg.id, msg.world_from_body);
+                    let share = ShareDescriptor { keyframe, world_from_body, descriptor: descriptor.clone() };
+                    links.share_descriptors.do_send(share);
+                }
+                let dropped = self.places.insert(msg.id, Place::new(descriptor), self.config.scan_context.max_places);
+                self.forget_places(&dropped);
+                let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
+                for robot in robots {
+                    self.try_match_places(robot);
+                }
+            }
+        });
+    }
+}
+
+impl Handler<LocalScansChanged> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: LocalScansChanged, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            for (id, change) in msg.changes {
+                match change {
+                    Some(scan) => {
+                        if let Some(k) = self.keyframes.get_mut(&id) {
+                            k.scan = scan;
+                        }
+                    }
+                    None => {
+                        self.keyframes.remove(&id);
+                        // Its descriptor could only lead to a keyframe we cannot register.
+                        if self.places.remove(id) {
+                            self.forget_places(&[id]);
+                        }
+                    }
+                }
+            }
+        });
+    }
+}
+
+impl Handler<NeighbourDescriptors> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourDescriptors, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            if self.config.association != Association::ScanContext {
+                return;
+            }
+            let now = self.clock.now();
+            let shape = (self.config.scan_context.descriptor.rings, self.config.scan_context.descriptor.sectors);
+            let max_places = self.config.scan_context.max_places;
+            let entry = self.entry(msg.robot);
+            // A descriptor of another shape can never match ours: not kept.
+            for (id, world_from_body, descriptor) in msg.descriptors {
+                if (descriptor.rings, descriptor.sectors) == shape {
+                    entry.places.add_remote(id, world_from_body, Place::new(descriptor), max_places);
+                }
+            }
+            // The number of keyframes the neighbour shared stands in for an object-data revision.
+            let revision = u32::try_from(entry.places.remote_count()).unwrap_or(u32::MAX);
+            entry.protocol = entry.protocol.take().map(|p| p.on_objects(revision, now));
+            self.try_match_places(msg.robot);
+        });
+    }
+}
+
+impl Handler<PosesOptimised> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: PosesOptimised, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            for (id, pose) in msg.poses {
+                if let Some(k) = self.keyframes.get_mut(&id) {
+                    k.world_from_body = pose;
+                }
+            }
+        });
+    }
+}
+
+impl Handler<NeighbourObjects> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourObjects, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            let now = self.clock.now();
+            let entry = self.entry(msg.robot);
+            if entry.objects.as_ref().is_some_and(|d| d.revision >= msg.data.revision) {
+                return;
+            }
+            let revision = msg.data.revision;
+            entry.objects = Some(msg.data);
+            entry.protocol = entry.protocol.take().map(|p| p.on_objects(revision, now));
+            self.try_match(msg.robot);
+        });
+    }
+}
+
+impl Handler<NeighbourObjectClouds> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourObjectClouds, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            self.on_object_clouds(msg);
+        });
+    }
+}
+
+impl Handler<NeighbourKeyframe> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourKeyframe, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            let (robot, id) = (msg.robot, msg.id);
+            let cap = self.config.max_held_keyframes;
+            let entry = self.entry(robot);
+            // Only a keyframe of the current round is kept (a late or duplicated one is not).
+            if !entry.round.contains(&id) {
+                tracing::debug!(neighbour = %robot, keyframe = id.0, "keyframe outside the round, not kept");
+                self.release(robot, vec![id]);
+                return;
+            }
+            entry.keyframes.insert(id, msg);
+            let released = hold_at_most(&mut entry.keyframes, &entry.round, cap);
+            self.release(robot, released);
+            self.on_keyframe_resolved(robot, id);
+        });
+    }
+}
+
+impl Handler<KeyframesUnavailable> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: KeyframesUnavailable, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            // Busy: given up after every retry, or refused for load; the keyframe was not
+            // shown to be absent.
+            if msg.reason == KeyframeRefusalReason::Busy {
+                self.entry(msg.robot).round_incomplete = true;
+            }
+            for id in msg.keyframes {
+                self.on_keyframe_resolved(msg.robot, id);
+            }
+        });
+    }
+}
+
+impl Handler<Tick> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: Tick, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            // Object clouds that never came: ask again with back-off, then start over.
+            let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
+            for robot in robots {
+                let Some(entry) = self.neighbours.get_mut(&robot) else { continue };
+                let Some(Protocol::Matched(mut n)) = entry.protocol.clone() else { continue };
+                if !entry.link_up || !n.state.wait.expired(msg.now) {
+                    continue;
+                }
+                // Comms reports the link down after `link_timeout_s` of silence; until then the
+                // neighbour counts as heard, and a lost cloud response is asked for again at
+                // the same pace. (While it is down nothing is retried: see above.)
+                match n.state.wait.retry(msg.now, &self.retry, entry.link_up) {
+                    Some(next) => {
+                        n.state.wait = next;
+                        entry.protocol = Some(n.clone().into());
+                        self.ask_clouds_again(robot, &n);
+                    }
+                    None => {
+                        entry.protocol = Some(n.gave_up(msg.now).into());
+                        entry.match_again = true;
+                    }
+                }
+            }
+            // Rounds cut short by losses: try again (the neighbour may have stopped changing).
+            let again: Vec<RobotId> = self.neighbours.iter().filter(|(_, e)| e.match_again).map(|(r, _)| *r).collect();
+            for robot in again {
+                self.try_associate(robot);
+            }
+        });
+    }
+}
+
+impl Handler<LinkChanged> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: LinkChanged, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            let now = self.clock.now();
+            let retry = self.retry.clone();
+            let entry = self.entry(msg.robot);
+            entry.link_up = msg.up;
+            if !msg.up {
+                return;
+            }
+            // Back: a pending object-cloud request is sent again at once (its retries were
+            // paused); a neighbour waiting to be matched is matched now.
+            entry.last_attempt = None;
+            if let Some(Protocol::Matched(mut n)) = entry.protocol.clone() {
+                n.state.wait = Wait::new(now, &retry);
+                entry.protocol = Some(n.clone().into());
+                self.ask_clouds_again(msg.robot, &n);
+            }
+            self.try_associate(msg.robot);
+        });
+    }
+}
+
+impl Handler<GetNeighbours> for Matcher {
+    type Result = MessageResult<GetNeighbours>;
+    fn handle(&mut self, _: GetNeighbours, _: &mut Context<Self>) -> Self::Result {
+        MessageResult(
+            self.neighbours
+                .iter()
+                .map(|(robot, e)| NeighbourStatus {
+                    robot: *robot,
+                    state: e.protocol.as_ref().map(Protocol::stage),
+                    local_from_remote: e.protocol.as_ref().and_then(|p| p.local_from_remote().copied()),
+                    first_aligned: e.first_aligned,
+                    keyframes_held: e.keyframes.len(),
+                    objects_revision: e.objects.as_ref().map(|d| d.revision),
+                })
+                .collect(),
+        )
+    }
+}
+
+connects!(Matcher => MatcherLinks);
+freezes!(Matcher => MatcherState);
+stops_on_injected_failure!(Matcher => "matcher");

@@ -1,0 +1,112 @@
+//! What the Matcher keeps per neighbour: its protocol, object data, held keyframes, the round
+//! in progress and the refuted transforms; what a snapshot keeps of it; what status reports.
+
+use super::*;
+
+/// The protocol state and alignment of every neighbour.
+#[derive(Message)]
+#[rtype(result = "Vec<NeighbourStatus>")]
+pub struct GetNeighbours;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct NeighbourStatus {
+    pub robot: RobotId,
+    /// Where its protocol stands (none only while a handler that failed is being restarted).
+    pub state: Option<ProtocolStage>,
+    pub local_from_remote: Option<Pose3>,
+    /// When it first reached `Aligned`.
+    pub first_aligned: Option<f64>,
+    pub keyframes_held: usize,
+    /// Revision of the neighbour's object data held (`None`: none received).
+    pub objects_revision: Option<u32>,
+}
+
+pub(super) struct NeighbourEntry {
+    pub(super) protocol: Option<Protocol>,
+    pub(super) objects: Option<ObjectData>,
+    pub(super) keyframes: BTreeMap<KeyframeId, NeighbourKeyframe>,
+    pub(super) first_aligned: Option<f64>,
+    /// Remote object → keyframes that observed it (from the object-cloud response).
+    pub(super) observed_in: BTreeMap<ObjectId, Vec<KeyframeId>>,
+    /// Transforms refuted by keyframe registration, and when: a match landing near one of them
+    /// within [`REFUTED_FOR_S`] is not pursued again.
+    pub(super) refuted: Vec<(Pose3, Stamp)>,
+    /// The neighbour keyframes of the current alignment round (requested or already held).
+    pub(super) round: BTreeSet<KeyframeId>,
+    /// When matching against this neighbour was last tried.
+    pub(super) last_attempt: Option<Stamp>,
+    /// Scan Context association only: the neighbour's descriptors and the candidate pairs.
+    pub(super) places: PlaceCandidates,
+    /// Scan Context association only (never set otherwise): the pair of the current round and
+    /// the local keyframes around its local one (object association derives its targets from
+    /// the object pairs).
+    pub(super) place_round: Option<(PlaceCandidate, BTreeSet<KeyframeId>)>,
+    /// Comms reported the link down: nothing is matched, requested or retried until it is back.
+    pub(super) link_up: bool,
+    /// A keyframe of the current round was given up on (lost, not refused): too few factors
+    /// then say nothing against the match.
+    pub(super) round_incomplete: bool,
+    /// The last round was cut short by losses, not refuted: match again once
+    /// `match_interval_s` has passed, even if no new object data comes.
+    pub(super) match_again: bool,
+}
+
+/// What of the Matcher a snapshot keeps, per neighbour: its protocol state (a request in flight
+/// is not kept: see [`Protocol::settled`]), its latest object data, every keyframe received
+/// (never asked for twice, also across a crash), and the refuted transforms. Local keyframes
+/// and objects are not kept here: the Tracker hands them over again after a thaw.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MatcherState {
+    pub neighbours: Vec<NeighbourMemory>,
+}
+
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NeighbourMemory {
+    pub robot: RobotId,
+    pub protocol: Option<Protocol>,
+    pub objects: Option<ObjectData>,
+    pub keyframes: Vec<NeighbourKeyframe>,
+    pub first_aligned: Option<f64>,
+    pub refuted: Vec<(Pose3, Stamp)>,
+}
+
+/// Drops held neighbour keyframes outside `round`, lowest ids first, until at most `cap` are
+/// held; the ids dropped.
+pub(super) fn hold_at_most(
+    held: &mut BTreeMap<KeyframeId, NeighbourKeyframe>,
+    round: &BTreeSet<KeyframeId>,
+    cap: usize,
+) -> Vec<KeyframeId> {
+    let excess = held.len().saturating_sub(cap);
+    let victims: Vec<KeyframeId> = held.keys().filter(|k| !round.contains(k)).take(excess).copied().collect();
+    for k in &victims {
+        held.remove(k);
+    }
+    victims
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix6;
+
+    #[test]
+    fn held_neighbour_keyframes_beyond_the_cap_go_lowest_first_sparing_the_round() {
+        let keyframe = |id: u32| NeighbourKeyframe {
+            robot: RobotId(2),
+            id: KeyframeId(id),
+            world_from_body: Pose3::identity(),
+            covariance: Matrix6::identity(),
+            points_in_body: Vec::new(),
+        };
+        let mut held: BTreeMap<KeyframeId, NeighbourKeyframe> = (0..10).map(|k| (KeyframeId(k), keyframe(k))).collect();
+        let round: BTreeSet<KeyframeId> = [KeyframeId(1), KeyframeId(2)].into();
+        let released = hold_at_most(&mut held, &round, 5);
+        assert_eq!(released, [0, 3, 4, 5, 6].map(KeyframeId));
+        assert_eq!(held.keys().copied().collect::<Vec<_>>(), [1, 2, 7, 8, 9].map(KeyframeId));
+        // The round itself is never dropped, even over the cap.
+        let everything: BTreeSet<KeyframeId> = held.keys().copied().collect();
+        assert!(hold_at_most(&mut held, &everything, 2).is_empty());
+        assert_eq!(held.len(), 5);
+    }
+}

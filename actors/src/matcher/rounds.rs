@@ -1,0 +1,173 @@
+//! An alignment round (paper §IV-C, §IV-D): object clouds in, object-cloud ICP refines the
+//! match, the neighbour keyframes around the matched objects are asked for, and once all are
+//! in (or reported unavailable) the round is registered and judged by
+//! `model::matching::alignment`: incomplete, refuted, or aligned with inter-robot factors.
+
+use super::*;
+
+/// A local keyframe: its latest pose and the map's scan (shared, not copied).
+pub(super) struct LocalKeyframeData {
+    pub(super) world_from_body: Pose3,
+    pub(super) scan: Arc<SemanticScan>,
+}
+
+/// A local keyframe as registration sees it.
+pub(super) fn local_view(k: &LocalKeyframeData) -> LocalView<'_> {
+    LocalView { world_from_body: &k.world_from_body, points_in_body: &k.scan.points_in_body }
+}
+
+/// A neighbour keyframe as registration sees it.
+pub(super) fn remote_view(k: &NeighbourKeyframe) -> RemoteView<'_> {
+    RemoteView {
+        id: k.id,
+        world_from_body: &k.world_from_body,
+        covariance: &k.covariance,
+        points_in_body: &k.points_in_body,
+    }
+}
+
+impl Matcher {
+    pub(super) fn local_object_cloud(&self, object: &GraphObject) -> Vec<Point3<f64>> {
+        let observed = self.local.observed_in.get(&object.id).cloned().unwrap_or_default();
+        let scans = observed
+            .iter()
+            .rev()
+            .filter_map(|k| self.keyframes.get(k))
+            .take(MAX_VIEWS)
+            .map(|k| (&k.world_from_body, &k.scan.points_in_body[..], &k.scan.labels[..]));
+        object_cloud(scans, object.label, &object.centroid, &object.size.unwrap_or_default(), 0.3, 0.1)
+    }
+
+    pub(super) fn on_object_clouds(&mut self, msg: NeighbourObjectClouds) {
+        let now = self.clock.now();
+        let Some(Protocol::Matched(matched)) = self.neighbours.get(&msg.robot).and_then(|e| e.protocol.clone()) else {
+            return;
+        };
+        // Object-cloud ICP: remote object points (remote world) onto ours (local world).
+        let remote_of: BTreeMap<ObjectId, ObjectId> = matched.state.pairs.iter().map(|(l, r)| (*r, *l)).collect();
+        let (mut source, mut target) = (Vec::new(), Vec::new());
+        let mut observed_in = BTreeMap::new();
+        for cloud in &msg.clouds {
+            let Some(local_id) = remote_of.get(&cloud.id) else { continue };
+            observed_in.insert(cloud.id, cloud.keyframes.clone());
+            // The envelope held the clouds' declared points within `comms.limits.max_cloud_points`.
+            if let Ok(points) = cloud_codec::decode(&cloud.cloud) {
+                source.extend(points);
+            }
+            if let Some(object) = self.local.objects.iter().find(|o| o.id == *local_id) {
+                target.extend(self.local_object_cloud(object));
+            }
+        }
+        let mut local_from_remote = matched.state.local_from_remote;
+        if let Ok(result) = register(&source, &target, &local_from_remote, &self.config.icp) {
+            if result.converged {
+                local_from_remote = result.target_from_source;
+            }
+        }
+        // Neighbour keyframes that observed the matched objects, ± the neighbourhood.
+        let around = neighbourhood(observed_in.values().flatten().copied(), self.config.keyframe_neighbourhood as u32);
+        let round = evenly(around, self.config.max_keyframes_per_alignment);
+        let retry = self.retry.clone();
+        let entry = self.entry(msg.robot);
+        entry.observed_in = observed_in;
+        let wanted: BTreeSet<KeyframeId> =
+            round.iter().filter(|id| !entry.keyframes.contains_key(id)).copied().collect();
+        entry.round = round;
+        entry.round_incomplete = false;
+        entry.protocol = Some(matched.keyframes_requested(local_from_remote, wanted.clone(), now, &retry).into());
+        tracing::debug!(robot = %self.robot, neighbour = %msg.robot, wanted = wanted.len(), "object clouds in, keyframes wanted");
+        if wanted.is_empty() {
+            self.finish_alignment(msg.robot);
+        } else if let Some(links) = &self.links {
+            links
+                .request_keyframes
+                .do_send(RequestKeyframes { robot: msg.robot, keyframes: wanted.into_iter().collect() });
+        }
+    }
+
+    pub(super) fn on_keyframe_resolved(&mut self, robot: RobotId, id: KeyframeId) {
+        let Some(entry) = self.neighbours.get_mut(&robot) else { return };
+        if let Some(Protocol::KeyframesRequested(n)) = &mut entry.protocol {
+            n.state.awaiting.remove(&id);
+            if n.state.awaiting.is_empty() {
+                self.finish_alignment(robot);
+            }
+        }
+    }
+
+    /// Every requested keyframe arrived or was reported unavailable: register them and align
+    /// (`model::matching::alignment`).
+    pub(super) fn finish_alignment(&mut self, robot: RobotId) {
+        let now = self.clock.now();
+        let Some(entry) = self.neighbours.get(&robot) else { return };
+        let Some(Protocol::KeyframesRequested(n)) = entry.protocol.clone() else { return };
+        let mut local_from_remote = n.state.local_from_remote;
+        // Local keyframes that observed the matched objects are the registration targets (with
+        // Scan Context, those around the round's local keyframe).
+        let local_ids: BTreeSet<KeyframeId> = match &entry.place_round {
+            Some((_, targets)) => targets.clone(),
+            _ => n.state.pairs.iter().filter_map(|(l, _)| self.local.observed_in.get(l)).flatten().copied().collect(),
+        };
+        let keyframe_icp = IcpConfig {
+            voxel_m: self.config.keyframe_voxel_m,
+            max_iterations: self.config.keyframe_max_iterations,
+            ..self.config.icp.clone()
+        };
+        if let Some((pair, _)) = &entry.place_round {
+            let (local, remote) = (self.keyframes.get(&pair.local), entry.keyframes.get(&pair.remote));
+            let coarse = self.config.scan_context.coarse_correspondence_m;
+            if let Some(refined) = local
+                .zip(remote)
+                .and_then(|(l, r)| coarse_to_fine(&local_view(l), &remote_view(r), pair.yaw, coarse, &keyframe_icp))
+            {
+                local_from_remote = refined;
+            }
+        }
+        let targets = local_ids.iter().filter_map(|id| Some((*id, local_view(self.keyframes.get(id)?)))).collect();
+        let round = entry.keyframes.iter().filter(|(id, _)| entry.round.contains(id)).map(|(_, k)| remote_view(k));
+        let config = RoundConfig {
+            icp: &keyframe_icp,
+            structure: &self.config.structure_check,
+            min_structure_agreement: self.config.min_structure_agreement,
+        };
+        let registered = register_round(&targets, round, &local_from_remote, &config);
+        let Some(entry) = self.neighbours.get_mut(&robot) else { return };
+        let factors = registered.factors.len();
+        match judge_round(&registered, self.config.min_keyframe_factors, entry.round_incomplete, &local_from_remote) {
+            RoundVerdict::Incomplete => {
+                // Keyframes were lost on the way: too few to judge the match, which is tried again.
+                tracing::info!(robot = %self.robot, neighbour = %robot, factors, "alignment round incomplete");
+                if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
+                    entry.protocol = Some(n.gave_up(now).into());
+                }
+                entry.match_again = true;
+            }
+            RoundVerdict::Refuted => {
+                tracing::info!(robot = %self.robot, neighbour = %robot, factors, "object match refuted");
+                entry.refuted.push((n.state.local_from_remote, now));
+                if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
+                    entry.protocol = Some(n.refuted(now).into());
+                }
+            }
+            RoundVerdict::Aligned(local_from_remote) => {
+                if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
+                    entry.protocol = Some(n.aligned(local_from_remote, now).into());
+                    entry.first_aligned.get_or_insert(now);
+                }
+                // Aligned is final: no later round reads the neighbour's clouds.
+                let released: Vec<KeyframeId> = std::mem::take(&mut entry.keyframes).into_keys().collect();
+                entry.round.clear();
+                self.release(robot, released);
+                tracing::info!(robot = %self.robot, neighbour = %robot, factors, "aligned");
+                if let (Some(links), false) = (&self.links, registered.factors.is_empty()) {
+                    links.optimiser.do_send(InterRobotConstraints {
+                        robot,
+                        local_from_remote,
+                        neighbour_keyframes: registered.neighbour_keyframes,
+                        factors: registered.factors,
+                    });
+                }
+            }
+        }
+    }
+}
