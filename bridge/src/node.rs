@@ -377,6 +377,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         let mut last_snapshot = handle.clock.now();
         let mut snapshots = store.clone().map(Snapshots::new);
         let mut body_published: Option<sgm_model::scene_graph::Stamp> = None;
+        let mut failures = PublishFailures::default();
         while rosrust::is_ok() {
             actix_rt::time::sleep(tick).await;
             handle.supervisor.do_send(Tick { now: handle.clock.now() });
@@ -391,7 +392,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                         child_frame_id: side.inputs.body_frame().to_string(),
                         transform: crate::convert::geometry::transform_msg(&world_from_body),
                     };
-                    let _ = publishers.tf.send(tf2_msgs::TFMessage { transforms: vec![transform] });
+                    failures.check("tf", publishers.tf.send(tf2_msgs::TFMessage { transforms: vec![transform] }));
                 }
             }
             if let Some(snapshots) = &mut snapshots {
@@ -416,20 +417,16 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             ) else {
                 continue;
             };
-            let _ = publishers.markers.send(map_markers(&header, &map, &classes));
-            let _ = publishers.path.send(keyframe_path(&header, &map, |t| side.ros_time(t)));
+            failures.check("markers", publishers.markers.send(map_markers(&header, &map, &classes)));
+            failures.check("path", publishers.path.send(keyframe_path(&header, &map, |t| side.ros_time(t))));
             let own = sgm_model::scene_graph::RobotId(id);
             if let Some(transform) = team_transform(&header, own, &neighbours, &world_frames) {
-                let _ = publishers.tf.send(tf2_msgs::TFMessage { transforms: vec![transform] });
+                failures.check("tf", publishers.tf.send(tf2_msgs::TFMessage { transforms: vec![transform] }));
             }
             if publishers.map.subscriber_count() > 0 {
                 if let Ok(graph) = handle.tracker.send(GetSceneGraph).await {
-                    let _ = publishers.map.send(semantic_map(
-                        &header,
-                        &[(&graph, Pose3::identity())],
-                        &classes,
-                        ros.map_voxel_m,
-                    ));
+                    let map = semantic_map(&header, &[(&graph, Pose3::identity())], &classes, ros.map_voxel_m);
+                    failures.check("map", publishers.map.send(map));
                 }
             }
             let (sync_counts, timeline, tf_status, missing_mount) = {
@@ -463,6 +460,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 "latency_ms": side.intake.latency(),
                 "held_dropped": side.intake.dropped.load(Ordering::Relaxed),
                 "transport": crate::transport::status(&counts, &peers),
+                "publish_failures": &failures.0,
                 "comms": comms_status,
                 "fusion": fusion_status,
                 "neighbours": neighbours.iter().map(|n| serde_json::json!({
@@ -475,7 +473,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                     }),
                 })).collect::<Vec<_>>(),
             });
-            let _ = publishers.status.send(std_msgs::String { data: status.to_string() });
+            failures.check("status", publishers.status.send(std_msgs::String { data: status.to_string() }));
         }
         drop((team_in, deliver, points, labels, camera_info, odometry, clock, tf));
         // Shutdown (SIGINT, rosnode kill): one last snapshot.
@@ -531,6 +529,26 @@ fn random_incarnation() -> u32 {
     incarnation.max(1)
 }
 
+/// Publications rosrust did not take (a publisher shut down, or a message it could not
+/// serialise), per output: counted in the status (`publish_failures`) and logged once per output.
+#[derive(Default)]
+struct PublishFailures(std::collections::BTreeMap<&'static str, u64>);
+
+impl PublishFailures {
+    fn check<E: std::fmt::Display>(&mut self, output: &'static str, sent: Result<(), E>) {
+        if let Err(e) = sent {
+            let n = self.0.entry(output).or_default();
+            *n += 1;
+            if *n == 1 {
+                tracing::warn!(
+                    output,
+                    "publishing failed: {e} (further failures counted in the status's publish_failures)"
+                );
+            }
+        }
+    }
+}
+
 struct Publishers {
     markers: rosrust::Publisher<visualization_msgs::MarkerArray>,
     path: rosrust::Publisher<nav_msgs::Path>,
@@ -562,6 +580,20 @@ impl Publishers {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn publish_failures_are_counted_per_output() {
+        let mut failures = PublishFailures::default();
+        failures.check("markers", Ok::<(), String>(()));
+        assert!(failures.0.is_empty(), "a publication taken is no failure");
+        for _ in 0..3 {
+            failures.check("map", Err("publisher shut down"));
+        }
+        failures.check("status", Err("publisher shut down"));
+        assert_eq!(failures.0.get("map"), Some(&3));
+        assert_eq!(failures.0.get("status"), Some(&1));
+        assert_eq!(serde_json::json!({ "publish_failures": &failures.0 })["publish_failures"]["map"], 3);
+    }
 
     /// `NodeConfig` flattens `RobotConfig`: a node's file sets `[classes]` beside `[ros]`, and a
     /// wrong entry is refused by name.
