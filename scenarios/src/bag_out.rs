@@ -6,6 +6,7 @@
 //! once, before the first frame), as a robot's `robot_state_publisher` would publish them.
 //! `sgm replay` of these bags gives the scenario's run.
 
+use crate::output_error::OutputError;
 use sgm_bridge::bag::writer::BagWriter;
 use sgm_bridge::config::RosConfig;
 use sgm_bridge::convert::cloud::cloud_msg;
@@ -51,86 +52,85 @@ pub struct BagRecorder {
     names: Vec<String>,
 }
 
-fn io_error(path: &Path, e: std::io::Error) -> String {
-    format!("{}: {e}", path.display())
-}
-
 impl BagRecorder {
-    pub fn new(dir: &Path, ros: &RosConfig, names: Vec<String>) -> Result<Self, String> {
-        std::fs::create_dir_all(dir).map_err(|e| io_error(dir, e))?;
+    pub fn new(dir: &Path, ros: &RosConfig, names: Vec<String>) -> Result<Self, OutputError> {
+        std::fs::create_dir_all(dir).map_err(OutputError::at(dir))?;
         Ok(Self { dir: dir.to_path_buf(), bags: names.iter().map(|_| None).collect(), ros: ros.clone(), names })
     }
 
-    fn bag(&mut self, k: usize) -> Result<&mut RobotBag, String> {
+    fn bag(&mut self, k: usize) -> Result<&mut RobotBag, OutputError> {
         let (name, id) = (&self.names[k], RobotId::from_index(k).0);
-        if self.bags[k].is_none() {
-            let path = self.dir.join(format!("{name}.bag"));
-            let writer = BagWriter::create(&path).map_err(|e| io_error(&path, e))?;
-            let t = &self.ros.topics;
-            let topic = |template: &str| {
-                let resolved = RosConfig::resolve(template, name, id);
-                if resolved.starts_with('/') {
-                    resolved
-                } else {
-                    format!("/{name}/{resolved}")
+        let bag = match self.bags[k].take() {
+            Some(bag) => bag,
+            None => {
+                let path = self.dir.join(format!("{name}.bag"));
+                let writer = BagWriter::create(&path).map_err(OutputError::at(&path))?;
+                let t = &self.ros.topics;
+                let topic = |template: &str| {
+                    let resolved = RosConfig::resolve(template, name, id);
+                    if resolved.starts_with('/') {
+                        resolved
+                    } else {
+                        format!("/{name}/{resolved}")
+                    }
+                };
+                let inputs = sgm_bridge::inputs::Inputs::new(&self.ros, name, id);
+                RobotBag {
+                    writer,
+                    topics: [
+                        topic(&t.points),
+                        topic(&t.labels),
+                        topic(&t.camera_info),
+                        topic(&t.odometry),
+                        topic(&t.ground_truth),
+                    ],
+                    frames: [inputs.world_frame(), inputs.body_frame(), inputs.lidar_frame(), inputs.camera_frame()]
+                        .map(str::to_string),
+                    tf_static: topic(&self.ros.tf.static_topic),
+                    mounts_written: false,
                 }
-            };
-            let inputs = sgm_bridge::inputs::Inputs::new(&self.ros, name, id);
-            self.bags[k] = Some(RobotBag {
-                writer,
-                topics: [
-                    topic(&t.points),
-                    topic(&t.labels),
-                    topic(&t.camera_info),
-                    topic(&t.odometry),
-                    topic(&t.ground_truth),
-                ],
-                frames: [inputs.world_frame(), inputs.body_frame(), inputs.lidar_frame(), inputs.camera_frame()]
-                    .map(str::to_string),
-                tf_static: topic(&self.ros.tf.static_topic),
-                mounts_written: false,
-            });
-        }
-        self.bags[k].as_mut().ok_or_else(|| format!("bag of {name} not open"))
+            }
+        };
+        Ok(self.bags[k].insert(bag))
     }
 
-    pub fn record(&mut self, k: usize, frame: RecordedFrame<'_>) -> Result<(), String> {
+    pub fn record(&mut self, k: usize, frame: RecordedFrame<'_>) -> Result<(), OutputError> {
         let path = self.dir.join(format!("{}.bag", self.names[k]));
         let bag = self.bag(k)?;
         let time = SCENARIO_EPOCH.time(frame.t);
         let header = |frame_id: &str| Header { seq: 0, stamp: time, frame_id: frame_id.to_string() };
         let [world, body, lidar, camera] = &bag.frames;
         let [points_topic, labels_topic, info_topic, odometry_topic, truth_topic] = &bag.topics;
-        let e = |e| io_error(&path, e);
+        let e = OutputError::at(&path);
         if !bag.mounts_written {
             bag.mounts_written = true;
             let mounts = mounts(header(body), lidar, frame.image.is_some().then_some(camera.as_str()));
             if !mounts.transforms.is_empty() {
-                bag.writer.write_latched(&bag.tf_static, time, &mounts).map_err(e)?;
+                bag.writer.write_latched(&bag.tf_static, time, &mounts).map_err(&e)?;
             }
         }
         let w = &mut bag.writer;
         // Camera info first, as a camera driver publishes it: a replay must not take its epoch
         // from a message without a stamp (regression: `replay_bags.rs`).
         if let Some((image, model)) = frame.image {
-            w.write(info_topic, time, &camera_info_msg(header(camera), model)).map_err(e)?;
-            w.write(labels_topic, time, &label_image_msg(header(camera), image)).map_err(e)?;
+            w.write(info_topic, time, &camera_info_msg(header(camera), model)).map_err(&e)?;
+            w.write(labels_topic, time, &label_image_msg(header(camera), image)).map_err(&e)?;
         }
-        w.write(odometry_topic, time, &odometry_msg(header(world), body, frame.odometry)).map_err(e)?;
-        w.write(truth_topic, time, &odometry_msg(header("truth"), body, frame.truth)).map_err(e)?;
+        w.write(odometry_topic, time, &odometry_msg(header(world), body, frame.odometry)).map_err(&e)?;
+        w.write(truth_topic, time, &odometry_msg(header("truth"), body, frame.truth)).map_err(&e)?;
         let points: Vec<nalgebra::Point3<f32>> = frame.points.iter().map(|p| p.map(|v| v as f32)).collect();
         w.write(points_topic, time, &cloud_msg(header(lidar), &points, frame.labels, |_| [200, 200, 200]))
-            .map_err(e)?;
+            .map_err(&e)?;
         Ok(())
     }
 
     /// Closes every bag; returns their paths.
-    pub fn finish(self) -> Result<Vec<PathBuf>, String> {
+    pub fn finish(self) -> Result<Vec<PathBuf>, OutputError> {
         let mut paths = Vec::new();
         for (bag, name) in self.bags.into_iter().zip(&self.names) {
             if let Some(bag) = bag {
                 let path = self.dir.join(format!("{name}.bag"));
-                bag.writer.finish().map_err(|e| io_error(&path, e))?;
+                bag.writer.finish().map_err(OutputError::at(&path))?;
                 paths.push(path);
             }
         }

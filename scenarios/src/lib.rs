@@ -11,6 +11,7 @@ pub mod bag_out;
 pub mod memory;
 pub mod object_file;
 pub mod observation;
+pub mod output_error;
 pub mod record;
 pub mod replay;
 pub mod report;

@@ -270,12 +270,15 @@ pub async fn replay_with(
             if let Some(path) = result_bag {
                 let result = match &mut result {
                     Some(result) => result,
-                    None => result.insert(
-                        ResultBag::create(path, &names, &ros, classes.clone(), epoch.unwrap_or(Epoch { sec: 0 }))
-                            .map_err(RunError::Input)?,
-                    ),
+                    None => result.insert(ResultBag::create(
+                        path,
+                        &names,
+                        &ros,
+                        classes.clone(),
+                        epoch.unwrap_or(Epoch { sec: 0 }),
+                    )?),
                 };
-                result.observe(&observation).map_err(RunError::Input)?;
+                result.observe(&observation)?;
             }
             observations.push(observation);
             crate::memory::release_free_pages();
@@ -340,10 +343,9 @@ pub async fn replay_with(
     if let Some(path) = result_bag {
         let result = match result {
             Some(result) => result,
-            None => ResultBag::create(path, &names, &ros, classes, epoch.unwrap_or(Epoch { sec: 0 }))
-                .map_err(RunError::Input)?,
+            None => ResultBag::create(path, &names, &ros, classes, epoch.unwrap_or(Epoch { sec: 0 }))?,
         };
-        result.finish(&maps, &last).map_err(RunError::Input)?;
+        result.finish(&maps, &last)?;
     }
     let record = RunRecord {
         scenario: format!("replay of {}", names.join(", ")),

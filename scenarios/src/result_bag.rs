@@ -14,6 +14,7 @@
 //! the mission's clock from `epoch`.
 
 use crate::observation::Observation;
+use crate::output_error::OutputError;
 use sgm_bridge::bag::writer::BagWriter;
 use sgm_bridge::config::RosConfig;
 use sgm_bridge::convert::cloud::voxels_msg;
@@ -56,9 +57,9 @@ impl ResultBag {
         ros: &RosConfig,
         classes: ClassTable,
         epoch: Epoch,
-    ) -> Result<Self, String> {
-        let writer = BagWriter::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let id = |k: usize| k as u16 + 1;
+    ) -> Result<Self, OutputError> {
+        let writer = BagWriter::create(path).map_err(OutputError::at(path))?;
+        let id = |k: usize| RobotId::from_index(k).0;
         let worlds: Vec<String> =
             names.iter().enumerate().map(|(k, n)| RosConfig::resolve(&ros.frames.world, n, id(k))).collect();
         let bodies = names.iter().enumerate().map(|(k, n)| RosConfig::resolve(&ros.frames.body, n, id(k))).collect();
@@ -88,12 +89,12 @@ impl ResultBag {
         self.topics[which].replace("{robot}", &self.names[k])
     }
 
-    fn io(&self, e: std::io::Error) -> String {
-        format!("{}: {e}", self.path.display())
+    fn io(&self, source: std::io::Error) -> OutputError {
+        OutputError { path: self.path.clone(), source }
     }
 
     /// Writes what observation `o` shows: markers, paths, the team's tf.
-    pub fn observe(&mut self, o: &Observation) -> Result<(), String> {
+    pub fn observe(&mut self, o: &Observation) -> Result<(), OutputError> {
         let time = self.epoch.time(o.t);
         let mut tf = TFMessage { transforms: Vec::new() };
         for (k, entry) in o.maps.iter().enumerate() {
@@ -120,7 +121,7 @@ impl ResultBag {
 
     /// Writes the maps at the end (`last` places each robot's map in the first robot's world)
     /// and closes the bag; returns its path.
-    pub fn finish(mut self, maps: &[SceneGraph], last: &Observation) -> Result<PathBuf, String> {
+    pub fn finish(mut self, maps: &[SceneGraph], last: &Observation) -> Result<PathBuf, OutputError> {
         let time = self.epoch.time(last.t);
         // The team map from the robots' voxels (each keyframe point is voxelised once).
         let mut team = LabelledVoxels::new(self.map_voxel_m);
@@ -143,7 +144,7 @@ impl ResultBag {
                 .map_err(|e| self.io(e))?;
         }
         let path = self.path.clone();
-        self.writer.finish().map_err(|e| format!("{}: {e}", path.display()))?;
+        self.writer.finish().map_err(OutputError::at(&path))?;
         Ok(path)
     }
 }

@@ -95,12 +95,12 @@ pub async fn run_with(
             let classes = sgm_model::perception::classes::ClassTable::new(scenario.fusion.classes.clone())
                 .map_err(|e| RunError::Input(format!("fusion.classes: {e}")))?;
             let epoch = sgm_bridge::convert::time::SCENARIO_EPOCH;
-            Some(ResultBag::create(path, &names, &scenario.ros, classes, epoch).map_err(RunError::Input)?)
+            Some(ResultBag::create(path, &names, &scenario.ros, classes, epoch)?)
         }
         None => None,
     };
     let mut recorder = match bag_out {
-        Some(dir) => Some(BagRecorder::new(dir, &scenario.ros, names).map_err(RunError::Input)?),
+        Some(dir) => Some(BagRecorder::new(dir, &scenario.ros, names)?),
         None => None,
     };
     let camera = camera_model(&scenario.camera);
@@ -196,7 +196,7 @@ pub async fn run_with(
                     labels: recorded_labels.as_deref(),
                     image,
                 };
-                recorder.record(k, recorded).map_err(RunError::Input)?;
+                recorder.record(k, recorded)?;
             }
             let sensor_frame = SensorFrame { stamp: t, odom_from_body: odometry, points_in_body: frame.points, labels };
             team.frame(k, || scenario.robot_config(k), sensor_frame)?;
@@ -214,7 +214,7 @@ pub async fn run_with(
         if step % report_every == 0 || step == steps {
             last = team.observe(t).await?;
             if let Some(result) = result.as_mut() {
-                result.observe(&last).map_err(RunError::Input)?;
+                result.observe(&last)?;
             }
             // A robot's world is placed on the truth at its first step.
             for (truth, robot) in truths.iter_mut().zip(&robots) {
@@ -229,12 +229,12 @@ pub async fn run_with(
         }
     }
     if let Some(recorder) = recorder {
-        recorder.finish().map_err(RunError::Input)?;
+        recorder.finish()?;
     }
 
     let maps = team.maps().await?;
     if let Some(result) = result {
-        result.finish(&maps, &last).map_err(RunError::Input)?;
+        result.finish(&maps, &last)?;
     }
     let optimisers = team.optimiser_statuses().await?;
     for (truth, robot) in truths.iter_mut().zip(&robots) {

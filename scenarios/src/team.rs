@@ -31,6 +31,8 @@ pub enum RunError {
     Mailbox(String),
     #[error("{0}")]
     Input(String),
+    #[error(transparent)]
+    Output(#[from] crate::output_error::OutputError),
 }
 
 fn mailbox(e: actix::MailboxError) -> RunError {
