@@ -9,17 +9,33 @@ use sgm_model::scene_graph::Stamp;
 
 pub struct Sensor {
     fusion: Recipient<SensorFrame>,
-    last_stamp: Option<Stamp>,
-    pub(crate) dropped: u64,
+    gate: FrameGate,
 }
 
 #[derive(Message)]
 #[rtype(result = "u64")]
 pub struct GetDroppedFrames;
 
-impl Sensor {
-    pub fn new(fusion: Recipient<SensorFrame>) -> Self {
-        Self { fusion, last_stamp: None, dropped: 0 }
+/// Which frames go on, as plain state: the latest stamp let through, and how many were dropped.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameGate {
+    last_stamp: Option<Stamp>,
+    dropped: u64,
+}
+
+impl FrameGate {
+    /// Lets `frame` through, or says why not (and counts it).
+    pub fn admit(&mut self, frame: &SensorFrame) -> Result<(), &'static str> {
+        let checked = self.check(frame);
+        match checked {
+            Ok(()) => self.last_stamp = Some(frame.stamp),
+            Err(_) => self.dropped += 1,
+        }
+        checked
+    }
+
+    pub fn dropped(&self) -> u64 {
+        self.dropped
     }
 
     fn check(&self, frame: &SensorFrame) -> Result<(), &'static str> {
@@ -45,6 +61,12 @@ impl Sensor {
     }
 }
 
+impl Sensor {
+    pub fn new(fusion: Recipient<SensorFrame>) -> Self {
+        Self { fusion, gate: FrameGate::default() }
+    }
+}
+
 impl Actor for Sensor {
     type Context = Context<Self>;
 }
@@ -54,15 +76,9 @@ impl Supervised for Sensor {}
 impl Handler<SensorFrame> for Sensor {
     type Result = ();
     fn handle(&mut self, frame: SensorFrame, ctx: &mut Context<Self>) {
-        contained(ctx, "sensor", || match self.check(&frame) {
-            Ok(()) => {
-                self.last_stamp = Some(frame.stamp);
-                self.fusion.do_send(frame);
-            }
-            Err(why) => {
-                self.dropped += 1;
-                tracing::warn!(stamp = frame.stamp, "sensor frame dropped: {why}");
-            }
+        contained(ctx, "sensor", || match self.gate.admit(&frame) {
+            Ok(()) => self.fusion.do_send(frame),
+            Err(why) => tracing::warn!(stamp = frame.stamp, "sensor frame dropped: {why}"),
         });
     }
 }
@@ -70,8 +86,43 @@ impl Handler<SensorFrame> for Sensor {
 impl Handler<GetDroppedFrames> for Sensor {
     type Result = u64;
     fn handle(&mut self, _: GetDroppedFrames, _: &mut Context<Self>) -> u64 {
-        self.dropped
+        self.gate.dropped()
     }
 }
 
 stops_on_injected_failure!(Sensor => "sensor");
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::messages::FrameLabels;
+    use nalgebra::Point3;
+    use sgm_model::geometry::Pose3;
+    use sgm_model::scene_graph::LabelId;
+
+    fn frame(stamp: Stamp, labels: usize) -> SensorFrame {
+        SensorFrame {
+            stamp,
+            odom_from_body: Pose3::identity(),
+            points_in_body: vec![Point3::origin(); 2],
+            labels: FrameLabels::PerPoint(vec![Some(LabelId(1)); labels]),
+        }
+    }
+
+    #[test]
+    fn frames_go_through_in_stamp_order_and_bad_ones_are_counted() {
+        let mut gate = FrameGate::default();
+        assert_eq!(gate.admit(&frame(1.0, 2)), Ok(()));
+        assert_eq!(gate.admit(&frame(1.0, 2)), Err("stamp not after the previous frame's"));
+        assert_eq!(gate.admit(&frame(0.5, 2)), Err("stamp not after the previous frame's"));
+        assert_eq!(gate.admit(&frame(2.0, 3)), Err("label count differs from point count"));
+        assert_eq!(gate.admit(&frame(f64::NAN, 2)), Err("non-finite stamp or pose"));
+        let mut far = frame(3.0, 2);
+        far.odom_from_body.translation.vector.x = f64::INFINITY;
+        assert_eq!(gate.admit(&far), Err("non-finite stamp or pose"));
+        assert_eq!(gate.dropped(), 5);
+        // A dropped frame does not move the gate: the next good stamp after 1.0 goes through.
+        assert_eq!(gate.admit(&frame(1.5, 2)), Ok(()));
+        assert_eq!(gate.dropped(), 5);
+    }
+}

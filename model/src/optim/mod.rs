@@ -4,6 +4,7 @@
 pub mod factors;
 pub mod g2o;
 pub mod graph;
+pub mod keyframe_graph;
 pub mod manifold;
 pub mod marginals;
 pub mod robust;
