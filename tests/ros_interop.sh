@@ -100,9 +100,14 @@ echo "  roslaunch: /alpha/sgm_alpha (pid $ALPHA) and /bravo/sgm_bravo (pid $BRAV
 rosbag record -q --lz4 -O "$WORK/recorded.bag" /alpha/velodyne_points /alpha/labels /alpha/camera_info /alpha/Odometry \
   /bravo/velodyne_points /bravo/labels /bravo/camera_info /bravo/Odometry /tf_static >/dev/null 2>&1 & RECORD=$!; PIDS+=($RECORD)
 sleep 1
-rosbag play -q -r 3 "$WORK/bags/alpha.bag" "$WORK/bags/bravo.bag" \
-  /alpha/points:=/alpha/velodyne_points /alpha/odometry:=/alpha/Odometry \
+# One rosbag play per robot, as each robot's own recording would be played: a latched topic
+# keeps only a publisher's last message, and one player of both bags publishes both robots'
+# /tf_static mounts on one publisher, so a subscriber that connects after the second has only it.
+rosbag play -q -r 3 "$WORK/bags/alpha.bag" \
+  /alpha/points:=/alpha/velodyne_points /alpha/odometry:=/alpha/Odometry >/dev/null 2>&1 & PLAY_ALPHA=$!
+rosbag play -q -r 3 "$WORK/bags/bravo.bag" \
   /bravo/points:=/bravo/velodyne_points /bravo/odometry:=/bravo/Odometry >/dev/null 2>&1
+wait "$PLAY_ALPHA"
 sleep 3
 kill -INT "$RECORD"; wait "$RECORD" 2>/dev/null || true
 
