@@ -64,6 +64,7 @@ pub mod config;
 pub mod containment;
 pub mod fusion;
 pub mod journal;
+pub mod map_view;
 pub mod matcher;
 pub mod messages;
 pub mod optimiser;

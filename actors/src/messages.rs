@@ -5,13 +5,11 @@ use actix::Message;
 use nalgebra::{Matrix6, Point3};
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::scan_context::ScanContext;
-use sgm_model::matching::GraphObject;
 use sgm_model::perception::clustering::ObjectCandidate;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
 use sgm_model::scene_graph::{Keyframe, KeyframeEdge, KeyframeId, LabelId, ObjectId, RobotId, Stamp};
 use sgm_model::wire::messages::{KeyframeRefusalReason, ObjectCloud, ObjectData};
 use sgm_model::wire::Message as WireMessage;
-use std::collections::BTreeMap;
 
 /// How the points of a frame get their classes.
 #[derive(Clone, Debug)]
@@ -54,34 +52,13 @@ pub struct NewKeyframe {
     pub edges: Vec<KeyframeEdge>,
 }
 
-/// Tracker → Matcher: a keyframe's labelled points, for object clouds and inter-robot ICP. The
-/// scan is the map's own, shared: the Matcher holds no copy.
+/// Tracker → Matcher and Comms: the map changed (a keyframe added, scans compacted or evicted,
+/// optimised poses applied, a restored map republished); the new snapshot, shared read-only.
 #[derive(Message, Clone, Debug)]
 #[rtype(result = "()")]
-pub struct LocalKeyframe {
-    pub id: KeyframeId,
-    pub world_from_body: Pose3,
-    pub scan: std::sync::Arc<sgm_model::scene_graph::SemanticScan>,
-}
+pub struct MapChanged(pub std::sync::Arc<crate::map_view::MapView>);
 
-/// Tracker → Matcher: scans the map's cloud store compacted (`Some`: the new scan) or evicted
-/// (`None`), so that the Matcher lets go of the old ones.
-#[derive(Message, Clone, Debug)]
-#[rtype(result = "()")]
-pub struct LocalScansChanged {
-    pub changes: Vec<sgm_model::scene_graph::cloud_store::CloudChange>,
-}
-
-/// Tracker → Matcher and Comms: the confirmed, matchable objects (world frame) and which
-/// keyframes observed each.
-#[derive(Message, Clone, Debug, Default)]
-#[rtype(result = "()")]
-pub struct LocalObjects {
-    pub objects: Vec<GraphObject>,
-    pub observed_in: BTreeMap<ObjectId, Vec<KeyframeId>>,
-}
-
-/// Optimiser → Tracker and Matcher: optimised keyframe poses (world frame) and marginal
+/// Optimiser → Tracker: optimised keyframe poses (world frame) and marginal
 /// covariances over (ω, v).
 #[derive(Message, Clone, Debug, Default)]
 #[rtype(result = "()")]

@@ -3,7 +3,7 @@
 //! keyframes as variables with priors from their marginal covariances (expressed in our world
 //! through `local_from_remote`), and inter-robot factors from ICP — solved by
 //! Levenberg–Marquardt on faer. Publishes optimised poses and marginal covariances to the
-//! Tracker and Matcher.
+//! Tracker, which applies them to the map (the Matcher sees them in the next map snapshot).
 //!
 //! A wrong loop closure or inter-robot factor (a false match that passed every check) would
 //! bend the whole trajectory toward it. With `reject_outliers`, each solve is GNC-TLS over those
@@ -19,11 +19,10 @@ use actix::{Actor, Context, Handler, Recipient, Supervised};
 use sgm_model::optim::keyframe_graph::{KeyframeGraph, KeyframeGraphState, KeyframeGraphStatus};
 use sgm_model::scene_graph::RobotId;
 
-/// Where optimised poses go.
+/// Where optimised poses go (the Tracker applies them to the map and shares the map).
 #[derive(Clone)]
 pub struct OptimiserLinks {
     pub tracker: Recipient<PosesOptimised>,
-    pub matcher: Recipient<PosesOptimised>,
 }
 
 /// Most keyframes whose marginal covariance is computed after each optimisation (the latest).
@@ -82,9 +81,7 @@ impl Optimiser {
             tracing::info!(robot = %self.robot, rejected = status.rejected_factors, candidates = status.candidate_factors, "outlier factors");
         }
         if let Some(links) = &self.links {
-            let message = PosesOptimised { poses: solved.poses, covariances: solved.covariances };
-            links.tracker.do_send(message.clone());
-            links.matcher.do_send(message);
+            links.tracker.do_send(PosesOptimised { poses: solved.poses, covariances: solved.covariances });
         }
     }
 }

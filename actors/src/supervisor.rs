@@ -188,10 +188,8 @@ pub fn start_robot_restored(
     }));
     tracker.do_send(Connect(TrackerLinks {
         optimiser: optimiser.clone().recipient(),
-        matcher_keyframes: matcher.clone().recipient(),
-        matcher_scans: matcher.clone().recipient(),
-        matcher_objects: matcher.clone().recipient(),
-        comms_objects: comms.clone().recipient(),
+        matcher_map: matcher.clone().recipient(),
+        comms_map: comms.clone().recipient(),
         comms_outgoing: comms.clone().recipient(),
     }));
     matcher.do_send(Connect(MatcherLinks {
@@ -201,10 +199,7 @@ pub fn start_robot_restored(
         share_descriptors: comms.clone().recipient(),
         optimiser: optimiser.clone().recipient(),
     }));
-    optimiser.do_send(Connect(OptimiserLinks {
-        tracker: tracker.clone().recipient(),
-        matcher: matcher.clone().recipient(),
-    }));
+    optimiser.do_send(Connect(OptimiserLinks { tracker: tracker.clone().recipient() }));
     attach(robot, comms.clone());
     if restored {
         tracker.do_send(Republish);

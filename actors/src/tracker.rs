@@ -1,18 +1,19 @@
 //! `Tracker`: the robot's map (paper §IV-A, §IV-E), a thin actor over
 //! `model::perception::mapper::Mapper`, which selects keyframes, chains odometry increments onto
 //! the optimised poses, keeps the object layer, detects intra-robot loop closures and fits the
-//! cloud budget. The actor sends on what the mapper returns (new keyframes to the Optimiser, the
-//! map's changes to the Matcher, confirmed objects to the Matcher and Comms) and answers
+//! cloud budget. The actor sends on what the mapper returns (new keyframes to the Optimiser; after
+//! every change, one read-only snapshot of the map, `crate::map_view::MapView`, to the Matcher
+//! and Comms) and answers
 //! neighbours' requests for object clouds and keyframes. A restart keeps the map (the keyframe
 //! database survives).
 
 use crate::config::{OptimiserConfig, TrackerSection};
 use crate::containment::contained;
+use crate::map_view::MapView;
 use crate::messages::*;
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use nalgebra::{Matrix6, Point3};
 use sgm_model::geometry::Pose3;
-use sgm_model::matching::GraphObject;
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::perception::mapper::{Mapper, MapperConfig, ScanInput};
 use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS};
@@ -25,15 +26,14 @@ use sgm_model::wire::messages::{
 };
 use sgm_model::wire::Message as WireMessage;
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 /// Where the Tracker sends what it produces.
 #[derive(Clone)]
 pub struct TrackerLinks {
     pub optimiser: Recipient<NewKeyframe>,
-    pub matcher_keyframes: Recipient<LocalKeyframe>,
-    pub matcher_scans: Recipient<LocalScansChanged>,
-    pub matcher_objects: Recipient<LocalObjects>,
-    pub comms_objects: Recipient<LocalObjects>,
+    pub matcher_map: Recipient<MapChanged>,
+    pub comms_map: Recipient<MapChanged>,
     pub comms_outgoing: Recipient<Outgoing>,
 }
 
@@ -158,22 +158,8 @@ impl Tracker {
         self
     }
 
-    fn local_objects(&self) -> LocalObjects {
-        let mut out = LocalObjects::default();
-        for o in self.map.graph.objects() {
-            if !self.classes.is_matchable(o.label) || !self.map.is_confirmed(o.id, &self.config) {
-                continue;
-            }
-            let Some(centroid) = self.map.graph.centroid_in_world(o.id) else { continue };
-            out.objects.push(GraphObject { id: o.id, label: o.label, centroid, size: Some(o.size) });
-            out.observed_in.insert(o.id, o.observed_in.iter().copied().collect());
-        }
-        out
-    }
-
-    /// Adds `scan` as a keyframe (`Mapper::add_keyframe`) and sends on what changed: the
-    /// keyframe and its edges to the Optimiser, its scan and the scans the cloud budget changed
-    /// to the Matcher.
+    /// Adds `scan` as a keyframe (`Mapper::add_keyframe`) and sends the keyframe and its edges
+    /// to the Optimiser.
     fn add_keyframe(&mut self, scan: &LabelledScan) -> Result<KeyframeId, SceneGraphError> {
         let input = ScanInput {
             stamp: scan.stamp,
@@ -183,32 +169,27 @@ impl Tracker {
             candidates: &scan.candidates,
         };
         let added = self.map.add_keyframe(input, &self.classes, &self.config)?;
-        let (id, world_from_body) = (added.keyframe.id, added.keyframe.world_from_body);
+        let id = added.keyframe.id;
         if let Some(e) = &added.refused_loop {
             tracing::warn!(robot = %self.robot, keyframe = id.0, "loop closure not added: {e}");
         }
         if let Some(links) = &self.links {
             links.optimiser.do_send(NewKeyframe { keyframe: added.keyframe, edges: added.edges });
-            if let Some(scan) = added.scan {
-                links.matcher_keyframes.do_send(LocalKeyframe { id, world_from_body, scan });
-            }
         }
         if !added.scans_changed.is_empty() {
             let stats = self.map.graph.cloud_stats();
             tracing::debug!(robot = %self.robot, changed = added.scans_changed.len(), scans = stats.scans,
                 bytes = stats.bytes, "cloud store fitted to its budget");
-            if let Some(links) = &self.links {
-                links.matcher_scans.do_send(LocalScansChanged { changes: added.scans_changed });
-            }
         }
         Ok(id)
     }
 
-    fn publish_objects(&self) {
+    /// Shares the map as it is now with the Matcher and Comms.
+    fn publish_map(&self) {
         if let Some(links) = &self.links {
-            let objects = self.local_objects();
-            links.matcher_objects.do_send(objects.clone());
-            links.comms_objects.do_send(objects);
+            let view = Arc::new(MapView::of(&self.map, &self.classes, &self.config));
+            links.matcher_map.do_send(MapChanged(view.clone()));
+            links.comms_map.do_send(MapChanged(view));
         }
     }
 
@@ -275,7 +256,7 @@ impl Handler<LabelledScan> for Tracker {
         contained(ctx, "tracker", || {
             if self.map.wants(&scan.odom_from_body, &self.config) {
                 match self.add_keyframe(&scan) {
-                    Ok(_) => self.publish_objects(),
+                    Ok(_) => self.publish_map(),
                     Err(e) => tracing::warn!(robot = %self.robot, stamp = scan.stamp, "keyframe not added: {e}"),
                 }
             }
@@ -293,7 +274,7 @@ impl Handler<PosesOptimised> for Tracker {
                 return;
             }
             self.covariances.extend(msg.covariances.iter().map(|(k, m)| (*k, pack_covariance(m))));
-            self.publish_objects();
+            self.publish_map();
         });
     }
 }
@@ -333,16 +314,7 @@ impl Handler<Republish> for Tracker {
     type Result = ();
     fn handle(&mut self, _: Republish, ctx: &mut Context<Self>) {
         contained(ctx, "tracker", || {
-            let Some(links) = &self.links else { return };
-            for keyframe in self.map.graph.keyframes() {
-                let Some(scan) = self.map.graph.semantic_scan_shared(keyframe.id) else { continue };
-                links.matcher_keyframes.do_send(LocalKeyframe {
-                    id: keyframe.id,
-                    world_from_body: keyframe.world_from_body,
-                    scan,
-                });
-            }
-            self.publish_objects();
+            self.publish_map();
         });
     }
 }

@@ -291,7 +291,7 @@ async fn a_partition_pauses_requests_and_the_heal_completes_them() {
         centroid: Point3::new(1.0, 2.0, 0.0),
         size: None,
     };
-    server.do_send(LocalObjects { objects: vec![object], ..LocalObjects::default() });
+    server.do_send(map_with(vec![object]));
     let wanted: Vec<KeyframeId> = (0..40).map(KeyframeId).collect();
     let mut links_down_during = Vec::new();
     for step in 0..6000 {
@@ -359,15 +359,12 @@ async fn descriptors_are_batched_broadcast_and_delivered() {
     let points: Vec<Point3<f64>> = (0..50).map(|k| Point3::new(f64::from(k) * 0.5 + 1.0, 2.0, 0.5)).collect();
     let descriptor = ScanContext::new(&points, &Default::default());
     // Objects are ignored by a Comms without object data.
-    sender.do_send(LocalObjects {
-        objects: vec![sgm_model::matching::GraphObject {
-            id: sgm_model::scene_graph::ObjectId(1),
-            label: sgm_model::scene_graph::LabelId(3),
-            centroid: Point3::origin(),
-            size: None,
-        }],
-        ..Default::default()
-    });
+    sender.do_send(map_with(vec![sgm_model::matching::GraphObject {
+        id: sgm_model::scene_graph::ObjectId(1),
+        label: sgm_model::scene_graph::LabelId(3),
+        centroid: Point3::origin(),
+        size: None,
+    }]));
     for (step, ids) in [(0u32, 0..6u32), (1, 6..7), (30, 7..8)] {
         let now = f64::from(step) * 0.1;
         clock.advance_to(now);
@@ -394,4 +391,10 @@ async fn descriptors_are_batched_broadcast_and_delivered() {
     assert!(heard.descriptors.iter().all(|(from, _)| *from == REQUESTER));
     assert_eq!(status.sent.get(sgm_model::wire::MessageKind::KeyframeDescriptors).count, 3);
     assert_eq!(status.sent.get(sgm_model::wire::MessageKind::ObjectData).count, 0);
+}
+
+/// A map snapshot holding only `objects`, as the Tracker shares it.
+fn map_with(objects: Vec<sgm_model::matching::GraphObject>) -> MapChanged {
+    let objects = sgm_actors::map_view::LocalObjects { objects, ..Default::default() };
+    MapChanged(std::sync::Arc::new(sgm_actors::map_view::MapView { objects, ..Default::default() }))
 }

@@ -8,11 +8,12 @@
 //! same pace, in envelopes of at most `limits.max_ids`.
 
 use crate::config::CommsConfig;
-use crate::messages::LocalObjects;
+use crate::map_view::MapView;
 use nalgebra::Point3;
 use sgm_model::scene_graph::{ObjectId, Stamp};
 use sgm_model::wire::messages::{KeyframeDescriptors, ObjectData, WireDescriptor};
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 /// The object-data broadcast.
 #[derive(Clone, Debug)]
@@ -20,7 +21,8 @@ pub struct ObjectBroadcast {
     /// Off when the Matcher associates by descriptors.
     enabled: bool,
     revision: u32,
-    latest: Option<LocalObjects>,
+    /// The map as last shared: its objects are what goes out.
+    latest: Option<Arc<MapView>>,
     /// The centroids of the last broadcast, to judge what is significant.
     centroids: BTreeMap<ObjectId, Point3<f64>>,
     change_pending: bool,
@@ -64,14 +66,15 @@ impl ObjectBroadcast {
     }
 
     /// The object layer now; whether it changed significantly since the last broadcast.
-    pub fn objects(&mut self, objects: LocalObjects, significant_move_m: f64) {
+    pub fn objects(&mut self, map: Arc<MapView>, significant_move_m: f64) {
+        let objects = &map.objects;
         let significant = objects
             .objects
             .iter()
             .any(|o| self.centroids.get(&o.id).is_none_or(|c| (c - o.centroid).norm() > significant_move_m))
             || objects.objects.len() != self.centroids.len();
         self.change_pending |= significant;
-        self.latest = Some(objects);
+        self.latest = Some(map);
     }
 
     /// A neighbour needs the current object data again.
@@ -87,7 +90,7 @@ impl ObjectBroadcast {
         if !self.enabled || !due || !(self.change_pending || self.repeat_pending || stale) {
             return None;
         }
-        let objects = self.latest.as_ref()?;
+        let objects = &self.latest.as_ref()?.objects;
         if self.change_pending || self.revision == 0 {
             self.revision = (self.revision + 1).max(now.clamp(0.0, f64::from(u32::MAX)) as u32);
         }
@@ -132,11 +135,12 @@ impl DescriptorBroadcast {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::map_view::LocalObjects;
     use sgm_model::matching::GraphObject;
     use sgm_model::scene_graph::LabelId;
 
-    fn objects(xs: &[f64]) -> LocalObjects {
-        LocalObjects {
+    fn objects(xs: &[f64]) -> Arc<MapView> {
+        let objects = LocalObjects {
             objects: xs
                 .iter()
                 .enumerate()
@@ -148,7 +152,8 @@ mod tests {
                 })
                 .collect(),
             ..LocalObjects::default()
-        }
+        };
+        Arc::new(MapView { objects, ..MapView::default() })
     }
 
     fn config() -> CommsConfig {

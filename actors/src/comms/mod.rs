@@ -351,11 +351,11 @@ impl Handler<Delivered> for Comms {
     }
 }
 
-impl Handler<LocalObjects> for Comms {
+impl Handler<MapChanged> for Comms {
     type Result = ();
-    fn handle(&mut self, msg: LocalObjects, ctx: &mut Context<Self>) {
+    fn handle(&mut self, msg: MapChanged, ctx: &mut Context<Self>) {
         contained(ctx, "comms", || {
-            self.objects.objects(msg, self.config.significant_move_m);
+            self.objects.objects(msg.0, self.config.significant_move_m);
             self.try_broadcast(self.clock.now());
         });
     }

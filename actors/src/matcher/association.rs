@@ -27,9 +27,10 @@ impl Matcher {
                 size: Some(o.size_m()),
             })
             .collect();
-        let (Ok(local), Ok(remote)) =
-            (ObjectGraph::new(self.local.objects.clone(), usize::MAX), ObjectGraph::new(remote_objects, usize::MAX))
-        else {
+        let (Ok(local), Ok(remote)) = (
+            ObjectGraph::new(self.map.objects.objects.clone(), usize::MAX),
+            ObjectGraph::new(remote_objects, usize::MAX),
+        ) else {
             return;
         };
         let refuted = entry.refuted.clone();
@@ -106,7 +107,8 @@ impl Matcher {
         entry.places.update(self.places.held(), &self.config.scan_context);
         let candidate = loop {
             let Some(c) = entry.places.take_best() else { return };
-            let (Some(local), Some(remote)) = (self.keyframes.get(&c.local), entry.places.remote_pose(c.remote)) else {
+            let (Some(local), Some(remote)) = (self.map.keyframes.get(&c.local), entry.places.remote_pose(c.remote))
+            else {
                 continue;
             };
             let guess = local.world_from_body * yaw_turn(-c.yaw) * remote.inverse();
@@ -121,7 +123,7 @@ impl Matcher {
         let mut round = evenly(remote_ids, self.config.max_keyframes_per_alignment.max(1));
         round.insert(c.remote);
         let local_targets: BTreeSet<KeyframeId> =
-            neighbourhood([c.local], k).into_iter().filter(|id| self.keyframes.contains_key(id)).collect();
+            neighbourhood([c.local], k).into_iter().filter(|id| self.map.keyframes.contains_key(id)).collect();
         let wanted: BTreeSet<KeyframeId> =
             round.iter().filter(|id| !entry.keyframes.contains_key(id)).copied().collect();
         let retry = self.retry.clone();

@@ -21,6 +21,7 @@ pub use neighbour::{GetNeighbours, MatcherState, NeighbourMemory, NeighbourStatu
 use crate::clock::Clock;
 use crate::config::{Association, MatcherSection};
 use crate::containment::contained;
+use crate::map_view::{MapView, ViewKeyframe};
 use crate::messages::*;
 use crate::protocol::{Matched, Neighbour, Protocol, ProtocolStage, RetryConfig, Wait};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
@@ -35,14 +36,13 @@ use sgm_model::matching::scan_context::{Place, ScanContext};
 use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
 use sgm_model::perception::icp::{register, IcpConfig};
 use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS};
-use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, SemanticScan, Stamp};
+use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{KeyframeRefusalReason, ObjectData};
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
 use neighbour::{hold_at_most, NeighbourEntry};
-use rounds::LocalKeyframeData;
 
 /// Where the Matcher sends what it produces.
 #[derive(Clone)]
@@ -61,8 +61,8 @@ pub struct Matcher {
     clock: Clock,
     labels: LabelSimilarity,
     links: Option<MatcherLinks>,
-    local: LocalObjects,
-    keyframes: BTreeMap<KeyframeId, LocalKeyframeData>,
+    /// The map as the Tracker last shared it (keyframe poses, held scans, confirmed objects).
+    map: Arc<MapView>,
     /// Scan Context association only: our keyframes' descriptors, at most
     /// `scan_context.max_places`, spread over the run.
     places: EvenPlaces,
@@ -84,8 +84,7 @@ impl Matcher {
             clock,
             labels,
             links: None,
-            local: LocalObjects::default(),
-            keyframes: BTreeMap::new(),
+            map: Arc::default(),
             places: EvenPlaces::default(),
             neighbours: BTreeMap::new(),
         }
@@ -140,6 +139,28 @@ impl Matcher {
         })
     }
 
+    /// Scan Context association: the descriptor of a new local keyframe, shared with the
+    /// neighbours through Comms, kept among our places and tried against theirs.
+    fn describe(&mut self, id: KeyframeId) {
+        let Some(keyframe) = self.map.keyframes.get(&id) else { return };
+        let points: Vec<Point3<f64>> = keyframe.scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
+        let descriptor = ScanContext::new(&points, &self.config.scan_context.descriptor);
+        if let Some(links) = &self.links {
+            let world_from_body = keyframe.world_from_body;
+            links.share_descriptors.do_send(ShareDescriptor {
+                keyframe: id,
+                world_from_body,
+                descriptor: descriptor.clone(),
+            });
+        }
+        let dropped = self.places.insert(id, Place::new(descriptor), self.config.scan_context.max_places);
+        self.forget_places(&dropped);
+        let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
+        for robot in robots {
+            self.try_match_places(robot);
+        }
+    }
+
     /// Tells Comms that these neighbour keyframes are no longer held.
     fn release(&self, robot: RobotId, keyframes: Vec<KeyframeId>) {
         if let (Some(links), false) = (&self.links, keyframes.is_empty()) {
@@ -166,63 +187,26 @@ impl Supervised for Matcher {
     }
 }
 
-impl Handler<LocalObjects> for Matcher {
+impl Handler<MapChanged> for Matcher {
     type Result = ();
-    fn handle(&mut self, msg: LocalObjects, ctx: &mut Context<Self>) {
+    fn handle(&mut self, msg: MapChanged, ctx: &mut Context<Self>) {
         contained(ctx, "matcher", || {
-            self.local = msg;
+            let changes = msg.0.changes_since(&self.map);
+            self.map = msg.0;
+            if self.config.association == Association::ScanContext {
+                for id in changes.added {
+                    self.describe(id);
+                }
+                // An evicted keyframe's descriptor could only lead to one we cannot register.
+                for id in changes.removed {
+                    if self.places.remove(id) {
+                        self.forget_places(&[id]);
+                    }
+                }
+            }
             let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
             for robot in robots {
                 self.try_match(robot);
-            }
-        });
-    }
-}
-
-impl Handler<LocalKeyframe> for Matcher {
-    type Result = ();
-    fn handle(&mut self, msg: LocalKeyframe, ctx: &mut Context<Self>) {
-        contained(ctx, "matcher", || {
-            let data = LocalKeyframeData { world_from_body: msg.world_from_body, scan: msg.scan.clone() };
-            self.keyframes.insert(msg.id, data);
-            if self.config.association == Association::ScanContext {
-                let points: Vec<Point3<f64>> = msg.scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
-                let descriptor = ScanContext::new(&points, &self.config.scan_context.descriptor);
-                if let Some(links) = &self.links {
-                    let (keyframe, world_from_body) = (msg.id, msg.world_from_body);
-                    let share = ShareDescriptor { keyframe, world_from_body, descriptor: descriptor.clone() };
-                    links.share_descriptors.do_send(share);
-                }
-                let dropped = self.places.insert(msg.id, Place::new(descriptor), self.config.scan_context.max_places);
-                self.forget_places(&dropped);
-                let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
-                for robot in robots {
-                    self.try_match_places(robot);
-                }
-            }
-        });
-    }
-}
-
-impl Handler<LocalScansChanged> for Matcher {
-    type Result = ();
-    fn handle(&mut self, msg: LocalScansChanged, ctx: &mut Context<Self>) {
-        contained(ctx, "matcher", || {
-            for (id, change) in msg.changes {
-                match change {
-                    Some(scan) => {
-                        if let Some(k) = self.keyframes.get_mut(&id) {
-                            k.scan = scan;
-                        }
-                    }
-                    None => {
-                        self.keyframes.remove(&id);
-                        // Its descriptor could only lead to a keyframe we cannot register.
-                        if self.places.remove(id) {
-                            self.forget_places(&[id]);
-                        }
-                    }
-                }
             }
         });
     }
@@ -249,19 +233,6 @@ impl Handler<NeighbourDescriptors> for Matcher {
             let revision = u32::try_from(entry.places.remote_count()).unwrap_or(u32::MAX);
             entry.protocol = entry.protocol.take().map(|p| p.on_objects(revision, now));
             self.try_match_places(msg.robot);
-        });
-    }
-}
-
-impl Handler<PosesOptimised> for Matcher {
-    type Result = ();
-    fn handle(&mut self, msg: PosesOptimised, ctx: &mut Context<Self>) {
-        contained(ctx, "matcher", || {
-            for (id, pose) in msg.poses {
-                if let Some(k) = self.keyframes.get_mut(&id) {
-                    k.world_from_body = pose;
-                }
-            }
         });
     }
 }

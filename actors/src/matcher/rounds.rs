@@ -5,14 +5,8 @@
 
 use super::*;
 
-/// A local keyframe: its latest pose and the map's scan (shared, not copied).
-pub(super) struct LocalKeyframeData {
-    pub(super) world_from_body: Pose3,
-    pub(super) scan: Arc<SemanticScan>,
-}
-
 /// A local keyframe as registration sees it.
-pub(super) fn local_view(k: &LocalKeyframeData) -> LocalView<'_> {
+pub(super) fn local_view(k: &ViewKeyframe) -> LocalView<'_> {
     LocalView { world_from_body: &k.world_from_body, points_in_body: &k.scan.points_in_body }
 }
 
@@ -28,11 +22,11 @@ pub(super) fn remote_view(k: &NeighbourKeyframe) -> RemoteView<'_> {
 
 impl Matcher {
     pub(super) fn local_object_cloud(&self, object: &GraphObject) -> Vec<Point3<f64>> {
-        let observed = self.local.observed_in.get(&object.id).cloned().unwrap_or_default();
+        let observed = self.map.objects.observed_in.get(&object.id).cloned().unwrap_or_default();
         let scans = observed
             .iter()
             .rev()
-            .filter_map(|k| self.keyframes.get(k))
+            .filter_map(|k| self.map.keyframes.get(k))
             .take(MAX_VIEWS)
             .map(|k| (&k.world_from_body, &k.scan.points_in_body[..], &k.scan.labels[..]));
         object_cloud(scans, object.label, &object.centroid, &object.size.unwrap_or_default(), 0.3, 0.1)
@@ -54,7 +48,7 @@ impl Matcher {
             if let Ok(points) = cloud_codec::decode(&cloud.cloud) {
                 source.extend(points);
             }
-            if let Some(object) = self.local.objects.iter().find(|o| o.id == *local_id) {
+            if let Some(object) = self.map.objects.objects.iter().find(|o| o.id == *local_id) {
                 target.extend(self.local_object_cloud(object));
             }
         }
@@ -106,7 +100,14 @@ impl Matcher {
         // Scan Context, those around the round's local keyframe).
         let local_ids: BTreeSet<KeyframeId> = match &entry.place_round {
             Some((_, targets)) => targets.clone(),
-            _ => n.state.pairs.iter().filter_map(|(l, _)| self.local.observed_in.get(l)).flatten().copied().collect(),
+            _ => n
+                .state
+                .pairs
+                .iter()
+                .filter_map(|(l, _)| self.map.objects.observed_in.get(l))
+                .flatten()
+                .copied()
+                .collect(),
         };
         let keyframe_icp = IcpConfig {
             voxel_m: self.config.keyframe_voxel_m,
@@ -114,7 +115,7 @@ impl Matcher {
             ..self.config.icp.clone()
         };
         if let Some((pair, _)) = &entry.place_round {
-            let (local, remote) = (self.keyframes.get(&pair.local), entry.keyframes.get(&pair.remote));
+            let (local, remote) = (self.map.keyframes.get(&pair.local), entry.keyframes.get(&pair.remote));
             let coarse = self.config.scan_context.coarse_correspondence_m;
             if let Some(refined) = local
                 .zip(remote)
@@ -123,7 +124,7 @@ impl Matcher {
                 local_from_remote = refined;
             }
         }
-        let targets = local_ids.iter().filter_map(|id| Some((*id, local_view(self.keyframes.get(id)?)))).collect();
+        let targets = local_ids.iter().filter_map(|id| Some((*id, local_view(self.map.keyframes.get(id)?)))).collect();
         let round = entry.keyframes.iter().filter(|(id, _)| entry.round.contains(id)).map(|(_, k)| remote_view(k));
         let config = RoundConfig {
             icp: &keyframe_icp,

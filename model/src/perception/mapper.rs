@@ -26,7 +26,6 @@ use crate::scene_graph::{
     SemanticScan, Stamp,
 };
 use nalgebra::{Matrix6, Point3};
-use std::sync::Arc;
 
 /// What the mapper decides with.
 #[derive(Clone, Debug, PartialEq)]
@@ -56,8 +55,6 @@ pub struct KeyframeAdded {
     /// The odometry edge from the previous keyframe (none for the first) and a loop closure
     /// found at this keyframe, in that order.
     pub edges: Vec<KeyframeEdge>,
-    /// The keyframe's scan as the map holds it (shared, not copied).
-    pub scan: Option<Arc<SemanticScan>>,
     /// A loop closure found but refused by the scene graph (it names a keyframe the graph no
     /// longer accepts an edge to), for the caller to report.
     pub refused_loop: Option<SceneGraphError>,
@@ -137,9 +134,8 @@ impl Mapper {
                 Err(e) => refused_loop = Some(e),
             }
         }
-        let scan = self.graph.semantic_scan_shared(id);
         let scans_changed = self.graph.fit_clouds(&config.cloud_store, |l| classes.object_label(l.0).is_some());
-        Ok(KeyframeAdded { keyframe, edges, scan, refused_loop, scans_changed })
+        Ok(KeyframeAdded { keyframe, edges, refused_loop, scans_changed })
     }
 
     /// Moves the keyframes the map knows to their optimised poses (others are ignored: they may
@@ -188,7 +184,7 @@ mod tests {
         let added = mapper.add_keyframe(first, &classes, &config).expect("first keyframe");
         assert_eq!(added.keyframe.world_from_body, odom0, "the first keyframe takes its odometry pose");
         assert!(added.edges.is_empty());
-        assert_eq!(added.scan.as_ref().map(|s| s.points_in_body.len()), Some(2));
+        assert_eq!(mapper.graph.semantic_scan(added.keyframe.id).map(|s| s.points_in_body.len()), Some(2));
         // The optimiser moves keyframe 0; the next keyframe keeps the odometry increment from it.
         let corrected = pose_from_yaw_translation(0.25, Vector3::new(1.2, 1.9, 0.0));
         mapper.apply_poses(&[(KeyframeId(0), corrected), (KeyframeId(99), Pose3::identity())]).expect("poses");
