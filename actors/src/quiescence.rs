@@ -1,8 +1,8 @@
 //! When has a robot team finished reacting? Every handled message bumps a per-thread activity
-//! count (in [`crate::containment::contained`]); [`until_quiet`] yields to the runtime until a
-//! few consecutive yields pass with no handler running. The scenario runner and bag replay call
-//! it between virtual-time steps, so every consequence of step k is handled before step k + 1 —
-//! which is what makes runs deterministic. The count is per thread because an actix system runs
+//! count (`containment::contained` calls `record_activity`); [`until_quiet`] yields to the
+//! runtime until a few consecutive yields pass with no handler running. The scenario runner
+//! and bag replay call it between virtual-time steps, so every consequence of step k is handled
+//! before step k + 1 — which is what makes runs deterministic. The count is per thread because an actix system runs
 //! its actors on one thread: concurrent systems (parallel tests) do not see each other.
 
 use std::cell::Cell;

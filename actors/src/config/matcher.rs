@@ -1,0 +1,176 @@
+//! `[matcher]`: how robots find each other (object graphs, or the Scan Context baseline) and
+//! how an alignment is confirmed.
+
+use super::error::{check, positive, ConfigError};
+use serde::{Deserialize, Serialize};
+use sgm_model::matching::place_candidates::ScanContextSection;
+use sgm_model::matching::MatcherConfig;
+use sgm_model::perception::icp::IcpConfig;
+use sgm_model::perception::structure_check::StructureCheck;
+
+/// Inter-robot association.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Association {
+    /// Object-graph matching, then object-cloud and keyframe ICP (the paper).
+    #[default]
+    Objects,
+    /// None: robots exchange object data but never align (the evaluation's "no inter-robot
+    /// association" baseline).
+    None,
+    /// Scan Context descriptors of every keyframe instead of objects, then coarse-to-fine
+    /// keyframe ICP (the evaluation's Swarm-SC baseline, paper §V-B).
+    ScanContext,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MatcherSection {
+    /// How robots find each other. Default `objects`.
+    pub association: Association,
+    /// Object-graph matching (paper §IV-C).
+    #[serde(flatten)]
+    pub matching: MatcherConfig,
+    /// The Scan Context baseline (used with `association = "scan_context"` only).
+    pub scan_context: ScanContextSection,
+    /// Matched objects needed before object clouds are requested. Default 4.
+    pub min_matched_objects: usize,
+    /// Matching against one neighbour is tried at most this often (on new local objects or
+    /// new neighbour data), s. Default 2.
+    pub match_interval_s: f64,
+    /// Object-cloud ICP (paper §IV-D).
+    pub icp: IcpConfig,
+    /// Neighbour keyframes around each observing keyframe that are requested (paper: ±5).
+    /// Default 5.
+    pub keyframe_neighbourhood: usize,
+    /// Neighbour keyframes registered per alignment round, at most (spread evenly over those
+    /// the neighbourhood names): bounds radio bytes and ICP time. Default 8 (16 cost twice the bytes for
+    /// the same alignments: book, evaluation chapter).
+    pub max_keyframes_per_alignment: usize,
+    /// Voxel size of keyframe-to-keyframe ICP (`icp.voxel_m` is for object clouds), m.
+    /// Default 0.3.
+    pub keyframe_voxel_m: f64,
+    /// Iteration cap of keyframe-to-keyframe ICP (it starts from the object-cloud estimate and
+    /// converges in a few; a wrong match is refuted sooner). Default 20.
+    pub keyframe_max_iterations: usize,
+    /// Verification of keyframe registrations with the ground left out
+    /// (`model::perception::structure_check`).
+    pub structure_check: StructureCheck,
+    /// A keyframe registration counts when this fraction of its structure points agree.
+    /// Default 0.3.
+    pub min_structure_agreement: f64,
+    /// Registrations that must count before an alignment is accepted; fewer refute the object
+    /// match (the neighbour goes back to waiting for object data). Default 2.
+    pub min_keyframe_factors: usize,
+    /// Neighbour keyframes (clouds) held per neighbour between rounds, at most: kept so that a
+    /// round after a refutation need not ask for them again; the lowest ids outside the current
+    /// round go first, and all go once the neighbour is aligned. Default 16 (two rounds; a
+    /// keyframe is about 370 KB as held, and a pair refuted again and again fills its cap).
+    pub max_held_keyframes: usize,
+}
+
+impl Default for MatcherSection {
+    fn default() -> Self {
+        Self {
+            association: Association::Objects,
+            matching: MatcherConfig::default(),
+            scan_context: ScanContextSection::default(),
+            min_matched_objects: 4,
+            match_interval_s: 2.0,
+            icp: IcpConfig { max_correspondence_distance_m: 1.0, voxel_m: 0.1, ..IcpConfig::default() },
+            keyframe_neighbourhood: 5,
+            max_keyframes_per_alignment: 8,
+            keyframe_voxel_m: 0.3,
+            keyframe_max_iterations: 20,
+            structure_check: StructureCheck::default(),
+            min_structure_agreement: 0.3,
+            min_keyframe_factors: 2,
+            max_held_keyframes: 16,
+        }
+    }
+}
+
+impl MatcherSection {
+    /// Checks the object-graph matching keys (`matcher.*` of `model::matching::MatcherConfig`).
+    pub fn validate_matching(&self) -> Result<(), ConfigError> {
+        self.matching.validate().map_err(|e| ConfigError::Invalid {
+            key: format!("matcher.{}", e.key),
+            value: e.value,
+            allowed: e.allowed.into(),
+        })
+    }
+
+    /// Checks the other `matcher.*` keys against their allowed ranges.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let m = self;
+        check(m.min_matched_objects >= 3, "matcher.min_matched_objects", m.min_matched_objects, "≥ 3")?;
+        check(
+            positive(m.icp.max_correspondence_distance_m),
+            "matcher.icp.max_correspondence_distance_m",
+            m.icp.max_correspondence_distance_m,
+            "> 0",
+        )?;
+        let sc = &m.scan_context;
+        let shape = (1..=255).contains(&sc.descriptor.rings) && (1..=255).contains(&sc.descriptor.sectors);
+        check(shape, "matcher.scan_context.rings", sc.descriptor.rings, "rings and sectors 1–255")?;
+        check(shape, "matcher.scan_context.sectors", sc.descriptor.sectors, "rings and sectors 1–255")?;
+        let r = sc.descriptor.max_range_m;
+        check(positive(r), "matcher.scan_context.max_range_m", r, "> 0")?;
+        let h = sc.descriptor.height_offset_m;
+        check(h.is_finite(), "matcher.scan_context.height_offset_m", h, "finite")?;
+        let d = sc.max_distance;
+        check(d.is_finite() && (0.0..=1.0).contains(&d), "matcher.scan_context.max_distance", d, "0–1")?;
+        let c = sc.ring_key_candidates;
+        check(c >= 1, "matcher.scan_context.ring_key_candidates", c, "≥ 1")?;
+        let c = sc.coarse_correspondence_m;
+        check(positive(c), "matcher.scan_context.coarse_correspondence_m", c, "> 0")?;
+        check(sc.max_places >= 2, "matcher.scan_context.max_places", sc.max_places, "≥ 2")?;
+        check(m.keyframe_neighbourhood <= 50, "matcher.keyframe_neighbourhood", m.keyframe_neighbourhood, "0–50")?;
+        check(
+            m.keyframe_voxel_m.is_finite() && (0.0..=5.0).contains(&m.keyframe_voxel_m),
+            "matcher.keyframe_voxel_m",
+            m.keyframe_voxel_m,
+            "0 ≤ x ≤ 5 m",
+        )?;
+        check(
+            (0.0..=1.0).contains(&m.min_structure_agreement),
+            "matcher.min_structure_agreement",
+            m.min_structure_agreement,
+            "0 ≤ x ≤ 1",
+        )?;
+        check(
+            m.match_interval_s.is_finite() && (0.0..=3600.0).contains(&m.match_interval_s),
+            "matcher.match_interval_s",
+            m.match_interval_s,
+            "0 ≤ x ≤ 3600 s",
+        )?;
+        check(
+            (1..=1000).contains(&m.keyframe_max_iterations),
+            "matcher.keyframe_max_iterations",
+            m.keyframe_max_iterations,
+            "1 ≤ x ≤ 1000",
+        )?;
+        check(m.min_keyframe_factors >= 1, "matcher.min_keyframe_factors", m.min_keyframe_factors, "≥ 1")?;
+        check(
+            m.max_keyframes_per_alignment >= m.min_keyframe_factors,
+            "matcher.max_keyframes_per_alignment",
+            m.max_keyframes_per_alignment,
+            "≥ matcher.min_keyframe_factors",
+        )?;
+        check(
+            m.max_held_keyframes >= m.max_keyframes_per_alignment,
+            "matcher.max_held_keyframes",
+            m.max_held_keyframes,
+            "≥ matcher.max_keyframes_per_alignment",
+        )?;
+        let sc = &m.structure_check;
+        for (key, v) in [
+            ("matcher.structure_check.voxel_m", sc.voxel_m),
+            ("matcher.structure_check.ground_clearance_m", sc.ground_clearance_m),
+            ("matcher.structure_check.inlier_m", sc.inlier_m),
+        ] {
+            check(v.is_finite() && (0.0..=10.0).contains(&v), key, v, "0 ≤ x ≤ 10 m")?;
+        }
+        Ok(())
+    }
+}
