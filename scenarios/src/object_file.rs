@@ -4,7 +4,7 @@
 //! ignored so that exporters may add their own.
 
 use serde::Deserialize;
-use sgm_model::matching::{GraphObject, LabelSimilarity, MatcherConfig, ObjectGraph};
+use sgm_model::matching::{GraphError, GraphObject, LabelSimilarity, MatcherConfig, ObjectGraph};
 use sgm_model::scene_graph::{LabelId, ObjectId};
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -103,16 +103,25 @@ impl LabelTable {
     }
 }
 
+/// Two object files that do not make graphs.
+#[derive(Debug, thiserror::Error)]
+pub enum GraphsError {
+    #[error("{count} distinct labels, more than {}", u16::MAX)]
+    TooManyLabels { count: usize },
+    #[error("robot {robot:?}: {source}")]
+    Graph { robot: String, source: GraphError },
+}
+
 /// Two object files as graphs over one label table.
 pub fn graphs_from_files(
     local: &ObjectFile,
     remote: &ObjectFile,
     config: &MatcherConfig,
-) -> Result<(ObjectGraph, ObjectGraph, LabelSimilarity), String> {
+) -> Result<(ObjectGraph, ObjectGraph, LabelSimilarity), GraphsError> {
     let names = local.objects.iter().chain(&remote.objects).map(|o| o.label.as_str());
     let table = LabelTable::new(names);
     if table.len() > u16::MAX as usize {
-        return Err(format!("{} distinct labels, more than {}", table.len(), u16::MAX));
+        return Err(GraphsError::TooManyLabels { count: table.len() });
     }
     let to_graph = |file: &ObjectFile| {
         let objects = file
@@ -125,7 +134,8 @@ pub fn graphs_from_files(
                 size: o.size.map(Into::into),
             })
             .collect();
-        ObjectGraph::new(objects, config.max_objects).map_err(|e| format!("robot {:?}: {e}", file.robot))
+        ObjectGraph::new(objects, config.max_objects)
+            .map_err(|source| GraphsError::Graph { robot: file.robot.clone(), source })
     };
     Ok((to_graph(local)?, to_graph(remote)?, table.similarity(config)))
 }

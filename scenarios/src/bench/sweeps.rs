@@ -247,9 +247,9 @@ fn plot(json: &Json, dir: &Path) -> anyhow::Result<()> {
         ("sweep_centroid_noise", vec![("SGM", &json.centroid_noise)], "centroid noise σ (m)", "translation error (m)"),
     ] {
         let s: Vec<Series> = methods.iter().map(|(m, p)| Series { name: m, points: success(p) }).collect();
-        lines(&dir.join(format!("{name}_success.png")), x_desc, "success %", &s, false).map_err(anyhow::Error::msg)?;
+        lines(&dir.join(format!("{name}_success.png")), x_desc, "success %", &s, false).map_err(anyhow::Error::from)?;
         let e: Vec<Series> = methods.iter().map(|(m, p)| Series { name: m, points: error(p) }).collect();
-        lines(&dir.join(format!("{name}_error.png")), x_desc, error_desc, &e, false).map_err(anyhow::Error::msg)?;
+        lines(&dir.join(format!("{name}_error.png")), x_desc, error_desc, &e, false).map_err(anyhow::Error::from)?;
     }
     let bytes = [
         Series { name: "SGM", points: json.team_size.iter().filter_map(|p| Some((p.x, p.bytes_total?))).collect() },
@@ -259,7 +259,7 @@ fn plot(json: &Json, dir: &Path) -> anyhow::Result<()> {
         },
     ];
     lines(&dir.join("sweep_team_size_bytes.png"), "robots", "bytes sent by the team", &bytes, true)
-        .map_err(anyhow::Error::msg)
+        .map_err(anyhow::Error::from)
 }
 
 fn table(json: &Json, plotted: bool) -> String {

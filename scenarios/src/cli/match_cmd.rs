@@ -18,7 +18,7 @@ pub fn run(local: &Path, remote: &Path, config: Option<&Path>) -> ExitCode {
         let config = load_matcher_config(config).map_err(|e| e.to_string())?;
         let local_file = ObjectFile::load(local).map_err(|e| e.to_string())?;
         let remote_file = ObjectFile::load(remote).map_err(|e| e.to_string())?;
-        let (l, r, labels) = graphs_from_files(&local_file, &remote_file, &config)?;
+        let (l, r, labels) = graphs_from_files(&local_file, &remote_file, &config).map_err(|e| e.to_string())?;
         Ok((config, l, r, labels))
     })();
     let (config, local_graph, remote_graph, labels) = match input {

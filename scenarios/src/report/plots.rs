@@ -7,7 +7,7 @@
 use super::Report;
 use crate::record::RunOutcome;
 use plotters::prelude::*;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 const FONT_PATHS: &[&str] = &[
@@ -44,27 +44,37 @@ const ROBOT_COLOURS: [RGBColor; 8] = [
     RGBColor(23, 190, 207),
 ];
 
-fn err(e: impl std::fmt::Display) -> String {
-    e.to_string()
+/// A plot that could not be drawn or written, naming its file (plotters' errors are generic
+/// over the backend: kept as their text).
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {message}", path.display())]
+pub struct PlotError {
+    pub path: PathBuf,
+    pub message: String,
 }
 
-pub fn draw(outcome: &RunOutcome, report: &Report, dir: &Path) -> Result<(), String> {
+/// A closure for `map_err` that names `path`.
+fn err<E: std::fmt::Display>(path: &Path) -> impl Fn(E) -> PlotError + '_ {
+    move |e| PlotError { path: path.to_path_buf(), message: e.to_string() }
+}
+
+pub fn draw(outcome: &RunOutcome, report: &Report, dir: &Path) -> Result<(), PlotError> {
     let text = font();
     map(outcome, &dir.join("map.png"), text)?;
     ate(report, &dir.join("ate.png"), text)?;
     bytes(report, &dir.join("bytes.png"), text)
 }
 
-fn map(outcome: &RunOutcome, path: &Path, text: bool) -> Result<(), String> {
+fn map(outcome: &RunOutcome, path: &Path, text: bool) -> Result<(), PlotError> {
     let [x0, y0, x1, y1] = outcome.world.bounds;
     let root = BitMapBackend::new(path, (1000, 1000)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
+    root.fill(&WHITE).map_err(err(path))?;
     let mut builder = ChartBuilder::on(&root);
     builder.margin(20).x_label_area_size(if text { 40 } else { 5 }).y_label_area_size(if text { 50 } else { 5 });
     if text {
         builder.caption("Top-down map: truth (thin) and estimates (thick); objects by class", ("sans-serif", 20));
     }
-    let mut chart = builder.build_cartesian_2d(x0..x1, y0..y1).map_err(err)?;
+    let mut chart = builder.build_cartesian_2d(x0..x1, y0..y1).map_err(err(path))?;
     let mut mesh = chart.configure_mesh();
     mesh.disable_mesh();
     if text {
@@ -72,7 +82,7 @@ fn map(outcome: &RunOutcome, path: &Path, text: bool) -> Result<(), String> {
     } else {
         mesh.x_labels(0).y_labels(0);
     }
-    mesh.draw().map_err(err)?;
+    mesh.draw().map_err(err(path))?;
     let colour = |label: u16| {
         let [r, g, b] = outcome.world.colours.get(&label).copied().unwrap_or([128, 128, 128]);
         RGBColor(r, g, b)
@@ -83,7 +93,7 @@ fn map(outcome: &RunOutcome, path: &Path, text: bool) -> Result<(), String> {
             let (x, y) = (o.centre.x, o.centre.y);
             Rectangle::new([(x - 0.6, y - 0.6), (x + 0.6, y + 0.6)], colour(o.label).stroke_width(1))
         }))
-        .map_err(err)?;
+        .map_err(err(path))?;
     let last = outcome.record.last.clone();
     for (k, robot) in outcome.record.robots.iter().enumerate() {
         let c = ROBOT_COLOURS[k % ROBOT_COLOURS.len()];
@@ -93,7 +103,7 @@ fn map(outcome: &RunOutcome, path: &Path, text: bool) -> Result<(), String> {
                 samples.iter().map(|(_, _, t)| (t.translation.x, t.translation.y)),
                 c.mix(0.4).stroke_width(1),
             ))
-            .map_err(err)?;
+            .map_err(err(path))?;
         let series = chart
             .draw_series(LineSeries::new(
                 samples.iter().map(|(_, e, _)| {
@@ -102,7 +112,7 @@ fn map(outcome: &RunOutcome, path: &Path, text: bool) -> Result<(), String> {
                 }),
                 c.stroke_width(3),
             ))
-            .map_err(err)?;
+            .map_err(err(path))?;
         if text {
             series
                 .label(robot.name.clone())
@@ -115,18 +125,23 @@ fn map(outcome: &RunOutcome, path: &Path, text: bool) -> Result<(), String> {
                     let p = robot.truth_from_world * o.centroid;
                     Circle::new((p.x, p.y), 3, colour(o.label.0).filled())
                 }))
-                .map_err(err)?;
+                .map_err(err(path))?;
         }
     }
     if text {
-        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(err(path))?;
     }
-    root.present().map_err(err)
+    root.present().map_err(err(path))
 }
 
-fn ate(report: &Report, path: &Path, text: bool) -> Result<(), String> {
+fn ate(report: &Report, path: &Path, text: bool) -> Result<(), PlotError> {
     let root = BitMapBackend::new(path, (1000, 500)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
+    root.fill(&WHITE).map_err(err(path))?;
     let t_max = time_extent(report);
     let mut y_max: f64 = 0.5;
     for p in &report.series {
@@ -140,20 +155,20 @@ fn ate(report: &Report, path: &Path, text: bool) -> Result<(), String> {
     if text {
         builder.caption("Team ATE and inter-robot translation error", ("sans-serif", 20));
     }
-    let mut chart = builder.build_cartesian_2d(0.0..t_max, 0.0..y_max * 1.1).map_err(err)?;
+    let mut chart = builder.build_cartesian_2d(0.0..t_max, 0.0..y_max * 1.1).map_err(err(path))?;
     let mut mesh = chart.configure_mesh();
     if text {
         mesh.x_desc("time (s)").y_desc("error (m)");
     } else {
         mesh.x_labels(0).y_labels(0);
     }
-    mesh.draw().map_err(err)?;
+    mesh.draw().map_err(err(path))?;
     let team = chart
         .draw_series(LineSeries::new(
             report.series.iter().filter_map(|p| p.team_ate_rmse_m.map(|v| (p.t, v))),
             BLACK.stroke_width(3),
         ))
-        .map_err(err)?;
+        .map_err(err(path))?;
     if text {
         team.label("team ATE RMSE").legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(3)));
     }
@@ -173,7 +188,7 @@ fn ate(report: &Report, path: &Path, text: bool) -> Result<(), String> {
                 .find(|a| &a.local == local && &a.remote == remote)
                 .map(|a| (p.t, a.translation_error_m.min(y_max)))
         });
-        let series = chart.draw_series(LineSeries::new(points, c.stroke_width(1))).map_err(err)?;
+        let series = chart.draw_series(LineSeries::new(points, c.stroke_width(1))).map_err(err(path))?;
         if text {
             series
                 .label(format!("{local} ← {remote}"))
@@ -181,9 +196,14 @@ fn ate(report: &Report, path: &Path, text: bool) -> Result<(), String> {
         }
     }
     if text {
-        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(err(path))?;
     }
-    root.present().map_err(err)
+    root.present().map_err(err(path))
 }
 
 /// The time axis: the mission, widened to every sample (a sample off the axis would overflow
@@ -192,9 +212,9 @@ fn time_extent(report: &Report) -> f64 {
     report.series.iter().map(|p| p.t).filter(|t| t.is_finite()).fold(report.sim_s.max(1.0), f64::max)
 }
 
-fn bytes(report: &Report, path: &Path, text: bool) -> Result<(), String> {
+fn bytes(report: &Report, path: &Path, text: bool) -> Result<(), PlotError> {
     let root = BitMapBackend::new(path, (1000, 500)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
+    root.fill(&WHITE).map_err(err(path))?;
     let t_max = time_extent(report);
     let raw_total = report.point_cloud_raw.bytes_total.max(1) as f64;
     let mut builder = ChartBuilder::on(&root);
@@ -202,14 +222,14 @@ fn bytes(report: &Report, path: &Path, text: bool) -> Result<(), String> {
     if text {
         builder.caption("Bytes sent by the team (log scale)", ("sans-serif", 20));
     }
-    let mut chart = builder.build_cartesian_2d(0.0..t_max, (1.0..raw_total * 2.0).log_scale()).map_err(err)?;
+    let mut chart = builder.build_cartesian_2d(0.0..t_max, (1.0..raw_total * 2.0).log_scale()).map_err(err(path))?;
     let mut mesh = chart.configure_mesh();
     if text {
         mesh.x_desc("time (s)").y_desc("bytes");
     } else {
         mesh.x_labels(0).y_labels(0);
     }
-    mesh.draw().map_err(err)?;
+    mesh.draw().map_err(err(path))?;
     let sgm_colour = ROBOT_COLOURS[0];
     let raw_colour = ROBOT_COLOURS[3];
     let sgm = chart
@@ -217,7 +237,7 @@ fn bytes(report: &Report, path: &Path, text: bool) -> Result<(), String> {
             report.series.iter().map(|p| (p.t, (p.bytes_total as f64).max(1.0))),
             sgm_colour.stroke_width(3),
         ))
-        .map_err(err)?;
+        .map_err(err(path))?;
     if text {
         sgm.label("SGM").legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], sgm_colour.stroke_width(3)));
     }
@@ -227,13 +247,18 @@ fn bytes(report: &Report, path: &Path, text: bool) -> Result<(), String> {
             report.series.iter().map(|p| (p.t, (raw_total * p.t / t_max).max(1.0))),
             raw_colour.stroke_width(2),
         ))
-        .map_err(err)?;
+        .map_err(err(path))?;
     if text {
         raw.label("raw point clouds")
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], raw_colour.stroke_width(2)));
-        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(err(path))?;
     }
-    root.present().map_err(err)
+    root.present().map_err(err(path))
 }
 
 /// One line of a [`lines`] plot.
@@ -243,7 +268,7 @@ pub struct Series<'a> {
 }
 
 /// A line plot with markers of `series` (the benches' sweeps); `log_y` for byte counts.
-pub fn lines(path: &Path, x_desc: &str, y_desc: &str, series: &[Series], log_y: bool) -> Result<(), String> {
+pub fn lines(path: &Path, x_desc: &str, y_desc: &str, series: &[Series], log_y: bool) -> Result<(), PlotError> {
     let text = font();
     let all = series.iter().flat_map(|s| s.points.iter());
     let (mut x0, mut x1, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
@@ -258,7 +283,7 @@ pub fn lines(path: &Path, x_desc: &str, y_desc: &str, series: &[Series], log_y: 
         x1 = x0 + 1.0;
     }
     let root = BitMapBackend::new(path, (800, 500)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
+    root.fill(&WHITE).map_err(err(path))?;
     let mut builder = ChartBuilder::on(&root);
     builder.margin(20).x_label_area_size(if text { 40 } else { 5 }).y_label_area_size(if text { 80 } else { 5 });
     let colour = |k: usize| ROBOT_COLOURS[k % ROBOT_COLOURS.len()];
@@ -271,17 +296,18 @@ pub fn lines(path: &Path, x_desc: &str, y_desc: &str, series: &[Series], log_y: 
             } else {
                 mesh.x_labels(0).y_labels(0);
             }
-            mesh.draw().map_err(err)?;
+            mesh.draw().map_err(err(path))?;
             for (k, s) in series.iter().enumerate() {
                 let c = colour(k);
-                let drawn =
-                    chart.draw_series(LineSeries::new(s.points.iter().copied(), c.stroke_width(2))).map_err(err)?;
+                let drawn = chart
+                    .draw_series(LineSeries::new(s.points.iter().copied(), c.stroke_width(2)))
+                    .map_err(err(path))?;
                 if text {
                     drawn
                         .label(s.name)
                         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
                 }
-                chart.draw_series(s.points.iter().map(|p| Circle::new(*p, 4, c.filled()))).map_err(err)?;
+                chart.draw_series(s.points.iter().map(|p| Circle::new(*p, 4, c.filled()))).map_err(err(path))?;
             }
             if text {
                 chart
@@ -289,15 +315,33 @@ pub fn lines(path: &Path, x_desc: &str, y_desc: &str, series: &[Series], log_y: 
                     .background_style(WHITE.mix(0.8))
                     .border_style(BLACK)
                     .draw()
-                    .map_err(err)?;
+                    .map_err(err(path))?;
             }
         }};
     }
     if log_y {
         let range = (y0.max(1.0) / 2.0)..(y1.max(1.0) * 2.0);
-        draw!(builder.build_cartesian_2d(x0..x1, range.log_scale()).map_err(err)?);
+        draw!(builder.build_cartesian_2d(x0..x1, range.log_scale()).map_err(err(path))?);
     } else {
-        draw!(builder.build_cartesian_2d(x0..x1, 0.0..(y1 * 1.1).max(1e-3)).map_err(err)?);
+        draw!(builder.build_cartesian_2d(x0..x1, 0.0..(y1 * 1.1).max(1e-3)).map_err(err(path))?);
     }
-    root.present().map_err(err)
+    root.present().map_err(err(path))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_plot_that_cannot_be_written_names_its_file() {
+        let dir = tempfile::tempdir().expect("a temporary directory");
+        let path = dir.path().join("missing").join("sweep.png");
+        let series = [Series { name: "SGM", points: vec![(1.0, 2.0), (2.0, 3.0)] }];
+        let e = lines(&path, "x", "y", &series, false).expect_err("no such directory");
+        assert_eq!(e.path, path);
+        assert!(e.to_string().starts_with(&path.display().to_string()), "{e}");
+        let written = dir.path().join("sweep.png");
+        lines(&written, "x", "y", &series, true).expect("a writable file");
+        assert!(std::fs::metadata(&written).is_ok_and(|m| m.len() > 0));
+    }
 }
