@@ -7,73 +7,12 @@
 //! The shares are taken over windows of `window_frames` clouds (assembled or dropped), so a
 //! segmenter that dies an hour in is seen within a window, not diluted by the hour before.
 
+pub use crate::config::HealthConfig;
 use crate::sync::SyncCounts;
 use crate::tf::listener::{TfCounts, TfStatus};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use sgm_model::scene_graph::Stamp;
 use std::collections::{BTreeMap, BTreeSet};
-
-/// `[ros.health]`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct HealthConfig {
-    /// Clouds per window over which the shares are judged. Default 50.
-    pub window_frames: u64,
-    /// A window in which more than this share of the assembled frames had no label image is a
-    /// finding (`no_labels`). Default 0.5.
-    pub max_unlabelled_share: f64,
-    /// A window in which more than this share of the clouds found no odometry pose is a
-    /// finding (`no_odometry`). Default 0.5.
-    pub max_no_odometry_share: f64,
-    /// Frames flowing and still no confirmed object in the map (none seen often enough to be
-    /// shared) after this much mission time is a finding (`no_objects`), s. Default 60.
-    pub no_objects_after_s: f64,
-    /// A window whose labelled frames project less than this share of their points into the
-    /// label image is a finding (`points_outside_image`). Default 0.01.
-    pub min_points_in_image_share: f64,
-    /// A window in which more than this share of an input topic's messages was refused is a
-    /// finding (`input_refused`, naming the topic and the last reason). Default 0.5.
-    pub max_refused_share: f64,
-}
-
-impl Default for HealthConfig {
-    fn default() -> Self {
-        Self {
-            window_frames: 50,
-            max_unlabelled_share: 0.5,
-            max_no_odometry_share: 0.5,
-            no_objects_after_s: 60.0,
-            min_points_in_image_share: 0.01,
-            max_refused_share: 0.5,
-        }
-    }
-}
-
-impl HealthConfig {
-    pub fn validate(&self) -> Result<(), String> {
-        let share = |v: f64, key: &str| {
-            if (0.0..=1.0).contains(&v) {
-                Ok(())
-            } else {
-                Err(format!("ros.health.{key} = {v}: a share in [0, 1] expected"))
-            }
-        };
-        share(self.max_unlabelled_share, "max_unlabelled_share")?;
-        share(self.max_no_odometry_share, "max_no_odometry_share")?;
-        share(self.min_points_in_image_share, "min_points_in_image_share")?;
-        share(self.max_refused_share, "max_refused_share")?;
-        if self.window_frames == 0 {
-            return Err("ros.health.window_frames = 0: at least 1 expected".into());
-        }
-        if !(self.no_objects_after_s.is_finite() && self.no_objects_after_s > 0.0) {
-            return Err(format!(
-                "ros.health.no_objects_after_s = {}: finite and > 0 expected",
-                self.no_objects_after_s
-            ));
-        }
-        Ok(())
-    }
-}
 
 /// What a finding is about.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
@@ -438,14 +377,6 @@ mod tests {
         assert_eq!(checks(&f), vec![Check::NoObjects]);
         assert!(f[0].likely_cause.contains("body_from_camera"));
         assert!(update(&mut h, 161.0, &counts(32, 0, 0), 1).is_empty(), "an object: nothing to say");
-    }
-
-    #[test]
-    fn bad_thresholds_are_named() {
-        let e = HealthConfig { max_unlabelled_share: 1.5, ..Default::default() }.validate().unwrap_err();
-        assert!(e.contains("ros.health.max_unlabelled_share"), "{e}");
-        let e = HealthConfig { window_frames: 0, ..Default::default() }.validate().unwrap_err();
-        assert!(e.contains("window_frames"), "{e}");
     }
 
     /// An odometry whose frames the configuration does not expect: every message refused, said
