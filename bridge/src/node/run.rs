@@ -1,14 +1,14 @@
-//! `sgm ros`: one robot as a ROS 1 node. Sensor topics in (checked by [`Inputs`], assembled by
-//! the [`Synchroniser`]), the robot's actor tree in the middle, RViz-ready outputs and the
-//! inter-robot [`RosTransport`] out. Names come from the `[ros]` section and resolve in the
-//! node's namespace; rosrust honours `ROS_MASTER_URI`, `ROS_IP`/`ROS_HOSTNAME`,
-//! `ROS_NAMESPACE`, `__name:=`, `__ns:=` and `from:=to` remappings on the command line.
-//!
-//! The robot's clock is the newest sensor stamp (ROS time, seconds since 1970): the node runs
-//! the same whether its sensors are live or a bag played at any rate. Handlers never read the
-//! wall clock; only the tick and publish loop waits on it.
+//! The node itself: the robot's actor tree started (resumed from its snapshot, with a new
+//! incarnation), the team's traffic and the sensors subscribed, and the loop that ticks the
+//! robot, takes snapshots and publishes the outputs and the status until ROS shuts down.
 
-use crate::bounded::{Bounded, Layout};
+use super::config::NodeConfig;
+use super::error::{ros_error, NodeError};
+use super::outputs::{PublishFailures, Publishers};
+use super::sensors::{subscribe, InputCounts, SensorSide};
+use super::team_key::{check_team_key, PublicKeys};
+use super::world_frames::register_world_frame;
+use crate::bounded::Bounded;
 use crate::bounded_deliver::{BoundedDeliver, BoundedDeliverReq, BoundedDeliverRes};
 use crate::config::RosConfig;
 use crate::convert::cloud::semantic_map;
@@ -16,17 +16,15 @@ use crate::convert::markers::{keyframe_path, map_markers};
 use crate::convert::time::Epoch;
 use crate::error::InputError;
 use crate::inputs::{Inputs, Payload};
-use crate::msg::{nav_msgs, rosgraph_msgs, sensor_msgs, sgm_msgs, std_msgs, tf2_msgs, visualization_msgs};
+use crate::msg::{rosgraph_msgs, sgm_msgs, std_msgs, tf2_msgs};
 use crate::persist::{Intake, Snapshots};
 use crate::sync::Synchroniser;
-use crate::team_frames::{team_transform, world_frame_param, WorldFrames};
+use crate::team_frames::{team_transform, WorldFrames};
 use crate::transport::peers::MasterLocator;
 use crate::transport::{RosTransport, TransportCounts};
-use serde::{Deserialize, Serialize};
 use sgm_actors::clock::Clock;
 use sgm_actors::comms::AttachJournal;
 use sgm_actors::comms::GetCommsStatus;
-use sgm_actors::config::{ConfigError, RobotConfig};
 use sgm_actors::fusion::GetFusionStatus;
 use sgm_actors::journal::JournalFile;
 use sgm_actors::matcher::GetNeighbours;
@@ -37,193 +35,10 @@ use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::wire::Sequence;
-use std::collections::BTreeMap;
 use std::path::Path;
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
-
-/// A node's configuration file: the robot's sections plus `[ros]`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct NodeConfig {
-    #[serde(flatten)]
-    pub robot: RobotConfig,
-    pub ros: RosConfig,
-}
-
-impl NodeConfig {
-    /// Defaults, then `file`, then `SGM__…` variables; both parts validated.
-    pub fn load(file: Option<&Path>) -> Result<Self, NodeError> {
-        let defaults = config::Config::try_from(&NodeConfig::default()).map_err(|e| {
-            NodeError::Config(ConfigError::Load { source_name: "defaults".into(), message: e.to_string() })
-        })?;
-        let merged = sgm_actors::config::layered(Some(defaults), file, "SGM").map_err(NodeError::Config)?;
-        let source_name = file.map_or("environment".into(), |p| p.display().to_string());
-        let config: NodeConfig = merged
-            .try_deserialize()
-            .map_err(|e| NodeError::Config(ConfigError::Load { source_name, message: e.to_string() }))?;
-        config.robot.validate().map_err(NodeError::Config)?;
-        config.ros.validate().map_err(NodeError::Ros)?;
-        Ok(config)
-    }
-}
-
-#[derive(Debug, thiserror::Error)]
-pub enum NodeError {
-    #[error("{0}")]
-    Config(ConfigError),
-    #[error(
-        "the team key is public ({published}): anyone who reaches the ROS master could forge, alter \
-         and replay this team's messages. Give the team a key of its own: \
-         `(umask 077 && head -c 32 /dev/urandom | od -An -vtx1 | tr -d ' \\n' > team.key)`, copy team.key \
-         to every robot (mode 600) and set comms.team_key_file to its absolute path \
-         (SGM__COMMS__TEAM_KEY_FILE=/path/to/team.key, or roslaunch sgm robot.launch \
-         team_key_file:=/path/to/team.key); for development on a private network only, \
-         `sgm ros --development-key` starts with a public key"
-    )]
-    PublicKey { published: &'static str },
-    #[error("[ros]: {0}")]
-    Ros(InputError),
-    #[error("ROS: {0}")]
-    Ros1(String),
-    #[error("[persistence]: {0}")]
-    Snapshot(sgm_actors::snapshot::StoreError),
-}
-
-fn ros_error(e: impl std::fmt::Display) -> NodeError {
-    NodeError::Ros1(e.to_string())
-}
-
-/// Per input topic: messages accepted and refused, and why the latest was refused.
-#[derive(Default)]
-struct InputCounts {
-    accepted: BTreeMap<&'static str, AtomicU64>,
-    refused: BTreeMap<&'static str, AtomicU64>,
-    last_refusal: Mutex<BTreeMap<&'static str, String>>,
-}
-
-impl InputCounts {
-    fn new(topics: &[&'static str]) -> Self {
-        Self {
-            accepted: topics.iter().map(|t| (*t, AtomicU64::new(0))).collect(),
-            refused: topics.iter().map(|t| (*t, AtomicU64::new(0))).collect(),
-            last_refusal: Mutex::default(),
-        }
-    }
-
-    /// The health checks' view.
-    fn tallies(&self) -> BTreeMap<String, crate::health::TopicTally> {
-        let last = self.last_refusal.lock().unwrap_or_else(PoisonError::into_inner);
-        self.accepted
-            .iter()
-            .map(|(topic, accepted)| {
-                let tally = crate::health::TopicTally {
-                    accepted: accepted.load(Ordering::Relaxed),
-                    refused: self.refused.get(topic).map_or(0, |r| r.load(Ordering::Relaxed)),
-                    last_refusal: last.get(topic).cloned(),
-                };
-                (topic.to_string(), tally)
-            })
-            .collect()
-    }
-
-    fn count<T>(&self, topic: &'static str, result: Result<T, InputError>) -> Option<T> {
-        let (map, value) = match result {
-            Ok(v) => (&self.accepted, Some(v)),
-            Err(e) => {
-                tracing::warn!(topic, "message refused: {e}");
-                self.last_refusal.lock().unwrap_or_else(PoisonError::into_inner).insert(topic, e.to_string());
-                (&self.refused, None)
-            }
-        };
-        if let Some(c) = map.get(topic) {
-            c.fetch_add(1, Ordering::Relaxed);
-        }
-        value
-    }
-
-    fn snapshot(map: &BTreeMap<&'static str, AtomicU64>) -> serde_json::Value {
-        map.iter().map(|(k, v)| (k.to_string(), serde_json::json!(v.load(Ordering::Relaxed)))).collect()
-    }
-}
-
-/// What the sensor callbacks share.
-struct SensorSide {
-    sync: Mutex<Synchroniser>,
-    inputs: Inputs,
-    counts: InputCounts,
-    intake: Arc<Intake>,
-    epoch: Epoch,
-}
-
-impl SensorSide {
-    fn sync(&self) -> std::sync::MutexGuard<'_, Synchroniser> {
-        self.sync.lock().unwrap_or_else(PoisonError::into_inner)
-    }
-
-    /// The ROS time of mission time `t` (outputs are stamped in ROS time).
-    fn ros_time(&self, t: sgm_model::scene_graph::Stamp) -> rosrust::Time {
-        self.sync().ros_time(self.epoch, t)
-    }
-
-    /// Counts a checked input of `topic`, feeds it to the synchroniser, and hands every frame
-    /// then assembled to the robot, moving its clock to the frame's stamp.
-    fn receive(&self, topic: &'static str, input: Result<Payload, InputError>) {
-        let Some(payload) = self.counts.count(topic, input) else { return };
-        let mut sync = self.sync();
-        sync.feed(self.epoch, payload);
-        for frame in sync.ready() {
-            self.intake.frame(frame);
-        }
-        if let Some(t) = sync.clock() {
-            self.intake.advance_clock(t);
-        }
-    }
-}
-
-/// Subscribes `topic` (counted as `name`): each message is checked by `check` and received.
-fn subscribe<M: rosrust::Message + Layout>(
-    topic: &str,
-    queue: usize,
-    side: &Arc<SensorSide>,
-    name: &'static str,
-    check: fn(&Inputs, &M) -> Result<Payload, InputError>,
-) -> Result<rosrust::Subscriber, NodeError> {
-    let side = side.clone();
-    rosrust::subscribe(topic, queue, move |m: Bounded<M>| side.receive(name, check(&side.inputs, &m.0)))
-        .map_err(ros_error)
-}
-
-/// Whether a node may start with a team key of
-/// [`PUBLIC_TEAM_KEYS`](sgm_actors::config::PUBLIC_TEAM_KEYS).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PublicKeys {
-    /// Refuse to start (the default of `sgm ros`).
-    Refuse,
-    /// Start, with a warning (`sgm ros --development-key`).
-    AllowForDevelopment,
-}
-
-/// Refuses a public team key (the default, or one printed in the book or the shipped
-/// configurations) unless `public` allows it, and then warns. A ROS node listens on a network,
-/// where anyone who knows the key can speak for the team.
-pub fn check_team_key(config: &RobotConfig, public: PublicKeys) -> Result<(), NodeError> {
-    let Some(key) = config.comms.public_team_key().map_err(NodeError::Config)? else { return Ok(()) };
-    match public {
-        PublicKeys::Refuse => Err(NodeError::PublicKey { published: key.published }),
-        PublicKeys::AllowForDevelopment => {
-            tracing::warn!(
-                robot = %config.robot.name,
-                "DEVELOPMENT KEY: the team key is public ({}); anyone who reaches the ROS master can \
-                 forge, alter and replay this team's messages. Never use --development-key in the field: \
-                 set comms.team_key_file to a key of the team's own",
-                key.published
-            );
-            Ok(())
-        }
-    }
-}
 
 /// Runs robot `config` as a ROS node until ROS shuts down (SIGINT, `rosnode kill`); a public
 /// team key is refused unless `public` allows it ([`check_team_key`]).
@@ -485,41 +300,6 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
     })
 }
 
-/// Registers this robot's world frame on the master (`/sgm/world_frames/robot_{id}`) and keeps
-/// `frames` up to date with the team's registrations, on a thread of its own (the master's
-/// parameter calls block), every 5 s while the node runs.
-fn register_world_frame(id: u16, world_frame: &str, frames: WorldFrames) {
-    let (name, frame) = (world_frame_param(id), world_frame.to_string());
-    let spawned = std::thread::Builder::new().name("sgm-world-frames".into()).spawn(move || {
-        match rosrust::param(&name) {
-            Some(param) => {
-                if let Ok(existing) = param.get::<String>() {
-                    if existing != frame {
-                        tracing::warn!(param = %name, existing, frame,
-                            "another world frame was registered for this robot id: a second robot with this id, \
-                             or this robot started before with another ros.frames.world; taking it over");
-                    }
-                }
-                if let Err(e) = param.set(&frame) {
-                    tracing::warn!(param = %name, "world frame not registered on the master: {e}");
-                }
-            }
-            None => tracing::warn!(param = %name, "world frame not registered: not a valid parameter name"),
-        }
-        while rosrust::is_ok() {
-            if let Some(Ok(registered)) =
-                rosrust::param("/sgm/world_frames").map(|p| p.get::<BTreeMap<String, String>>())
-            {
-                frames.update(&registered);
-            }
-            std::thread::sleep(Duration::from_secs(5));
-        }
-    });
-    if let Err(e) = spawned {
-        tracing::warn!("world frames not followed (no thread: {e}): neighbours' worlds are named robot_ID");
-    }
-}
-
 /// A random, non-zero incarnation (0 is simulation's): std's `RandomState` keys come from the
 /// operating system's entropy, different in every process.
 fn random_incarnation() -> u32 {
@@ -527,99 +307,4 @@ fn random_incarnation() -> u32 {
     let bits = std::collections::hash_map::RandomState::new().build_hasher().finish();
     let incarnation = (bits as u32) & ((1 << sgm_model::wire::replay::INCARNATION_BITS) - 1);
     incarnation.max(1)
-}
-
-/// Publications rosrust did not take (a publisher shut down, or a message it could not
-/// serialise), per output: counted in the status (`publish_failures`) and logged once per output.
-#[derive(Default)]
-struct PublishFailures(std::collections::BTreeMap<&'static str, u64>);
-
-impl PublishFailures {
-    fn check<E: std::fmt::Display>(&mut self, output: &'static str, sent: Result<(), E>) {
-        if let Err(e) = sent {
-            let n = self.0.entry(output).or_default();
-            *n += 1;
-            if *n == 1 {
-                tracing::warn!(
-                    output,
-                    "publishing failed: {e} (further failures counted in the status's publish_failures)"
-                );
-            }
-        }
-    }
-}
-
-struct Publishers {
-    markers: rosrust::Publisher<visualization_msgs::MarkerArray>,
-    path: rosrust::Publisher<nav_msgs::Path>,
-    map: rosrust::Publisher<sensor_msgs::PointCloud2>,
-    status: rosrust::Publisher<std_msgs::String>,
-    tf: rosrust::Publisher<tf2_msgs::TFMessage>,
-}
-
-impl Publishers {
-    fn advertise(ros: &RosConfig) -> Result<Self, rosrust::error::Error> {
-        let q = ros.queue_size;
-        let mut markers = rosrust::publish(&ros.topics.markers, q)?;
-        let mut path = rosrust::publish(&ros.topics.path, q)?;
-        let mut status = rosrust::publish(&ros.topics.status, q)?;
-        // Latched: a late `rostopic echo` or RViz sees the latest at once.
-        markers.set_latching(true);
-        path.set_latching(true);
-        status.set_latching(true);
-        Ok(Self {
-            markers,
-            path,
-            map: rosrust::publish(&ros.topics.map, q)?,
-            status,
-            tf: rosrust::publish(&ros.topics.tf, q)?,
-        })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn publish_failures_are_counted_per_output() {
-        let mut failures = PublishFailures::default();
-        failures.check("markers", Ok::<(), String>(()));
-        assert!(failures.0.is_empty(), "a publication taken is no failure");
-        for _ in 0..3 {
-            failures.check("map", Err("publisher shut down"));
-        }
-        failures.check("status", Err("publisher shut down"));
-        assert_eq!(failures.0.get("map"), Some(&3));
-        assert_eq!(failures.0.get("status"), Some(&1));
-        assert_eq!(serde_json::json!({ "publish_failures": &failures.0 })["publish_failures"]["map"], 3);
-    }
-
-    /// `NodeConfig` flattens `RobotConfig`: a node's file sets `[classes]` beside `[ros]`, and a
-    /// wrong entry is refused by name.
-    #[test]
-    fn a_node_file_sets_classes() {
-        let file = tempfile::Builder::new().suffix(".toml").tempfile().unwrap();
-        let text = "[classes]\nsegmenter = \"ade20k_150\"\n[classes.map]\nchair = [\"chair\", 30]\n[ros]\nlabels = \"image\"\n";
-        std::fs::write(file.path(), text).unwrap();
-        let config = NodeConfig::load(Some(file.path())).unwrap();
-        assert_eq!(config.robot.classes.segmenter, "ade20k_150");
-        assert_eq!(config.robot.classes.map["chair"].len(), 2);
-        std::fs::write(file.path(), "[classes]\nsegmenter = \"ade20k_150\"\n[classes.map]\nsofa = [23]\n").unwrap();
-        let error = NodeConfig::load(Some(file.path())).unwrap_err().to_string();
-        assert!(error.contains("classes.map.sofa: no class \"sofa\" in fusion.classes"), "{error}");
-    }
-
-    /// Frame aliases keep their case and slashes (config's keys are frame ids, not identifiers).
-    #[test]
-    fn frame_aliases_keep_their_names() {
-        let file = tempfile::Builder::new().suffix(".toml").tempfile().unwrap();
-        let text = "[ros.frames.aliases]\ncamera_init = \"{robot}/odom\"\n\"Livox_Frame\" = \"{robot}/livox\"\n";
-        std::fs::write(file.path(), text).unwrap();
-        let config = NodeConfig::load(Some(file.path())).unwrap();
-        let inputs = Inputs::new(&config.ros, "alpha", 1);
-        assert_eq!(inputs.frame("camera_init"), "alpha/odom");
-        assert_eq!(inputs.frame("/Livox_Frame"), "alpha/livox");
-        assert_eq!(inputs.frame("body"), "body");
-    }
 }
