@@ -9,6 +9,7 @@
 //! Lengths the peer declares are checked before anything is reserved: a header beyond
 //! [`MAX_HEADER_BYTES`], a reply beyond `max_reply` is refused.
 
+use super::locator::LocatorError;
 use crate::msg::sgm_msgs;
 use rosrust::{Message, RosMsg};
 use std::io::{self, Read, Write};
@@ -33,6 +34,9 @@ pub enum CallError {
     TooLarge { what: &'static str, len: usize, max: usize },
     #[error("the service refused the call: {0}")]
     Refused(String),
+    /// The peer's service was not located.
+    #[error("{0}")]
+    Lookup(#[from] LocatorError),
 }
 
 impl CallError {

@@ -3,69 +3,16 @@
 //! at the master (cached until a call fails), calls it within `ros.peers.call_timeout_s`
 //! ([`super::call`]), and follows the link's back-off while the peer does not answer.
 
-use super::call::{deliver, service_address, CallError, CallTarget};
-use super::peer::{LinkState, Next, PeerConfig, PeerCounts, PeerLink};
-use crate::msg::sgm_msgs;
+pub use super::locator::{Locator, LocatorError, MasterLocator};
+use super::peer::{LinkState, PeerCounts, PeerLink};
+use super::worker::{lock, run, Peer, Shared};
+use crate::config::PeerConfig;
 use serde::Serialize;
 use sgm_model::scene_graph::RobotId;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
-use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
-use std::time::{Duration, Instant};
-
-/// Finds where a service listens (`rosrpc://host:port`); the ROS master in the node.
-pub trait Locator: Send + Sync + 'static {
-    fn lookup(&self, service: &str) -> Result<String, String>;
-}
-
-/// The node's ROS master.
-pub struct MasterLocator {
-    master: rosrust::api::Master,
-}
-
-impl MasterLocator {
-    /// The master of the running rosrust node (after `rosrust::try_init`).
-    pub fn of_this_node() -> Result<Self, String> {
-        let master = rosrust::api::Master::new(&rosrust::api::resolve::master(), &rosrust::name(), &rosrust::uri())
-            .map_err(|e| format!("the ROS master: {e}"))?;
-        Ok(Self { master })
-    }
-}
-
-impl Locator for MasterLocator {
-    fn lookup(&self, service: &str) -> Result<String, String> {
-        self.master.lookup_service(service).map_err(|e| e.to_string())
-    }
-}
-
-/// One peer as its worker and the status see it.
-struct Peer {
-    link: Mutex<PeerLink>,
-    wake: Condvar,
-    /// Where its service was found, until a call there fails.
-    uri: Mutex<Option<String>>,
-    /// A lookup still running (the master did not answer in time): its answer is taken before
-    /// another lookup starts, so a silent master costs one thread per peer at most.
-    lookup: Mutex<Option<Receiver<Result<String, String>>>>,
-}
-
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(PoisonError::into_inner)
-}
-
-/// What the workers share.
-struct Shared {
-    config: PeerConfig,
-    robot: RobotId,
-    caller_id: String,
-    /// `ros.topics.deliver` with `{id}`.
-    deliver_template: String,
-    max_reply: usize,
-    locator: Arc<dyn Locator>,
-    stop: AtomicBool,
-    origin: Instant,
-}
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::Instant;
 
 /// A peer's state for the status topic.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -186,129 +133,33 @@ impl Drop for Peers {
     }
 }
 
-/// The worker of peer `to`: takes the link's next step until the transport is dropped.
-fn run(shared: &Shared, to: RobotId, peer: &Peer) {
-    let service = crate::config::RosConfig::resolve(&shared.deliver_template, "", to.0);
-    loop {
-        let envelope = {
-            let mut link = lock(&peer.link);
-            loop {
-                if shared.stop.load(Ordering::Relaxed) {
-                    return;
-                }
-                match link.next(shared.origin.elapsed()) {
-                    Next::Send(envelope) => break envelope,
-                    Next::Wait(d) => link = peer.wake.wait_timeout(link, d).unwrap_or_else(PoisonError::into_inner).0,
-                    Next::Idle => link = peer.wake.wait(link).unwrap_or_else(PoisonError::into_inner),
-                }
-            }
-        };
-        let request = sgm_msgs::DeliverReq { from_robot: shared.robot.0, data: envelope };
-        let outcome = call(shared, peer, &service, &request);
-        let mut link = lock(&peer.link);
-        let was = link.state();
-        match outcome {
-            Ok(res) => {
-                if !res.accepted {
-                    tracing::warn!(peer = to.0, "delivery refused by the peer: {}", res.reason);
-                }
-                link.succeeded();
-                if was != LinkState::Up {
-                    tracing::info!(peer = to.0, %service, "peer answers again");
-                }
-            }
-            Err(e) => {
-                *lock(&peer.uri) = None;
-                link.failed(request.data, shared.origin.elapsed());
-                if was == LinkState::Up {
-                    tracing::warn!(peer = to.0, %service, "peer not answering ({e}); its envelopes wait, probed with back-off");
-                } else {
-                    tracing::debug!(peer = to.0, %service, "probe failed: {e}");
-                }
-            }
-        }
-    }
-}
-
-/// Where the peer's service is: the cached address, or a lookup bounded by `timeout`.
-fn locate(shared: &Shared, peer: &Peer, service: &str, timeout: Duration) -> Result<String, CallError> {
-    if let Some(uri) = lock(&peer.uri).clone() {
-        return Ok(uri);
-    }
-    let mut pending = lock(&peer.lookup);
-    let receiver = match pending.take() {
-        Some(receiver) => receiver,
-        None => {
-            let (tx, rx) = mpsc::channel();
-            let (locator, name) = (shared.locator.clone(), service.to_string());
-            std::thread::Builder::new()
-                .name("sgm-lookup".into())
-                .spawn(move || {
-                    let _ = tx.send(locator.lookup(&name));
-                })
-                .map_err(CallError::Io)?;
-            rx
-        }
-    };
-    match receiver.recv_timeout(timeout) {
-        Ok(Ok(uri)) => {
-            *lock(&peer.uri) = Some(uri.clone());
-            Ok(uri)
-        }
-        Ok(Err(e)) => Err(CallError::Refused(format!("lookup of {service} at the master: {e}"))),
-        Err(RecvTimeoutError::Timeout) => {
-            *pending = Some(receiver);
-            Err(CallError::Timeout(timeout))
-        }
-        Err(RecvTimeoutError::Disconnected) => Err(CallError::Refused("the lookup thread ended".into())),
-    }
-}
-
-/// One bounded call: lookup (if needed) and delivery share `ros.peers.call_timeout_s`.
-fn call(
-    shared: &Shared,
-    peer: &Peer,
-    service: &str,
-    request: &sgm_msgs::DeliverReq,
-) -> Result<sgm_msgs::DeliverRes, CallError> {
-    let timeout = shared.config.call_timeout();
-    let started = Instant::now();
-    let uri = locate(shared, peer, service, timeout)?;
-    let left = timeout.saturating_sub(started.elapsed());
-    if left.is_zero() {
-        return Err(CallError::Timeout(timeout));
-    }
-    let target = CallTarget {
-        address: service_address(&uri)?,
-        service,
-        caller_id: &shared.caller_id,
-        timeout: left,
-        max_reply: shared.max_reply,
-    };
-    deliver(&target, request)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::msg::sgm_msgs;
     use rosrust::RosMsg;
     use std::io::{Read, Write};
     use std::net::{SocketAddr, TcpListener, TcpStream};
+    use std::time::Duration;
 
     /// Services by name; a name missing is "no such service", a name mapped to `None` makes the
     /// lookup hang (a master that does not answer).
     struct Table(Mutex<BTreeMap<String, Option<String>>>);
 
     impl Locator for Table {
-        fn lookup(&self, service: &str) -> Result<String, String> {
+        fn lookup(&self, service: &str) -> Result<String, LocatorError> {
             let entry = lock(&self.0).get(service).cloned();
+            let unknown = |reason: String| LocatorError::Lookup {
+                service: service.into(),
+                source: rosrust::error::ResponseError::Server(reason),
+            };
             match entry {
                 Some(Some(uri)) => Ok(uri),
                 Some(None) => {
                     std::thread::sleep(Duration::from_secs(3600));
-                    Err("never".into())
+                    Err(unknown("never".into()))
                 }
-                None => Err(format!("no provider for {service}")),
+                None => Err(unknown(format!("no provider for {service}"))),
             }
         }
     }
