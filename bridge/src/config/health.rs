@@ -38,13 +38,26 @@ impl Default for HealthConfig {
     }
 }
 
+/// A `[ros.health]` key out of range; the message names the key and its value.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum HealthConfigError {
+    /// A share (`max_unlabelled_share`, `max_no_odometry_share`, `min_points_in_image_share`,
+    /// `max_refused_share`) outside [0, 1].
+    #[error("ros.health.{key} = {value}: a share in [0, 1] expected")]
+    NotAShare { key: &'static str, value: f64 },
+    #[error("ros.health.window_frames = 0: at least 1 expected")]
+    NoWindow,
+    #[error("ros.health.no_objects_after_s = {0}: finite and > 0 expected")]
+    NoObjectsAfter(f64),
+}
+
 impl HealthConfig {
-    pub fn validate(&self) -> Result<(), String> {
-        let share = |v: f64, key: &str| {
-            if (0.0..=1.0).contains(&v) {
+    pub fn validate(&self) -> Result<(), HealthConfigError> {
+        let share = |value: f64, key: &'static str| {
+            if (0.0..=1.0).contains(&value) {
                 Ok(())
             } else {
-                Err(format!("ros.health.{key} = {v}: a share in [0, 1] expected"))
+                Err(HealthConfigError::NotAShare { key, value })
             }
         };
         share(self.max_unlabelled_share, "max_unlabelled_share")?;
@@ -52,13 +65,10 @@ impl HealthConfig {
         share(self.min_points_in_image_share, "min_points_in_image_share")?;
         share(self.max_refused_share, "max_refused_share")?;
         if self.window_frames == 0 {
-            return Err("ros.health.window_frames = 0: at least 1 expected".into());
+            return Err(HealthConfigError::NoWindow);
         }
         if !(self.no_objects_after_s.is_finite() && self.no_objects_after_s > 0.0) {
-            return Err(format!(
-                "ros.health.no_objects_after_s = {}: finite and > 0 expected",
-                self.no_objects_after_s
-            ));
+            return Err(HealthConfigError::NoObjectsAfter(self.no_objects_after_s));
         }
         Ok(())
     }
@@ -71,8 +81,11 @@ mod tests {
     #[test]
     fn bad_thresholds_are_named() {
         let e = HealthConfig { max_unlabelled_share: 1.5, ..Default::default() }.validate().unwrap_err();
-        assert!(e.contains("ros.health.max_unlabelled_share"), "{e}");
+        assert_eq!(e, HealthConfigError::NotAShare { key: "max_unlabelled_share", value: 1.5 });
+        assert_eq!(e.to_string(), "ros.health.max_unlabelled_share = 1.5: a share in [0, 1] expected");
         let e = HealthConfig { window_frames: 0, ..Default::default() }.validate().unwrap_err();
-        assert!(e.contains("window_frames"), "{e}");
+        assert_eq!(e.to_string(), "ros.health.window_frames = 0: at least 1 expected");
+        let e = HealthConfig { no_objects_after_s: f64::NAN, ..Default::default() }.validate().unwrap_err();
+        assert_eq!(e.to_string(), "ros.health.no_objects_after_s = NaN: finite and > 0 expected");
     }
 }

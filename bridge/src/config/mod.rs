@@ -3,26 +3,27 @@
 //! `{robot}` in a topic or frame is replaced by the robot's name and `{id}` by its id.
 //! Relative topic names resolve in the node's namespace (`__ns`, `ROS_NAMESPACE`).
 //!
-//! One file per part: [`RosConfig`] and its validation here, `topics.rs` (topic and frame
-//! names), `sync.rs` (`[ros.sync]`), `health.rs` (`[ros.health]`), `peers.rs` (`[ros.peers]`),
-//! `mounts.rs` (the sensors' mountings pinned here). Sections of modules that need nothing of
-//! the bridge stay with them (`[ros.tf]` in [`crate::tf`], `[ros.timeline]` in
-//! [`crate::timeline`]). Those of the synchroniser, the health checks and the transport live
-//! here: those modules read this one (the whole `[ros]` section, or the synchroniser that
-//! does), so this one must not read them.
+//! One file per part: [`RosConfig`] and its validation here (what it refuses: `error.rs`,
+//! [`RosConfigError`]), `topics.rs` (topic and frame names), `sync.rs` (`[ros.sync]`),
+//! `health.rs` (`[ros.health]`), `peers.rs` (`[ros.peers]`), `mounts.rs` (the sensors'
+//! mountings pinned here). Sections of modules that need nothing of the bridge stay with them
+//! (`[ros.tf]` in [`crate::tf`], `[ros.timeline]` in [`crate::timeline`]). Those of the
+//! synchroniser, the health checks and the transport live here: those modules read this one
+//! (the whole `[ros]` section, or the synchroniser that does), so this one must not read them.
 
+mod error;
 mod health;
 mod mounts;
 mod peers;
 mod sync;
 mod topics;
 
-pub use health::HealthConfig;
+pub use error::RosConfigError;
+pub use health::{HealthConfig, HealthConfigError};
 pub use peers::PeerConfig;
 pub use sync::{SyncConfig, Unlabelled};
 pub use topics::{RosFrames, RosTopics};
 
-use crate::error::InputError;
 use crate::tf::TfConfig;
 use crate::timeline::TimelineConfig;
 use serde::{Deserialize, Serialize};
@@ -121,21 +122,21 @@ impl RosConfig {
     }
 
     /// Checks every key; errors name the key.
-    pub fn validate(&self) -> Result<(), InputError> {
-        let positive = |v: f64, key: &str| {
-            if v.is_finite() && v > 0.0 {
+    pub fn validate(&self) -> Result<(), RosConfigError> {
+        let positive = |value: f64, key: &'static str| {
+            if value.is_finite() && value > 0.0 {
                 Ok(())
             } else {
-                Err(InputError::invalid(format!("ros.{key} = {v}: finite and > 0 expected")))
+                Err(RosConfigError::NotPositive { key, value })
             }
         };
         positive(self.sync.image_tolerance_s, "sync.image_tolerance_s")?;
         positive(self.sync.max_label_skew_s, "sync.max_label_skew_s")?;
         if self.sync.max_label_skew_s < self.sync.image_tolerance_s {
-            return Err(InputError::invalid(format!(
-                "ros.sync.max_label_skew_s = {} is below ros.sync.image_tolerance_s = {}: at least that expected",
-                self.sync.max_label_skew_s, self.sync.image_tolerance_s
-            )));
+            return Err(RosConfigError::SkewBelowTolerance {
+                skew: self.sync.max_label_skew_s,
+                tolerance: self.sync.image_tolerance_s,
+            });
         }
         positive(self.sync.max_odometry_gap_s, "sync.max_odometry_gap_s")?;
         positive(self.sync.max_wait_s, "sync.max_wait_s")?;
@@ -145,43 +146,40 @@ impl RosConfig {
         positive(self.peers.backoff_initial_s, "peers.backoff_initial_s")?;
         positive(self.peers.backoff_max_s, "peers.backoff_max_s")?;
         positive(self.timeline.max_jump_s, "timeline.max_jump_s")?;
-        self.health.validate().map_err(InputError::invalid)?;
-        self.tf.validate().map_err(InputError::invalid)?;
+        self.health.validate()?;
+        self.tf.validate()?;
         if self.timeline.confirm_messages == 0 {
-            return Err(InputError::invalid("ros.timeline.confirm_messages = 0: ≥ 1 expected"));
+            return Err(RosConfigError::Zero { key: "timeline.confirm_messages" });
         }
         if self.peers.queue == 0 {
-            return Err(InputError::invalid("ros.peers.queue = 0: ≥ 1 expected"));
+            return Err(RosConfigError::Zero { key: "peers.queue" });
         }
         if self.peers.backoff_max_s < self.peers.backoff_initial_s {
-            return Err(InputError::invalid(format!(
-                "ros.peers.backoff_max_s = {}: ≥ backoff_initial_s ({}) expected",
-                self.peers.backoff_max_s, self.peers.backoff_initial_s
-            )));
+            return Err(RosConfigError::BackoffBelowInitial {
+                max: self.peers.backoff_max_s,
+                initial: self.peers.backoff_initial_s,
+            });
         }
         if self.queue_size == 0 || self.max_cloud_points == 0 || self.max_image_pixels == 0 {
-            return Err(InputError::invalid("ros.queue_size, max_cloud_points and max_image_pixels must be ≥ 1"));
+            return Err(RosConfigError::NoRoom);
         }
         if self.max_message_bytes < 1024 {
-            return Err(InputError::invalid(format!(
-                "ros.max_message_bytes = {}: ≥ 1024 expected",
-                self.max_message_bytes
-            )));
+            return Err(RosConfigError::MessageBytes(self.max_message_bytes));
         }
         let t = &self.topics;
         for (key, name) in [
-            ("points", &t.points),
-            ("labels", &t.labels),
-            ("camera_info", &t.camera_info),
-            ("odometry", &t.odometry),
-            ("markers", &t.markers),
-            ("path", &t.path),
-            ("map", &t.map),
-            ("status", &t.status),
-            ("tf", &t.tf),
-            ("team", &t.team),
-            ("clock", &t.clock),
-            ("deliver", &t.deliver),
+            ("topics.points", &t.points),
+            ("topics.labels", &t.labels),
+            ("topics.camera_info", &t.camera_info),
+            ("topics.odometry", &t.odometry),
+            ("topics.markers", &t.markers),
+            ("topics.path", &t.path),
+            ("topics.map", &t.map),
+            ("topics.status", &t.status),
+            ("topics.tf", &t.tf),
+            ("topics.team", &t.team),
+            ("topics.clock", &t.clock),
+            ("topics.deliver", &t.deliver),
             ("tf.topic", &self.tf.topic),
             ("tf.static_topic", &self.tf.static_topic),
         ] {
@@ -189,18 +187,15 @@ impl RosConfig {
                 || !name.chars().all(|c| c.is_ascii_alphanumeric() || "_/{}~".contains(c))
                 || name.contains("//");
             if bad {
-                let key = if key.starts_with("tf.") { key.to_string() } else { format!("topics.{key}") };
-                return Err(InputError::invalid(format!("ros.{key} = {name:?}: not a valid ROS name")));
+                return Err(RosConfigError::Name { key, name: name.clone() });
             }
         }
         if !t.deliver.contains("{id}") {
-            return Err(InputError::invalid("ros.topics.deliver must contain {id}: one service per robot"));
+            return Err(RosConfigError::DeliverWithoutId);
         }
         for (from, to) in &self.frames.aliases {
             if from.trim_start_matches('/').is_empty() || to.trim_start_matches('/').is_empty() {
-                return Err(InputError::invalid(format!(
-                    "ros.frames.aliases: {from:?} = {to:?}: both frame names must be non-empty"
-                )));
+                return Err(RosConfigError::EmptyAlias { from: from.clone(), to: to.clone() });
             }
         }
         self.camera_pin()?;
@@ -235,5 +230,39 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(bad.validate().unwrap_err().to_string(), "ros.tf.topic = \"/tf two\": not a valid ROS name");
+    }
+
+    /// A configuration with one key changed by `edit`, refused: the message.
+    fn refused(edit: impl FnOnce(&mut RosConfig)) -> String {
+        let mut config = RosConfig::default();
+        edit(&mut config);
+        config.validate().map(|()| "accepted".to_string()).unwrap_or_else(|e| e.to_string())
+    }
+
+    /// Each error names the key and its value (the same texts as the strings before).
+    #[test]
+    fn errors_name_the_key_and_the_value() {
+        assert_eq!(refused(|_| ()), "accepted");
+        assert_eq!(refused(|c| c.map_voxel_m = 0.0), "ros.map_voxel_m = 0: finite and > 0 expected");
+        assert_eq!(
+            refused(|c| c.sync.max_label_skew_s = 0.01),
+            "ros.sync.max_label_skew_s = 0.01 is below ros.sync.image_tolerance_s = 0.05: at least that expected"
+        );
+        assert_eq!(refused(|c| c.health.window_frames = 0), "ros.health.window_frames = 0: at least 1 expected");
+        assert_eq!(
+            refused(|c| c.tf.max_mount_disagreement_m = -1.0),
+            "ros.tf.max_mount_disagreement_m = -1: finite and > 0 expected"
+        );
+        assert_eq!(refused(|c| c.peers.queue = 0), "ros.peers.queue = 0: ≥ 1 expected");
+        assert_eq!(
+            refused(|c| c.peers.backoff_max_s = 0.5),
+            "ros.peers.backoff_max_s = 0.5: ≥ backoff_initial_s (1) expected"
+        );
+        assert_eq!(refused(|c| c.max_message_bytes = 10), "ros.max_message_bytes = 10: ≥ 1024 expected");
+        assert_eq!(refused(|c| c.topics.points = "".into()), "ros.topics.points = \"\": not a valid ROS name");
+        assert_eq!(
+            refused(|c| c.topics.deliver = "/sgm/deliver".into()),
+            "ros.topics.deliver must contain {id}: one service per robot"
+        );
     }
 }

@@ -1,29 +1,25 @@
 //! The sensors' mountings pinned in `[ros]` (`camera_from_body` or `body_from_camera`,
 //! `body_from_lidar`), checked; unpinned ones are read from tf.
 
-use super::RosConfig;
-use crate::error::InputError;
+use super::{RosConfig, RosConfigError};
 use sgm_model::geometry::Pose3;
 
 /// A pose key's [x, y, z, qx, qy, qz, qw], checked; errors name `ros.KEY`.
-fn pose_key([x, y, z, qx, qy, qz, qw]: [f64; 7], key: &str) -> Result<Pose3, InputError> {
+fn pose_key([x, y, z, qx, qy, qz, qw]: [f64; 7], key: &'static str) -> Result<Pose3, RosConfigError> {
     let pose = crate::msg::geometry_msgs::Pose {
         position: crate::msg::geometry_msgs::Point { x, y, z },
         orientation: crate::msg::geometry_msgs::Quaternion { x: qx, y: qy, z: qz, w: qw },
     };
-    crate::convert::geometry::pose_from_msg(&pose).map_err(|e| InputError::invalid(format!("ros.{key}: {e}")))
+    crate::convert::geometry::pose_from_msg(&pose).map_err(|source| RosConfigError::Mount { key, source })
 }
 
 impl RosConfig {
     /// The camera mounting pinned by configuration, as `body_from_camera`: `body_from_camera`,
     /// or the inverse of `camera_from_body` (checked: finite, unit quaternion, not both set).
     /// `None`: read from tf.
-    pub fn camera_pin(&self) -> Result<Option<Pose3>, InputError> {
+    pub fn camera_pin(&self) -> Result<Option<Pose3>, RosConfigError> {
         match (self.camera_from_body, self.body_from_camera) {
-            (Some(_), Some(_)) => Err(InputError::invalid(
-                "ros.camera_from_body and ros.body_from_camera are both set: they are one mounting \
-                 (one the inverse of the other), set one",
-            )),
+            (Some(_), Some(_)) => Err(RosConfigError::BothCameraMounts),
             (Some(values), None) => pose_key(values, "camera_from_body").map(|c| Some(c.inverse())),
             (None, Some(values)) => pose_key(values, "body_from_camera").map(Some),
             (None, None) => Ok(None),
@@ -31,7 +27,7 @@ impl RosConfig {
     }
 
     /// The LiDAR mounting pinned by configuration (`body_from_lidar`); `None`: from tf.
-    pub fn lidar_pin(&self) -> Result<Option<Pose3>, InputError> {
+    pub fn lidar_pin(&self) -> Result<Option<Pose3>, RosConfigError> {
         self.body_from_lidar.map(|values| pose_key(values, "body_from_lidar")).transpose()
     }
 }

@@ -1,7 +1,8 @@
 //! Why a node does not start or stops.
 
-use crate::error::InputError;
+use crate::config::RosConfigError;
 use sgm_actors::config::ConfigError;
+use sgm_model::perception::classes::ClassTableError;
 
 #[derive(Debug, thiserror::Error)]
 pub enum NodeError {
@@ -18,7 +19,11 @@ pub enum NodeError {
     )]
     PublicKey { published: &'static str },
     #[error("[ros]: {0}")]
-    Ros(InputError),
+    Ros(RosConfigError),
+    /// `fusion.classes` does not make a class table (a configuration `NodeConfig::load` read
+    /// was validated already).
+    #[error("[ros]: fusion.classes: {0}")]
+    Classes(ClassTableError),
     #[error("ROS: {0}")]
     Ros1(String),
     #[error("[persistence]: {0}")]

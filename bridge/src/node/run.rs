@@ -14,7 +14,6 @@ use crate::config::RosConfig;
 use crate::convert::cloud::semantic_map;
 use crate::convert::markers::{keyframe_path, map_markers};
 use crate::convert::time::Epoch;
-use crate::error::InputError;
 use crate::inputs::{Inputs, Payload};
 use crate::msg::{rosgraph_msgs, sgm_msgs, std_msgs, tf2_msgs};
 use crate::persist::{Intake, Snapshots};
@@ -49,8 +48,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
     rosrust::try_init(&format!("sgm_{robot_name}")).map_err(ros_error)?;
     let ros = config.ros.clone();
     crate::bounded::set_max_message_bytes(ros.max_message_bytes);
-    let classes = ClassTable::new(config.robot.fusion.classes.clone())
-        .map_err(|e| NodeError::Ros(InputError::invalid(format!("fusion.classes: {e}"))))?;
+    let classes = ClassTable::new(config.robot.fusion.classes.clone()).map_err(NodeError::Classes)?;
     let system = actix_rt::System::new();
     system.block_on(async move {
         let counts = Arc::new(TransportCounts::default());

@@ -3,7 +3,7 @@
 //! is `assemble.rs`'s, labelling them `labels.rs`'s.
 
 use super::counts::SyncCounts;
-use crate::config::{LabelSource, SyncConfig};
+use crate::config::{LabelSource, RosConfig, RosConfigError, SyncConfig};
 use crate::convert::cloud::Scan;
 use crate::convert::image::UnknownColours;
 use crate::convert::time::Epoch;
@@ -65,7 +65,7 @@ impl Synchroniser {
 
     /// A robot's synchroniser as its `[ros]` section says: mounts pinned there or read from tf
     /// between the frames `inputs` resolved, stamps checked by `ros.timeline`.
-    pub fn for_robot(ros: &crate::config::RosConfig, inputs: &Inputs) -> Result<Self, crate::error::InputError> {
+    pub fn for_robot(ros: &RosConfig, inputs: &Inputs) -> Result<Self, RosConfigError> {
         let body = inputs.body_frame();
         let camera = Mount::new("camera", "ros.body_from_camera", body, inputs.camera_frame(), ros.camera_pin()?);
         let lidar = Mount::new("lidar", "ros.body_from_lidar", body, inputs.lidar_frame(), ros.lidar_pin()?);

@@ -47,8 +47,17 @@ impl Default for TfConfig {
     }
 }
 
+/// A `[ros.tf]` key out of range; the message names the key and its value.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TfConfigError {
+    /// A disagreement threshold (`max_mount_disagreement_m`, `…_deg`,
+    /// `max_odometry_disagreement_m`, `…_deg`) that is not finite and positive.
+    #[error("ros.tf.{key} = {value}: finite and > 0 expected")]
+    NotPositive { key: &'static str, value: f64 },
+}
+
 impl TfConfig {
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), TfConfigError> {
         for (key, v) in [
             ("max_mount_disagreement_m", self.max_mount_disagreement_m),
             ("max_mount_disagreement_deg", self.max_mount_disagreement_deg),
@@ -56,7 +65,7 @@ impl TfConfig {
             ("max_odometry_disagreement_deg", self.max_odometry_disagreement_deg),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("ros.tf.{key} = {v}: finite and > 0 expected"));
+                return Err(TfConfigError::NotPositive { key, value: v });
             }
         }
         Ok(())
@@ -79,4 +88,17 @@ pub struct TfBatch {
     pub transforms: Vec<TfTransform>,
     /// One line per transform refused (its frames and the reason).
     pub refused: Vec<String>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_thresholds_are_named() {
+        assert_eq!(TfConfig::default().validate(), Ok(()));
+        let e = TfConfig { max_odometry_disagreement_deg: 0.0, ..Default::default() }.validate().unwrap_err();
+        assert_eq!(e, TfConfigError::NotPositive { key: "max_odometry_disagreement_deg", value: 0.0 });
+        assert_eq!(e.to_string(), "ros.tf.max_odometry_disagreement_deg = 0: finite and > 0 expected");
+    }
 }
