@@ -10,14 +10,14 @@ use std::path::Path;
 /// Examines robot `config`'s inputs in the bag at `path`.
 pub fn examine_bag(path: &Path, config: &NodeConfig) -> Result<DoctorReport, DoctorError> {
     let mut doctor = Doctor::new(config)?;
-    let colours = config.robot.colour_ids().map_err(|e| DoctorError(e.to_string()))?;
+    let colours = config.robot.colour_ids()?;
     let source = BagSource::new(&config.ros, &config.robot.robot.name, config.robot.robot.id).with_colours(colours);
     for item in read_bag(path, source) {
         match item {
             BagItem::Message { payload: Payload::GroundTruth(..), .. } => {}
             BagItem::Message { payload, .. } => doctor.observe(payload.input_name(), Ok(payload)),
             BagItem::Refused { input, error, .. } => doctor.observe(input, Err(error)),
-            BagItem::Failed(e) => return Err(DoctorError(e.to_string())),
+            BagItem::Failed(e) => return Err(DoctorError::Bag(e)),
         }
     }
     Ok(doctor.finish(format!("bag {}", path.display()), true))

@@ -33,14 +33,14 @@ fn listen<M: rosrust::Message + Layout>(
             d.observe(input, result);
         }
     })
-    .map_err(|e| DoctorError(format!("subscribing {topic}: {e}")))
+    .map_err(|e| DoctorError::Subscribe { topic: topic.to_string(), reason: e.to_string() })
 }
 
 /// Listens to robot `config`'s inputs on the master (`ROS_MASTER_URI`) for `duration`.
 pub fn examine_live(config: &NodeConfig, duration: Duration) -> Result<DoctorReport, DoctorError> {
     let robot = config.robot.robot.name.clone();
     rosrust::try_init_with_options(&format!("sgm_doctor_{robot}_{}", std::process::id()), false)
-        .map_err(|e| DoctorError(format!("no ROS master at ROS_MASTER_URI: {e}")))?;
+        .map_err(|e| DoctorError::NoMaster(e.to_string()))?;
     crate::bounded::set_max_message_bytes(config.ros.max_message_bytes);
     let first = Doctor::new(config)?.live();
     let topics = first.topics().clone();
@@ -82,7 +82,7 @@ pub fn examine_live(config: &NodeConfig, duration: Duration) -> Result<DoctorRep
     let published: Vec<_> =
         rosrust::topics().unwrap_or_default().into_iter().filter(|t| publishing.contains(&t.name)).collect();
     let taken = doctor.lock().unwrap_or_else(PoisonError::into_inner).take();
-    let Some(mut d) = taken else { return Err(DoctorError("the doctor was taken twice".into())) };
+    let Some(mut d) = taken else { return Err(DoctorError::TakenTwice) };
     for (input, datatype, subscriber) in &subscribers {
         if subscriber.publisher_count() == 0 {
             let alike: Vec<&str> =

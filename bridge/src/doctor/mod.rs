@@ -6,17 +6,21 @@
 //! feeds it a bag, [`live`] a running master.
 
 pub mod bag;
+mod error;
 pub mod live;
+mod report;
 mod verdicts;
+
+pub use error::DoctorError;
+pub use report::{DoctorReport, InputVerdict, Verdict};
 
 use crate::config::LabelSource;
 use crate::convert::time::Epoch;
 use crate::error::InputError;
-use crate::health::{judge_whole_stream, Finding, HealthConfig, TopicTally};
+use crate::health::{judge_whole_stream, HealthConfig, TopicTally};
 use crate::inputs::{Inputs, Payload};
 use crate::node::NodeConfig;
 use crate::sync::Synchroniser;
-use serde::Serialize;
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::perception::label_map::{LabelMap, Mapped};
 use sgm_model::perception::projection::CameraModel;
@@ -25,48 +29,6 @@ use std::collections::BTreeMap;
 
 /// Every this-many-th pixel of a label image is counted in the class shares.
 const PIXEL_SAMPLE: usize = 7;
-
-/// How an input (or the whole robot) fares.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
-#[serde(rename_all = "UPPERCASE")]
-pub enum Verdict {
-    Ok,
-    Warn,
-    Fail,
-}
-
-impl std::fmt::Display for Verdict {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Verdict::Ok => "OK",
-            Verdict::Warn => "WARN",
-            Verdict::Fail => "FAIL",
-        })
-    }
-}
-
-/// One input's (or check's) verdict: what was seen, and what is wrong.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct InputVerdict {
-    pub input: String,
-    pub verdict: Verdict,
-    pub seen: String,
-    pub problems: Vec<String>,
-}
-
-/// The doctor's whole answer.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct DoctorReport {
-    pub robot: String,
-    /// The bag, or the master and how long it was listened to.
-    pub source: String,
-    /// From the first to the last sensor stamp, s.
-    pub span_s: f64,
-    pub inputs: Vec<InputVerdict>,
-    /// The node's health findings over the whole span (each is quoted in its input's problems).
-    pub findings: Vec<Finding>,
-    pub verdict: Verdict,
-}
 
 /// Stamps of one input.
 #[derive(Clone, Debug, Default)]
@@ -136,19 +98,14 @@ pub struct Doctor {
     health: HealthConfig,
 }
 
-/// Why the doctor cannot start: the configuration.
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct DoctorError(pub String);
-
 impl Doctor {
     pub fn new(config: &NodeConfig) -> Result<Self, DoctorError> {
         let robot = config.robot.robot.name.clone();
         let id = config.robot.robot.id;
-        let (classes, map) = config.robot.class_tables().map_err(|e| DoctorError(e.to_string()))?;
-        let colours = config.robot.colour_ids().map_err(|e| DoctorError(e.to_string()))?;
+        let (classes, map) = config.robot.class_tables()?;
+        let colours = config.robot.colour_ids()?;
         let inputs = Inputs::new(&config.ros, &robot, id).with_colours(colours);
-        let sync = Synchroniser::for_robot(&config.ros, &inputs).map_err(|e| DoctorError(format!("[ros]: {e}")))?;
+        let sync = Synchroniser::for_robot(&config.ros, &inputs)?;
         let mut tallies = BTreeMap::new();
         let mut expected = vec!["points", "odometry"];
         if config.ros.labels == LabelSource::Image {
@@ -308,28 +265,6 @@ impl Doctor {
 /// The static name of an input (for the stamps map).
 fn static_name(input: &str) -> Option<&'static str> {
     ["points", "labels", "camera_info", "odometry"].into_iter().find(|n| *n == input)
-}
-
-impl DoctorReport {
-    /// The report as the terminal shows it.
-    pub fn text(&self) -> String {
-        let mut out = format!("sgm doctor: robot {}, {} ({:.1} s of stamps)\n", self.robot, self.source, self.span_s);
-        for v in &self.inputs {
-            out.push_str(&format!("  {:<12} {:<4}  {}\n", v.input, v.verdict.to_string(), v.seen));
-            for p in &v.problems {
-                out.push_str(&format!("  {:<12}       - {p}\n", ""));
-            }
-        }
-        let count = |v: Verdict| self.inputs.iter().filter(|i| i.verdict == v).count();
-        out.push_str(&format!(
-            "verdict: {} ({} failed, {} with warnings, {} ok)\n",
-            self.verdict,
-            count(Verdict::Fail),
-            count(Verdict::Warn),
-            count(Verdict::Ok)
-        ));
-        out
-    }
 }
 
 #[cfg(test)]
