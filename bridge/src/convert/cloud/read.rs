@@ -1,49 +1,12 @@
-//! `sensor_msgs/PointCloud2` ↔ points. In: any field layout with `x`, `y`, `z` as float32 (or
-//! float64) — Velodyne's (x y z intensity ring time), Livox's (x y z intensity tag line
-//! timestamp), Ouster's — either byte order, organised or not; points with a non-finite
-//! coordinate are dropped (organised clouds mark missing returns with NaN). An optional integer
-//! label field gives per-point classes ([`NO_LABEL`] or any value outside the class table:
-//! unlabelled). Out: x y z float32, label uint16, and a packed `rgb` float32 that RViz colours by.
+//! A cloud read into a [`Scan`]: `x`, `y`, `z` as float32 or float64 at any offsets, either byte
+//! order, organised or not, points with a non-finite coordinate dropped, and an optional integer
+//! label field.
 
+use super::datatypes::{type_name, type_size, FLOAT32, FLOAT64, INT16, INT32, INT8, UINT16, UINT32, UINT8};
+use super::NO_LABEL;
 use crate::error::InputError;
-use crate::msg::{sensor_msgs, std_msgs};
+use crate::msg::sensor_msgs;
 use nalgebra::Point3;
-
-/// The label value meaning "no class" in our clouds and label images.
-pub const NO_LABEL: u16 = u16::MAX;
-
-const INT8: u8 = 1;
-const UINT8: u8 = 2;
-const INT16: u8 = 3;
-const UINT16: u8 = 4;
-const INT32: u8 = 5;
-const UINT32: u8 = 6;
-const FLOAT32: u8 = 7;
-const FLOAT64: u8 = 8;
-
-fn type_name(datatype: u8) -> &'static str {
-    match datatype {
-        INT8 => "int8",
-        UINT8 => "uint8",
-        INT16 => "int16",
-        UINT16 => "uint16",
-        INT32 => "int32",
-        UINT32 => "uint32",
-        FLOAT32 => "float32",
-        FLOAT64 => "float64",
-        _ => "unknown",
-    }
-}
-
-fn type_size(datatype: u8) -> Option<u32> {
-    match datatype {
-        INT8 | UINT8 => Some(1),
-        INT16 | UINT16 => Some(2),
-        INT32 | UINT32 | FLOAT32 => Some(4),
-        FLOAT64 => Some(8),
-        _ => None,
-    }
-}
 
 /// Where a field sits in a point and how to read it.
 #[derive(Clone, Copy, Debug)]
@@ -169,86 +132,11 @@ pub fn read_cloud(msg: &sensor_msgs::PointCloud2, label_field: &str) -> Result<S
     Ok(scan)
 }
 
-fn point_field(name: &str, offset: u32, datatype: u8) -> sensor_msgs::PointField {
-    sensor_msgs::PointField { name: name.into(), offset, datatype, count: 1 }
-}
-
-/// Packs an RGB colour the way PCL and RViz read an `rgb` float32 field.
-fn packed_rgb([r, g, b]: [u8; 3]) -> f32 {
-    f32::from_bits((u32::from(r) << 16) | (u32::from(g) << 8) | u32::from(b))
-}
-
-/// An unorganised little-endian cloud: x y z float32, plus `label` uint16 and `rgb` (from
-/// `colour_of(label)`) when labels are given.
-pub fn cloud_msg(
-    header: std_msgs::Header,
-    points: &[Point3<f32>],
-    labels: Option<&[u16]>,
-    colour_of: impl Fn(u16) -> [u8; 3],
-) -> sensor_msgs::PointCloud2 {
-    let mut fields = vec![point_field("x", 0, FLOAT32), point_field("y", 4, FLOAT32), point_field("z", 8, FLOAT32)];
-    let point_step = if labels.is_some() {
-        fields.push(point_field("rgb", 12, FLOAT32));
-        fields.push(point_field("label", 16, UINT16));
-        20
-    } else {
-        12
-    };
-    let mut data = Vec::with_capacity(points.len() * point_step);
-    for (k, p) in points.iter().enumerate() {
-        for v in [p.x, p.y, p.z] {
-            data.extend_from_slice(&v.to_le_bytes());
-        }
-        if let Some(labels) = labels {
-            let label = labels.get(k).copied().unwrap_or(NO_LABEL);
-            data.extend_from_slice(&packed_rgb(colour_of(label)).to_le_bytes());
-            data.extend_from_slice(&label.to_le_bytes());
-            data.extend_from_slice(&[0, 0]);
-        }
-    }
-    sensor_msgs::PointCloud2 {
-        header,
-        height: 1,
-        width: points.len() as u32,
-        fields,
-        is_bigendian: false,
-        point_step: point_step as u32,
-        row_step: (points.len() * point_step) as u32,
-        data,
-        is_dense: true,
-    }
-}
-
-/// The semantic map: the keyframes' labelled points of `graphs`, each placed in the header's
-/// frame by its `frame_from_graph` (the identity for the robot's own), one point per `voxel_m`
-/// voxel (the first label), coloured by class.
-pub fn semantic_map(
-    header: &std_msgs::Header,
-    graphs: &[(&sgm_model::scene_graph::SceneGraph, sgm_model::geometry::Pose3)],
-    classes: &sgm_model::perception::classes::ClassTable,
-    voxel_m: f64,
-) -> sensor_msgs::PointCloud2 {
-    let mut voxels = sgm_model::scene_graph::LabelledVoxels::new(voxel_m);
-    for (graph, frame_from_graph) in graphs {
-        voxels.insert_graph(graph, frame_from_graph);
-    }
-    voxels_msg(header, &voxels, classes)
-}
-
-/// Labelled voxels as a cloud in the header's frame, coloured by class.
-pub fn voxels_msg(
-    header: &std_msgs::Header,
-    voxels: &sgm_model::scene_graph::LabelledVoxels,
-    classes: &sgm_model::perception::classes::ClassTable,
-) -> sensor_msgs::PointCloud2 {
-    let (points, labels): (Vec<_>, Vec<_>) = voxels.points().map(|(p, l)| (p.cast::<f32>(), l.0)).unzip();
-    let colour = |l: u16| classes.get(sgm_model::scene_graph::LabelId(l)).map_or([128, 128, 128], |c| c.colour);
-    cloud_msg(header.clone(), &points, Some(&labels), colour)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::convert::cloud::write::{cloud_msg, point_field};
+    use crate::msg::std_msgs;
     use proptest::prelude::*;
 
     /// Drivers' point layouts: (field, offset, datatype), point step.
