@@ -1,6 +1,12 @@
 //! SGM's ROS 1 bridge (DESIGN.md §5): ROS message ↔ model conversions, the synchroniser that
 //! turns LiDAR, label image and odometry streams into sensor frames, ROS 1 bag reading and
 //! writing, and the rosrust node with its inter-robot transport.
+//!
+//! The modules, lowest first; each uses only those before it (no two use each other):
+//! `error`, `msg`, `latency`, [`tf`], [`timeline`] → [`convert`], [`persist`] → [`config`] (the
+//! `[ros]` section, with the sections of the modules above it) → [`bounded`], [`inputs`],
+//! [`team_frames`] → [`bag`], [`bounded_deliver`], [`sync`] → [`health`], [`transport`] →
+//! [`node`] → [`doctor`].
 
 pub mod bag;
 pub mod bounded;

@@ -1,8 +1,8 @@
 //! `sgm doctor`: a robot's inputs checked before (or beside) a mission, from a bag or a live
-//! master, with a verdict per input. The same checks as the node's ([`Inputs`](crate::inputs),
-//! the [`Synchroniser`], the mounts from tf, the [`Health`] findings), plus what only a
-//! look at the whole stream tells: rates, sizes, which classes the label images' pixel values
-//! mean under `[classes]`. Plain state fed message by message ([`Doctor::observe`]); [`bag`]
+//! master, with a verdict per input. The same checks as the node's ([`Inputs`](crate::inputs), the
+//! [`Synchroniser`], the mounts from tf, the [`Health`](crate::health::Health) findings), plus what
+//! only a look at the whole stream tells: rates, sizes, which classes the label images' pixel
+//! values mean under `[classes]`. Plain state fed message by message ([`Doctor::observe`]); [`bag`]
 //! feeds it a bag, [`live`] a running master.
 
 pub mod bag;

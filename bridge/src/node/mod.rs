@@ -1,8 +1,10 @@
-//! `sgm ros`: one robot as a ROS 1 node. Sensor topics in (checked by [`Inputs`], assembled by
-//! the [`Synchroniser`]), the robot's actor tree in the middle, RViz-ready outputs and the
-//! inter-robot [`RosTransport`] out. Names come from the `[ros]` section and resolve in the
-//! node's namespace; rosrust honours `ROS_MASTER_URI`, `ROS_IP`/`ROS_HOSTNAME`,
-//! `ROS_NAMESPACE`, `__name:=`, `__ns:=` and `from:=to` remappings on the command line.
+//! `sgm ros`: one robot as a ROS 1 node. Sensor topics in (checked by
+//! [`Inputs`](crate::inputs::Inputs), assembled by the
+//! [`Synchroniser`](crate::sync::Synchroniser)), the robot's actor tree in the middle, RViz-ready
+//! outputs and the inter-robot [`RosTransport`](crate::transport::RosTransport) out. Names come
+//! from the `[ros]` section and resolve in the node's namespace; rosrust honours `ROS_MASTER_URI`,
+//! `ROS_IP`/`ROS_HOSTNAME`, `ROS_NAMESPACE`, `__name:=`, `__ns:=` and `from:=to` remappings on the
+//! command line.
 //!
 //! The robot's clock is the newest sensor stamp (ROS time, seconds since 1970): the node runs
 //! the same whether its sensors are live or a bag played at any rate. Handlers never read the
