@@ -19,7 +19,9 @@ use crate::sim::camera::{camera_from_body, camera_model, mislabels, noisy_labels
 use crate::sim::false_factors::FalseFactors;
 use crate::sim::lidar::Lidar;
 use crate::sim::odometry::Odometry;
+use crate::sim::platform::Motion;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
+use crate::sim::terrain::Terrain;
 use crate::sim::trajectory::Route;
 use crate::sim::world::{generate, NO_LABEL};
 pub use crate::team::RunError;
@@ -32,6 +34,7 @@ use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_actors::transport::InProcessRadio;
 use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, LabelId, RobotId};
 use std::path::Path;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 struct SimRobot {
@@ -77,9 +80,20 @@ pub async fn run_with(
     let bag_out = outputs.bag_out;
     let wall = Instant::now();
     let seed = scenario.scenario.seed;
-    let routes: Vec<Route> = scenario.robots.iter().enumerate().map(|(k, r)| Route::of(r, k, seed)).collect();
+    let [sx, sy] = scenario.world.size_m;
+    let terrain = Arc::new(Terrain::generate(&scenario.terrain, [-sx / 2.0, -sy / 2.0, sx / 2.0, sy / 2.0], seed));
+    let routes: Vec<Route> = scenario
+        .robots
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            let motion = Motion::new(terrain.clone(), r.platform, &scenario.platforms, r.sensor_height_m, k, seed);
+            Route::of(r, k, seed).with_motion(motion)
+        })
+        .collect();
     let paths: Vec<Vec<Point2<f64>>> = routes.iter().map(|r| r.points.clone()).collect();
-    let world = generate(&scenario.world, &scenario.fusion.classes, &paths, seed);
+    let mut world = generate(&scenario.world, &scenario.fusion.classes, &paths, seed);
+    world.settle_on(terrain);
     let shared = RadioShared::default();
     let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
     let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&scenario.radio, seed, shared.clone(), &names)));

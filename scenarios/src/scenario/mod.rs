@@ -7,7 +7,10 @@
 
 pub mod library;
 pub mod shapes;
+pub mod terrain;
 mod validate;
+
+pub use terrain::{Platform, PlatformsSpec, TerrainSpec};
 
 use serde::{Deserialize, Serialize};
 use sgm_actors::config::{
@@ -37,6 +40,10 @@ pub enum ScenarioError {
 pub struct Scenario {
     pub scenario: ScenarioSection,
     pub world: WorldSpec,
+    /// The ground: flat unless hills, kerbs or ramps are asked for.
+    pub terrain: TerrainSpec,
+    /// How each platform kind's body moves.
+    pub platforms: PlatformsSpec,
     pub lidar: LidarSpec,
     pub camera: CameraSpec,
     pub odometry: OdometrySpec,
@@ -65,6 +72,8 @@ impl Default for Scenario {
         Self {
             scenario: ScenarioSection::default(),
             world: WorldSpec::default(),
+            terrain: TerrainSpec::default(),
+            platforms: PlatformsSpec::default(),
             lidar: LidarSpec::default(),
             camera: CameraSpec::default(),
             odometry: OdometrySpec::default(),
@@ -366,6 +375,8 @@ pub struct RobotSpec {
     pub speed_mps: f64,
     /// Height of the LiDAR above the ground, m. Default 0.8.
     pub sensor_height_m: f64,
+    /// What carries the sensors: `wheeled`, `legged` or `handheld`. Default `wheeled`.
+    pub platform: Platform,
     /// The robot is switched on at this time, s. Default 0.
     pub start_s: f64,
     /// SGM on this robot crashes at this time, s: its actors and everything they held are
@@ -384,6 +395,7 @@ impl Default for RobotSpec {
             route: None,
             speed_mps: 1.5,
             sensor_height_m: 0.8,
+            platform: Platform::Wheeled,
             start_s: 0.0,
             crash_s: None,
             restart_s: None,

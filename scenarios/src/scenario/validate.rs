@@ -56,6 +56,38 @@ impl Scenario {
             "0.5 m ≤ x ≤ world.room_size_m − 1 m",
         )?;
 
+        let t = &self.terrain;
+        check(within(t.max_slope_deg, 0.0, 30.0), "terrain.max_slope_deg", t.max_slope_deg, "0 ≤ x ≤ 30°")?;
+        check(
+            within(t.hill_wavelength_m, 5.0, 1000.0),
+            "terrain.hill_wavelength_m",
+            t.hill_wavelength_m,
+            "5 ≤ x ≤ 1000 m",
+        )?;
+        check(t.kerbs <= 100, "terrain.kerbs", t.kerbs, "≤ 100")?;
+        check(within(t.kerb_height_m, 0.0, 0.5), "terrain.kerb_height_m", t.kerb_height_m, "0 ≤ x ≤ 0.5 m")?;
+        check(t.ramps <= 100, "terrain.ramps", t.ramps, "≤ 100")?;
+        check(
+            t.ramp_slope_deg.is_finite() && t.ramp_slope_deg > 0.0 && t.ramp_slope_deg <= 30.0,
+            "terrain.ramp_slope_deg",
+            t.ramp_slope_deg,
+            "0 < x ≤ 30°",
+        )?;
+        check(within(t.ramp_height_m, 0.0, 3.0), "terrain.ramp_height_m", t.ramp_height_m, "0 ≤ x ≤ 3 m")?;
+        let p = &self.platforms;
+        check(within(p.wheelbase_m, 0.1, 5.0), "platforms.wheelbase_m", p.wheelbase_m, "0.1 ≤ x ≤ 5 m")?;
+        check(within(p.track_m, 0.1, 5.0), "platforms.track_m", p.track_m, "0.1 ≤ x ≤ 5 m")?;
+        check(within(p.gait_hz, 0.1, 10.0), "platforms.gait_hz", p.gait_hz, "0.1 ≤ x ≤ 10 Hz")?;
+        check(
+            within(p.gait_amplitude_deg, 0.0, 20.0),
+            "platforms.gait_amplitude_deg",
+            p.gait_amplitude_deg,
+            "0 ≤ x ≤ 20°",
+        )?;
+        check(within(p.gait_bounce_m, 0.0, 0.3), "platforms.gait_bounce_m", p.gait_bounce_m, "0 ≤ x ≤ 0.3 m")?;
+        check(within(p.sway_deg, 0.0, 30.0), "platforms.sway_deg", p.sway_deg, "0 ≤ x ≤ 30°")?;
+        check(within(p.sway_m, 0.0, 1.0), "platforms.sway_m", p.sway_m, "0 ≤ x ≤ 1 m")?;
+
         let l = &self.lidar;
         check((1..=256).contains(&l.beams), "lidar.beams", l.beams, "1 ≤ x ≤ 256")?;
         check(within(l.azimuth_step_deg, 0.05, 10.0), "lidar.azimuth_step_deg", l.azimuth_step_deg, "0.05 ≤ x ≤ 10°")?;

@@ -1,5 +1,6 @@
 //! The LiDAR simulator: a spinning multi-beam pattern or a Livox-Mid-360-like non-repetitive
-//! one, ray-cast against the world's solids and the ground plane z = 0. Solids are culled per
+//! one, ray-cast against the world's solids and the ground (the plane z = 0, or the terrain's
+//! height field). Solids are culled per
 //! frame by azimuth: each solid within range covers the azimuth bins its footprint subtends from
 //! the sensor, and a ray tests only the solids of its bin.
 
@@ -116,7 +117,8 @@ impl Lidar {
             let dw = rotation * d;
             let bin = (dw.y.atan2(dw.x).rem_euclid(std::f64::consts::TAU) / bin_width) as usize % BINS;
             let mut best = (f64::INFINITY, world.ground_label, u32::MAX);
-            if dw.z < -1e-9 {
+            let flat = world.terrain.is_flat();
+            if flat && dw.z < -1e-9 {
                 best.0 = -origin.z / dw.z;
             }
             for &k in &bins[bin] {
@@ -124,6 +126,14 @@ impl Lidar {
                 if let Some(t) = solid.primitive.intersect(&origin, &dw) {
                     if t < best.0 {
                         best = (t, solid.label, solid.instance);
+                    }
+                }
+            }
+            if !flat {
+                // The ground only matters before the nearest solid.
+                if let Some(t) = world.terrain.intersect(&origin, &dw, best.0.min(max_range)) {
+                    if t <= best.0 {
+                        best = (t, world.ground_label, u32::MAX);
                     }
                 }
             }

@@ -25,6 +25,25 @@ pub struct Solid {
 }
 
 impl Primitive {
+    /// The primitive raised by `dz`; a part that stands on the ground (its bottom at z = 0)
+    /// also reaches `below` further down, so that it meets ground lower than its base.
+    pub fn settled(self, dz: f64, below: f64) -> Self {
+        match self {
+            Primitive::Box { mut centre, mut half, yaw } => {
+                if centre.z - half.z <= 1e-9 {
+                    centre.z -= below / 2.0;
+                    half.z += below / 2.0;
+                }
+                centre.z += dz;
+                Primitive::Box { centre, half, yaw }
+            }
+            Primitive::Cylinder { x, y, radius, z0, z1 } => {
+                let z0 = if z0 <= 1e-9 { z0 - below } else { z0 };
+                Primitive::Cylinder { x, y, radius, z0: z0 + dz, z1: z1 + dz }
+            }
+        }
+    }
+
     /// Centre and radius of a vertical cylinder enclosing the primitive (for culling).
     pub fn footprint(&self) -> (f64, f64, f64) {
         match *self {

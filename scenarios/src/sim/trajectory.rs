@@ -1,7 +1,9 @@
 //! Where each robot is: constant speed along its waypoints, heading along the current leg,
-//! stationary before its start time... (it is off) and after its last waypoint.
+//! stationary before its start time... (it is off) and after its last waypoint. On terrain or
+//! on legs, its `sim::platform::Motion` turns that planar track into the body's 6-DoF pose.
 
 use crate::scenario::RobotSpec;
+use crate::sim::platform::Motion;
 use nalgebra::{Point2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -13,6 +15,8 @@ pub struct Route {
     pub speed_mps: f64,
     pub start_s: f64,
     pub height_m: f64,
+    /// The body on the terrain; none: level at `height_m` above the plane z = 0.
+    pub motion: Option<std::sync::Arc<Motion>>,
 }
 
 impl Route {
@@ -26,7 +30,13 @@ impl Route {
             }
             None => spec.waypoints.iter().map(|p| Point2::new(p[0], p[1])).collect(),
         };
-        Self { points, speed_mps: spec.speed_mps, start_s: spec.start_s, height_m: spec.sensor_height_m }
+        Self { points, speed_mps: spec.speed_mps, start_s: spec.start_s, height_m: spec.sensor_height_m, motion: None }
+    }
+
+    /// The route driven with `motion` (kept only when it is more than the planar track).
+    pub fn with_motion(mut self, motion: Motion) -> Self {
+        self.motion = (!motion.is_planar()).then(|| std::sync::Arc::new(motion));
+        self
     }
 
     pub fn length_m(&self) -> f64 {
@@ -49,7 +59,10 @@ impl Route {
             if s <= len || k == last {
                 let p = w[0] + d * (s.min(len) / len.max(1e-9));
                 let yaw = d.y.atan2(d.x);
-                return Some(pose_from_yaw_translation(yaw, Vector3::new(p.x, p.y, self.height_m)));
+                return Some(match &self.motion {
+                    Some(motion) => motion.pose(p, yaw, t, s < len && self.speed_mps > 0.0),
+                    None => pose_from_yaw_translation(yaw, Vector3::new(p.x, p.y, self.height_m)),
+                });
             }
             s -= len;
         }

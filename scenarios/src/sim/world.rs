@@ -4,6 +4,7 @@
 use crate::scenario::shapes::{shape_of, Part};
 use crate::scenario::{WorldKind, WorldSpec};
 use crate::sim::shapes::{place, Primitive, Solid};
+use crate::sim::terrain::Terrain;
 use nalgebra::{Point2, Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -33,6 +34,36 @@ pub struct World {
     pub bounds: [f64; 4],
     /// RGB of each class id (for plots).
     pub colours: std::collections::BTreeMap<u16, [u8; 3]>,
+    /// The ground (the plane z = 0 unless `settle_on` put the world on terrain).
+    pub terrain: std::sync::Arc<Terrain>,
+}
+
+impl World {
+    /// Stands the world on `terrain`: an object's parts rise by the ground's height under the
+    /// object's centre, a wall or building by the height under its footprint's centre, and the
+    /// parts that stand on the ground reach down to the lowest ground around their footprint,
+    /// so that nothing floats over a slope.
+    pub fn settle_on(&mut self, terrain: std::sync::Arc<Terrain>) {
+        if !terrain.is_flat() {
+            let base: std::collections::BTreeMap<u32, f64> =
+                self.objects.iter().map(|o| (o.instance, terrain.height(o.centre.x, o.centre.y))).collect();
+            for object in &mut self.objects {
+                object.centre.z += base[&object.instance];
+            }
+            for solid in &mut self.solids {
+                let (x, y, r) = solid.primitive.footprint();
+                let dz = base.get(&solid.instance).copied().unwrap_or_else(|| terrain.height(x, y));
+                let lowest = (0..16)
+                    .map(|k| {
+                        let a = f64::from(k) * std::f64::consts::TAU / 16.0;
+                        terrain.height(x + r * a.cos(), y + r * a.sin())
+                    })
+                    .fold(terrain.height(x, y), f64::min);
+                solid.primitive = solid.primitive.settled(dz, (dz - lowest).max(0.0));
+            }
+        }
+        self.terrain = terrain;
+    }
 }
 
 fn label_of(classes: &[ClassSpec], name: &str) -> u16 {

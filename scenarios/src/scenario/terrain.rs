@@ -1,0 +1,94 @@
+//! `[terrain]` and `[platforms]`: the ground the robots move over and how their bodies move on
+//! it. Every effect defaults to off (flat ground, wheeled robots), which is the world of the
+//! first milestone; `sim::terrain` and `sim::platform` make them.
+
+use serde::{Deserialize, Serialize};
+
+/// The ground as a height field: rolling hills, raised sidewalks with kerbs, ramps.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TerrainSpec {
+    /// Steepest slope of the rolling ground, ° (0: flat). Default 0.
+    pub max_slope_deg: f64,
+    /// Longest wavelength of the rolling ground, m. Default 40.
+    pub hill_wavelength_m: f64,
+    /// Raised sidewalks (3 m wide, a kerb on each side) crossing the world. Default 0.
+    pub kerbs: usize,
+    /// Height of a kerb, m. Default 0.12.
+    pub kerb_height_m: f64,
+    /// Ramps (3 m wide: up, a 4 m landing, down). Default 0.
+    pub ramps: usize,
+    /// Slope of a ramp, °. Default 8.
+    pub ramp_slope_deg: f64,
+    /// Height of a ramp's landing, m. Default 0.5.
+    pub ramp_height_m: f64,
+}
+
+impl Default for TerrainSpec {
+    fn default() -> Self {
+        Self {
+            max_slope_deg: 0.0,
+            hill_wavelength_m: 40.0,
+            kerbs: 0,
+            kerb_height_m: 0.12,
+            ramps: 0,
+            ramp_slope_deg: 8.0,
+            ramp_height_m: 0.5,
+        }
+    }
+}
+
+impl TerrainSpec {
+    /// No hills, no kerbs, no ramps: the plane z = 0.
+    pub fn is_flat(&self) -> bool {
+        self.max_slope_deg == 0.0 && self.kerbs == 0 && self.ramps == 0
+    }
+}
+
+/// How a robot's body moves over the ground.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Platform {
+    /// Four wheels on the ground: attitude follows the terrain under them.
+    #[default]
+    Wheeled,
+    /// A quadruped: the terrain's attitude plus the gait's roll and pitch oscillation and
+    /// vertical bounce while it walks.
+    Legged,
+    /// Carried by a person: the terrain's height plus a 6-DoF sway, also when standing.
+    Handheld,
+}
+
+/// The motion of each platform kind (`[platforms]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlatformsSpec {
+    /// Wheelbase (front to rear contact) of a wheeled or legged robot, m. Default 0.6.
+    pub wheelbase_m: f64,
+    /// Track (left to right contact), m. Default 0.5.
+    pub track_m: f64,
+    /// Gait frequency of a legged robot (its roll; pitch and bounce at twice it), Hz. Default 2.
+    pub gait_hz: f64,
+    /// Roll and pitch amplitude of the gait, °. Default 3.
+    pub gait_amplitude_deg: f64,
+    /// Vertical bounce amplitude of the gait, m. Default 0.02.
+    pub gait_bounce_m: f64,
+    /// Rotation sway amplitude of a handheld rig (each axis), °. Default 4.
+    pub sway_deg: f64,
+    /// Translation sway amplitude of a handheld rig (each axis), m. Default 0.05.
+    pub sway_m: f64,
+}
+
+impl Default for PlatformsSpec {
+    fn default() -> Self {
+        Self {
+            wheelbase_m: 0.6,
+            track_m: 0.5,
+            gait_hz: 2.0,
+            gait_amplitude_deg: 3.0,
+            gait_bounce_m: 0.02,
+            sway_deg: 4.0,
+            sway_m: 0.05,
+        }
+    }
+}
