@@ -5,6 +5,10 @@ use super::HealthConfigError;
 use crate::error::InputError;
 use crate::tf::TfConfigError;
 
+/// `RosConfigError::DeliverWithoutId`'s text, whole (`{id}` is the placeholder it asks for, not a
+/// format argument; the troubleshooting table quotes it).
+const DELIVER_WITHOUT_ID: &str = "ros.topics.deliver must contain {id}: one service per robot";
+
 /// A `[ros]` key out of range, or two keys that contradict each other.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum RosConfigError {
@@ -32,7 +36,7 @@ pub enum RosConfigError {
     /// A topic name with characters ROS does not allow, empty, or with `//`.
     #[error("ros.{key} = {name:?}: not a valid ROS name")]
     Name { key: &'static str, name: String },
-    #[error("ros.topics.deliver must contain {{id}}: one service per robot")]
+    #[error("{}", DELIVER_WITHOUT_ID)]
     DeliverWithoutId,
     #[error("ros.frames.aliases: {from:?} = {to:?}: both frame names must be non-empty")]
     EmptyAlias { from: String, to: String },

@@ -3,9 +3,9 @@
 //! outside the label image. Counts only grow, so a window is the difference between the counts
 //! now and at its start.
 
-use super::checks::Health;
 use super::finding::{Check, Finding};
 use super::observed::{Observed, TopicTally};
+use super::Health;
 use crate::sync::SyncCounts;
 use crate::tf::listener::TfCounts;
 use std::collections::BTreeMap;

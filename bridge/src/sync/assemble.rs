@@ -4,7 +4,7 @@
 //! its partners may still come, and once the streams are `max_wait_s` past it (or the input has
 //! ended) takes what there is or is dropped and counted.
 
-use super::synchroniser::{with_stamp, Outcome, Synchroniser};
+use super::{with_stamp, Outcome, Synchroniser};
 use crate::convert::time::Epoch;
 use sgm_actors::messages::SensorFrame;
 use sgm_model::geometry::Pose3;

@@ -4,7 +4,7 @@
 //! at both stamps); a cloud no image reaches is kept without labels or dropped
 //! (`unlabelled`). The share of a labelled frame's points that lands in the image is sampled.
 
-use super::synchroniser::{Outcome, Synchroniser};
+use super::{Outcome, Synchroniser};
 use crate::config::{LabelSource, Unlabelled};
 use crate::convert::cloud::{Scan, NO_LABEL};
 use sgm_actors::messages::FrameLabels;

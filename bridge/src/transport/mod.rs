@@ -9,10 +9,10 @@
 //! included: ROS adds transport, not trust.
 
 pub mod call;
+mod delivery;
 pub mod locator;
 pub mod peer;
 pub mod peers;
-mod worker;
 
 use crate::config::RosConfig;
 use crate::msg::sgm_msgs;

@@ -1,6 +1,6 @@
 //! One peer's outgoing link: a bounded queue of sealed envelopes and whether the peer answers.
 //! A plain state machine — time is handed in, nothing here touches the network — driven by the
-//! peer's worker thread (`worker.rs`), so a peer that is dead, out of range or never
+//! peer's worker thread ([`super::peers`]), so a peer that is dead, out of range or never
 //! answers holds up its own queue and nobody else's.
 //!
 //! ```text

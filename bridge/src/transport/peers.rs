@@ -3,15 +3,16 @@
 //! at the master (cached until a call fails), calls it within `ros.peers.call_timeout_s`
 //! ([`super::call`]), and follows the link's back-off while the peer does not answer.
 
+use super::delivery::{call, lock, Peer, Shared};
 pub use super::locator::{Locator, LocatorError, MasterLocator};
-use super::peer::{LinkState, PeerCounts, PeerLink};
-use super::worker::{lock, run, Peer, Shared};
+use super::peer::{LinkState, Next, PeerCounts, PeerLink};
 use crate::config::PeerConfig;
+use crate::msg::sgm_msgs;
 use serde::Serialize;
 use sgm_model::scene_graph::RobotId;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::time::Instant;
 
 /// A peer's state for the status topic.
@@ -129,6 +130,50 @@ impl Drop for Peers {
         self.shared.stop.store(true, Ordering::Relaxed);
         for peer in lock(&self.peers).values() {
             peer.wake.notify_all();
+        }
+    }
+}
+
+/// The worker of peer `to`: takes the link's next step until the transport is dropped.
+fn run(shared: &Shared, to: RobotId, peer: &Peer) {
+    let service = crate::config::RosConfig::resolve(&shared.deliver_template, "", to.0);
+    loop {
+        let envelope = {
+            let mut link = lock(&peer.link);
+            loop {
+                if shared.stop.load(Ordering::Relaxed) {
+                    return;
+                }
+                match link.next(shared.origin.elapsed()) {
+                    Next::Send(envelope) => break envelope,
+                    Next::Wait(d) => link = peer.wake.wait_timeout(link, d).unwrap_or_else(PoisonError::into_inner).0,
+                    Next::Idle => link = peer.wake.wait(link).unwrap_or_else(PoisonError::into_inner),
+                }
+            }
+        };
+        let request = sgm_msgs::DeliverReq { from_robot: shared.robot.0, data: envelope };
+        let outcome = call(shared, peer, &service, &request);
+        let mut link = lock(&peer.link);
+        let was = link.state();
+        match outcome {
+            Ok(res) => {
+                if !res.accepted {
+                    tracing::warn!(peer = to.0, "delivery refused by the peer: {}", res.reason);
+                }
+                link.succeeded();
+                if was != LinkState::Up {
+                    tracing::info!(peer = to.0, %service, "peer answers again");
+                }
+            }
+            Err(e) => {
+                *lock(&peer.uri) = None;
+                link.failed(request.data, shared.origin.elapsed());
+                if was == LinkState::Up {
+                    tracing::warn!(peer = to.0, %service, "peer not answering ({e}); its envelopes wait, probed with back-off");
+                } else {
+                    tracing::debug!(peer = to.0, %service, "probe failed: {e}");
+                }
+            }
         }
     }
 }

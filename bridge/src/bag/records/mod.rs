@@ -30,9 +30,9 @@ mod error;
 mod header;
 mod section;
 
-#[cfg(test)]
-mod test_bags;
-
 pub use chunk::{Chunk, ChunkRecord, ChunkRecords};
 pub use error::RecordError;
 pub use section::{BagLimits, ChunkSection, MAX_RECORD_HEADER_BYTES};
+
+#[cfg(test)]
+mod test_bags;

@@ -1,13 +1,15 @@
-//! One peer's worker thread: it takes the link's next step, looks the peer's Deliver service up
-//! at the master (cached until a call fails, the lookup bounded in time), calls it within
-//! `ros.peers.call_timeout_s` ([`super::call`]) and tells the link how the call went.
+//! One delivery to a peer, as its worker makes it: where the peer's Deliver service is (cached
+//! until a call there fails; a lookup at the master bounded in time, and one at most running per
+//! peer), and the call ([`super::call`]), lookup and delivery within `ros.peers.call_timeout_s`.
+//! With the state a worker works on: the peer's ([`Peer`]) and all workers' ([`Shared`]).
 
 use super::call::{deliver, service_address, CallError, CallTarget};
 use super::locator::{Locator, LocatorError};
-use super::peer::{LinkState, Next, PeerConfig, PeerLink};
+use super::peer::PeerLink;
+use crate::config::PeerConfig;
 use crate::msg::sgm_msgs;
 use sgm_model::scene_graph::RobotId;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
@@ -38,50 +40,6 @@ pub(super) struct Shared {
     pub(super) locator: Arc<dyn Locator>,
     pub(super) stop: AtomicBool,
     pub(super) origin: Instant,
-}
-
-/// The worker of peer `to`: takes the link's next step until the transport is dropped.
-pub(super) fn run(shared: &Shared, to: RobotId, peer: &Peer) {
-    let service = crate::config::RosConfig::resolve(&shared.deliver_template, "", to.0);
-    loop {
-        let envelope = {
-            let mut link = lock(&peer.link);
-            loop {
-                if shared.stop.load(Ordering::Relaxed) {
-                    return;
-                }
-                match link.next(shared.origin.elapsed()) {
-                    Next::Send(envelope) => break envelope,
-                    Next::Wait(d) => link = peer.wake.wait_timeout(link, d).unwrap_or_else(PoisonError::into_inner).0,
-                    Next::Idle => link = peer.wake.wait(link).unwrap_or_else(PoisonError::into_inner),
-                }
-            }
-        };
-        let request = sgm_msgs::DeliverReq { from_robot: shared.robot.0, data: envelope };
-        let outcome = call(shared, peer, &service, &request);
-        let mut link = lock(&peer.link);
-        let was = link.state();
-        match outcome {
-            Ok(res) => {
-                if !res.accepted {
-                    tracing::warn!(peer = to.0, "delivery refused by the peer: {}", res.reason);
-                }
-                link.succeeded();
-                if was != LinkState::Up {
-                    tracing::info!(peer = to.0, %service, "peer answers again");
-                }
-            }
-            Err(e) => {
-                *lock(&peer.uri) = None;
-                link.failed(request.data, shared.origin.elapsed());
-                if was == LinkState::Up {
-                    tracing::warn!(peer = to.0, %service, "peer not answering ({e}); its envelopes wait, probed with back-off");
-                } else {
-                    tracing::debug!(peer = to.0, %service, "probe failed: {e}");
-                }
-            }
-        }
-    }
 }
 
 /// Where the peer's service is: the cached address, or a lookup bounded by `timeout`.
@@ -119,7 +77,7 @@ fn locate(shared: &Shared, peer: &Peer, service: &str, timeout: Duration) -> Res
 }
 
 /// One bounded call: lookup (if needed) and delivery share `ros.peers.call_timeout_s`.
-fn call(
+pub(super) fn call(
     shared: &Shared,
     peer: &Peer,
     service: &str,
