@@ -75,3 +75,26 @@ fn robot_configuration_sections_are_shared_and_checked() {
     let e = parse(&format!("[comms]\nmax_keyframes_in_flight = 0\n{ONE_ROBOT}")).unwrap_err().to_string();
     assert!(e.contains("comms.max_keyframes_in_flight"), "{e}");
 }
+
+#[test]
+fn impossible_terrain_platforms_and_imus_are_refused_with_their_key() {
+    let refused = |toml: &str, expected: &str| {
+        let e = parse(&format!("{toml}\n{ONE_ROBOT}")).unwrap_err().to_string();
+        assert_eq!(e, format!("test.toml: {expected}"));
+    };
+    refused("[terrain]\nmax_slope_deg = 90.0", "terrain.max_slope_deg = 90: allowed 0 ≤ x ≤ 30°");
+    refused("[terrain]\nramp_slope_deg = 0.0", "terrain.ramp_slope_deg = 0: allowed 0 < x ≤ 30°");
+    refused("[terrain]\nkerb_height_m = -0.1", "terrain.kerb_height_m = -0.1: allowed 0 ≤ x ≤ 0.5 m");
+    refused("[platforms]\ngait_hz = -2.0", "platforms.gait_hz = -2: allowed 0.1 ≤ x ≤ 10 Hz");
+    // An IMU slower than the LiDAR's frames.
+    refused(
+        "[scenario]\nframe_interval_s = 0.1\n[imu]\nrate_hz = 5.0",
+        "imu.rate_hz = 5: allowed ≥ the frame rate (1 / scenario.frame_interval_s) and ≤ 2000 Hz",
+    );
+    refused("[imu]\ngyro_noise = -1e-4", "imu.gyro_noise = -0.0001: allowed 0 ≤ x ≤ 1");
+    let e =
+        parse("[[robots]]\nplatform = \"hovercraft\"\nwaypoints = [[0.0, 0.0], [1.0, 0.0]]\n").unwrap_err().to_string();
+    assert!(e.contains("hovercraft") && e.contains("platform"), "{e}");
+    let ok = parse(&format!("[terrain]\nmax_slope_deg = 15.0\nramps = 2\n[imu]\nenabled = true\n{ONE_ROBOT}")).unwrap();
+    assert!(!ok.terrain.is_flat() && ok.imu.enabled);
+}

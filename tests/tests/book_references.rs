@@ -17,7 +17,8 @@ use std::collections::BTreeMap;
 const CONFIGURATION: &str = include_str!("../../book/src/configuration.md");
 const SCENARIOS: &str = include_str!("../../book/src/scenarios.md");
 const ROS: &str = include_str!("../../book/src/ros.md");
-const OWN_SECTIONS: [&str; 8] = ["scenario", "world", "terrain", "platforms", "lidar", "camera", "odometry", "radio"];
+const OWN_SECTIONS: [&str; 9] =
+    ["scenario", "world", "terrain", "platforms", "lidar", "camera", "imu", "odometry", "radio"];
 /// Tables documented as a whole rather than key by key.
 const WHOLE: [&str; 6] =
     ["fusion.classes", "classes.map", "classes.palette", "ros.frames.aliases", "world.objects", "robots[].route"];

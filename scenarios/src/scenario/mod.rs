@@ -5,11 +5,13 @@
 //! both). Validated before anything runs; errors name the key. The book's scenario chapter
 //! documents every key with its default and unit.
 
+pub mod imu;
 pub mod library;
 pub mod shapes;
 pub mod terrain;
 mod validate;
 
+pub use imu::ImuSpec;
 pub use terrain::{Platform, PlatformsSpec, TerrainSpec};
 
 use serde::{Deserialize, Serialize};
@@ -46,6 +48,7 @@ pub struct Scenario {
     pub platforms: PlatformsSpec,
     pub lidar: LidarSpec,
     pub camera: CameraSpec,
+    pub imu: ImuSpec,
     pub odometry: OdometrySpec,
     pub radio: RadioSpec,
     pub robots: Vec<RobotSpec>,
@@ -76,6 +79,7 @@ impl Default for Scenario {
             platforms: PlatformsSpec::default(),
             lidar: LidarSpec::default(),
             camera: CameraSpec::default(),
+            imu: ImuSpec::default(),
             odometry: OdometrySpec::default(),
             radio: RadioSpec::default(),
             robots: Vec::new(),

@@ -88,6 +88,23 @@ impl Scenario {
         check(within(p.sway_deg, 0.0, 30.0), "platforms.sway_deg", p.sway_deg, "0 ≤ x ≤ 30°")?;
         check(within(p.sway_m, 0.0, 1.0), "platforms.sway_m", p.sway_m, "0 ≤ x ≤ 1 m")?;
 
+        let i = &self.imu;
+        check(
+            within(i.rate_hz, 1.0 / s.frame_interval_s, 2000.0),
+            "imu.rate_hz",
+            i.rate_hz,
+            "≥ the frame rate (1 / scenario.frame_interval_s) and ≤ 2000 Hz",
+        )?;
+        for (key, v) in [
+            ("imu.gyro_noise", i.gyro_noise),
+            ("imu.gyro_bias_walk", i.gyro_bias_walk),
+            ("imu.accel_noise", i.accel_noise),
+            ("imu.accel_bias_walk", i.accel_bias_walk),
+        ] {
+            check(within(v, 0.0, 1.0), key, v, "0 ≤ x ≤ 1")?;
+        }
+        check(within(i.gravity_mps2, 9.7, 9.9), "imu.gravity_mps2", i.gravity_mps2, "9.7 ≤ x ≤ 9.9 m/s²")?;
+
         let l = &self.lidar;
         check((1..=256).contains(&l.beams), "lidar.beams", l.beams, "1 ≤ x ≤ 256")?;
         check(within(l.azimuth_step_deg, 0.05, 10.0), "lidar.azimuth_step_deg", l.azimuth_step_deg, "0.05 ≤ x ≤ 10°")?;

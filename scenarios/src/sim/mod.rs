@@ -3,6 +3,7 @@
 
 pub mod camera;
 pub mod false_factors;
+pub mod imu;
 pub mod lidar;
 pub mod odometry;
 pub mod platform;

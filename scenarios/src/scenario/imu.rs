@@ -1,0 +1,37 @@
+//! `[imu]`: the simulated IMU (`sim::imu`). Off by default.
+
+use serde::{Deserialize, Serialize};
+
+/// Rates and noise densities as a datasheet or a Kalibr `imu.yaml` gives them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ImuSpec {
+    /// Simulate an IMU on every robot. Default false.
+    pub enabled: bool,
+    /// Samples per second, Hz. Default 200.
+    pub rate_hz: f64,
+    /// Gyroscope white noise density, rad/s/√Hz. Default 1.6968e-4 (EuRoC's ADIS16448).
+    pub gyro_noise: f64,
+    /// Gyroscope bias random walk, rad/s²/√Hz. Default 1.9393e-5.
+    pub gyro_bias_walk: f64,
+    /// Accelerometer white noise density, m/s²/√Hz. Default 2.0e-3.
+    pub accel_noise: f64,
+    /// Accelerometer bias random walk, m/s³/√Hz. Default 3.0e-3.
+    pub accel_bias_walk: f64,
+    /// Gravity, m/s². Default 9.81.
+    pub gravity_mps2: f64,
+}
+
+impl Default for ImuSpec {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            rate_hz: 200.0,
+            gyro_noise: 1.6968e-4,
+            gyro_bias_walk: 1.9393e-5,
+            accel_noise: 2.0e-3,
+            accel_bias_walk: 3.0e-3,
+            gravity_mps2: 9.81,
+        }
+    }
+}
