@@ -9,7 +9,7 @@
 //! Tables and dumps are found by the HTML comment before them (`<!-- limits-table -->`, …).
 
 use nalgebra::{Point3, Vector3};
-use sgm_actors::config::{CommsConfig, RobotConfig, DEFAULT_TEAM_SALT};
+use sgm_actors::config::{CommsConfig, DEFAULT_TEAM_SALT};
 use sgm_actors::protocol::RetryConfig;
 use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId};
 use sgm_model::wire::cloud_codec::{self, CodecError};
@@ -281,8 +281,8 @@ fn shortest_salt() -> usize {
 /// The smallest `comms.limits.max_envelope_bytes` the configuration accepts, by behaviour.
 fn smallest_envelope_limit() -> usize {
     let valid = |n: usize| {
-        let mut c = RobotConfig::default();
-        c.comms.limits.max_envelope_bytes = n;
+        let mut c = CommsConfig::default();
+        c.limits.max_envelope_bytes = n;
         c.validate().is_ok()
     };
     assert!(valid(1 << 20));
@@ -310,7 +310,7 @@ fn code_value(name: &str) -> Option<f64> {
         "WireLimits::max_objects" => limits.max_objects as f64,
         "WireLimits::max_ids" => limits.max_ids as f64,
         "WireLimits::max_cloud_points" => limits.max_cloud_points as f64,
-        "RobotConfig::validate" => smallest_envelope_limit() as f64,
+        "CommsConfig::validate" => smallest_envelope_limit() as f64,
         "cloud_codec::MAX_POINTS" => cloud_codec::MAX_POINTS as f64,
         "cloud_codec::AXIS_BITS" => f64::from(codec_axis_bits()),
         "cloud_codec::VERSION" => f64::from(cloud_codec::encode(&[], 0.01).unwrap().bytes[0]),
@@ -350,7 +350,7 @@ const LIMIT_NAMES: [&str; 34] = [
     "WireLimits::max_objects",
     "WireLimits::max_ids",
     "WireLimits::max_cloud_points",
-    "RobotConfig::validate",
+    "CommsConfig::validate",
     "cloud_codec::MAX_POINTS",
     "cloud_codec::AXIS_BITS",
     "cloud_codec::VERSION",
