@@ -1,5 +1,7 @@
 //! `Fusion` (paper §IV-A): a thin actor over `model::perception::scan_fusion::ScanFusion`.
-//! Points take the class of their pixel in the segmented image (`model::perception::projection`),
+//! A scan whose points carry their times is first deskewed (`model::perception::deskew`, the
+//! twist from the previous frame's odometry pose to this one's); one without is used as it came
+//! and counted. Points take the class of their pixel in the segmented image (`model::perception::projection`),
 //! or keep per-point labels given upstream; the scan is fused (the segmenter's values mapped to
 //! SGM classes, the label vote, ranges, clustering) and goes on as a [`LabelledScan`] to the
 //! Tracker. Pixel values `[classes]` does not know are logged once each and counted.
@@ -10,12 +12,15 @@ use crate::messages::{FrameLabels, LabelledScan, SensorFrame};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use serde::{Deserialize, Serialize};
 use sgm_model::perception::classes::ClassTable;
+use sgm_model::perception::deskew::{DeskewCounts, DeskewRefusal, Deskewer};
 use sgm_model::perception::label_map::LabelMap;
 use sgm_model::perception::projection::label_points;
 use sgm_model::perception::scan_fusion::{ScanFusion, ScanFusionConfig};
 
 pub struct Fusion {
     fusion: ScanFusion,
+    /// `fusion.deskew`: none when off.
+    deskewer: Option<Deskewer>,
     tracker: Recipient<LabelledScan>,
 }
 
@@ -31,6 +36,8 @@ pub struct FusionStatus {
     /// `unknown_label_other_points`.
     pub unknown_label_ids: std::collections::BTreeMap<u16, u64>,
     pub unknown_label_other_points: u64,
+    /// Scans deskewed, and those used as they came with the reason (`fusion.deskew`).
+    pub deskew: DeskewCounts,
 }
 
 /// Fusion's [`FusionStatus`].
@@ -54,7 +61,32 @@ impl Fusion {
             object_range_m: config.object_range_m,
             label_vote: config.label_vote.clone(),
         };
-        Self { fusion: ScanFusion::new(classes, label_map, fusion_config), tracker }
+        let deskewer = config.deskew.then(Deskewer::default);
+        Self { fusion: ScanFusion::new(classes, label_map, fusion_config), deskewer, tracker }
+    }
+}
+
+impl Fusion {
+    /// `frame` with its points deskewed when it carries their times; else as it came (the
+    /// first refusal of each kind is logged).
+    fn deskewed(&mut self, mut frame: SensorFrame) -> SensorFrame {
+        let Some(deskewer) = self.deskewer.as_mut() else { return frame };
+        let before = deskewer.counts();
+        let points = std::mem::take(&mut frame.points_in_body);
+        let (points, outcome) =
+            deskewer.apply(frame.stamp, &frame.odom_from_body, points, frame.point_times.as_deref());
+        frame.points_in_body = points;
+        if let Err(refusal) = outcome {
+            let first = match refusal {
+                DeskewRefusal::NoTimes => before.no_times == 0,
+                DeskewRefusal::NoMotion => before.no_motion == 0,
+                DeskewRefusal::TimesMismatch { .. } | DeskewRefusal::TimeOutOfRange => before.refused == 0,
+            };
+            if first && refusal != DeskewRefusal::NoMotion {
+                tracing::info!(stamp = frame.stamp, "scan not deskewed: {refusal}");
+            }
+        }
+        frame
     }
 }
 
@@ -68,6 +100,7 @@ impl Handler<SensorFrame> for Fusion {
     type Result = ();
     fn handle(&mut self, frame: SensorFrame, ctx: &mut Context<Self>) {
         contained(ctx, "fusion", || {
+            let frame = self.deskewed(frame);
             let labels = match &frame.labels {
                 FrameLabels::PerPoint(labels) => labels.clone(),
                 FrameLabels::Image { image, camera, camera_from_body } => {
@@ -108,6 +141,7 @@ impl Handler<GetFusionStatus> for Fusion {
             unknown_label_points: unknown.points,
             unknown_label_ids: unknown.ids.clone(),
             unknown_label_other_points: unknown.other_points,
+            deskew: self.deskewer.as_ref().map(Deskewer::counts).unwrap_or_default(),
         })
     }
 }

@@ -29,6 +29,9 @@ pub struct SensorFrame {
     pub stamp: Stamp,
     pub odom_from_body: Pose3,
     pub points_in_body: Vec<Point3<f64>>,
+    /// Each point's time after `stamp`, s, when the driver gives it (a sweep measured on the
+    /// move): Fusion deskews the scan with it. `None`: the scan is used as it came.
+    pub point_times: Option<Vec<f32>>,
     pub labels: FrameLabels,
 }
 

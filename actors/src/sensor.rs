@@ -105,6 +105,7 @@ mod tests {
             stamp,
             odom_from_body: Pose3::identity(),
             points_in_body: vec![Point3::origin(); 2],
+            point_times: None,
             labels: FrameLabels::PerPoint(vec![Some(LabelId(1)); labels]),
         }
     }

@@ -85,6 +85,7 @@ fn fusion_maps_ade_ids_and_counts_an_unknown_one() {
             stamp: 1.0,
             odom_from_body: Pose3::identity(),
             points_in_body: points,
+            point_times: None,
             labels: FrameLabels::PerPoint(labels),
         };
         fusion.send(frame.clone()).await.unwrap();

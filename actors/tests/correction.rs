@@ -56,6 +56,7 @@ async fn map_of_a_loop(loop_closure: bool) -> SceneGraph {
             stamp: t,
             odom_from_body: drift * truth,
             points_in_body: points,
+            point_times: None,
             labels: FrameLabels::PerPoint(labels),
         });
         settle().await;

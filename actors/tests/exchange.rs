@@ -74,6 +74,7 @@ async fn run_team(paths: Vec<(Vec<Point3<f64>>, Pose3)>, seconds: usize, panic_a
                 stamp: t,
                 odom_from_body,
                 points_in_body: points,
+                point_times: None,
                 labels: FrameLabels::PerPoint(labels),
             });
         }
@@ -192,6 +193,7 @@ async fn foreign_replayed_truncated_and_oversized_envelopes_are_refused_and_coun
             stamp: t,
             odom_from_body: pose,
             points_in_body: points,
+            point_times: None,
             labels: FrameLabels::PerPoint(labels),
         });
         settle().await;

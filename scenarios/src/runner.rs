@@ -180,7 +180,8 @@ pub async fn run_with(
                 }
                 continue;
             }
-            let frame = robot.lidar.scan(&world, &truth, &mut robot.rng);
+            let route = &robot.route;
+            let frame = robot.lidar.sweep(&world, &|tau| route.pose_at(t + tau).unwrap_or(truth), &mut robot.rng);
             let wrong = mislabels(&frame, scenario.camera.mislabel_rate, &world.matchable_labels, &mut robot.rng);
             let (labels, recorded_labels) = if scenario.camera.enabled {
                 let mut image = render(&scenario.camera, &frame, &wrong, splat, &mut robot.rng);
@@ -212,7 +213,9 @@ pub async fn run_with(
                 };
                 recorder.record(k, recorded)?;
             }
-            let sensor_frame = SensorFrame { stamp: t, odom_from_body: odometry, points_in_body: frame.points, labels };
+            let point_times = (!frame.times.is_empty()).then_some(frame.times);
+            let sensor_frame =
+                SensorFrame { stamp: t, odom_from_body: odometry, points_in_body: frame.points, point_times, labels };
             team.frame(k, || scenario.robot_config(k), sensor_frame)?;
         }
         simulation += sim_started.elapsed();

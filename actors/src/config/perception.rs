@@ -30,6 +30,9 @@ pub struct FusionConfig {
     pub label_vote: LabelVote,
     /// The class table. Default: [`default_classes`].
     pub classes: Vec<ClassSpec>,
+    /// Deskew scans whose points carry their times (constant velocity from the previous
+    /// frame's odometry pose, `model::perception::deskew`). Default true.
+    pub deskew: bool,
 }
 
 impl Default for FusionConfig {
@@ -41,6 +44,7 @@ impl Default for FusionConfig {
             min_object_height_m: 0.2,
             label_vote: LabelVote::default(),
             classes: default_classes(),
+            deskew: true,
         }
     }
 }

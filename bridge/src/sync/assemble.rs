@@ -57,7 +57,13 @@ impl Synchroniser {
                             *p = body_from_lidar * *p;
                         }
                     }
-                    frames.push(SensorFrame { stamp: t, odom_from_body: pose, points_in_body: scan.points, labels });
+                    frames.push(SensorFrame {
+                        stamp: t,
+                        odom_from_body: pose,
+                        points_in_body: scan.points,
+                        point_times: None,
+                        labels,
+                    });
                 }
                 Outcome::Wait if !stale => {
                     self.clouds.push_front((t, scan));

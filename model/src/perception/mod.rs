@@ -6,6 +6,7 @@
 pub mod classes;
 pub mod clustering;
 pub mod colour_ids;
+pub mod deskew;
 pub mod icp;
 pub mod keyframes;
 pub mod label_map;

@@ -205,6 +205,10 @@ pub struct LidarSpec {
     pub max_range_m: f64,
     /// Standard deviation of range noise, m. Default 0.02.
     pub range_noise_m: f64,
+    /// Duration of one sweep, s: each return is measured from the moving sensor at its own
+    /// time and carries it (0: every return at the frame's stamp, an undistorted scan). A real
+    /// 10 Hz LiDAR sweeps for 0.1 s. Default 0.
+    pub sweep_s: f64,
 }
 
 impl Default for LidarSpec {
@@ -217,6 +221,7 @@ impl Default for LidarSpec {
             points_per_frame: 20_000,
             max_range_m: 60.0,
             range_noise_m: 0.02,
+            sweep_s: 0.0,
         }
     }
 }

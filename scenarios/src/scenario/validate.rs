@@ -123,6 +123,12 @@ impl Scenario {
         )?;
         check(within(l.max_range_m, 1.0, 500.0), "lidar.max_range_m", l.max_range_m, "1 ≤ x ≤ 500 m")?;
         check(within(l.range_noise_m, 0.0, 1.0), "lidar.range_noise_m", l.range_noise_m, "0 ≤ x ≤ 1 m")?;
+        check(
+            within(l.sweep_s, 0.0, s.frame_interval_s.min(0.5)),
+            "lidar.sweep_s",
+            l.sweep_s,
+            "0 ≤ x ≤ min(scenario.frame_interval_s, 0.5 s)",
+        )?;
 
         let c = &self.camera;
         check((16..=4096).contains(&c.width), "camera.width", c.width, "16 ≤ x ≤ 4096 px")?;

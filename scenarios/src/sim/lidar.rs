@@ -21,6 +21,9 @@ pub struct LidarFrame {
     pub labels: Vec<u16>,
     /// Object instance of each return (`u32::MAX`: ground).
     pub instances: Vec<u32>,
+    /// Each return's time after the frame's stamp, s (empty when `lidar.sweep_s` is 0: every
+    /// return from the pose at the stamp).
+    pub times: Vec<f32>,
 }
 
 pub struct Lidar {
@@ -82,16 +85,42 @@ impl Lidar {
         Cow::Owned(out)
     }
 
-    /// Casts one frame from `world_from_sensor`.
+    /// Casts one frame from `world_from_sensor`, every return at once.
     pub fn scan(&mut self, world: &World, world_from_sensor: &Pose3, rng: &mut impl Rng) -> LidarFrame {
-        let origin = Point3::from(world_from_sensor.translation.vector);
-        let rotation = world_from_sensor.rotation;
+        self.sweep(world, &|_| *world_from_sensor, rng)
+    }
+
+    /// Casts one frame as the sensor sweeps: with `lidar.sweep_s` > 0, return k of the sweep is
+    /// measured at τ = (its column, or its place in a Livox frame) / (their count) ·
+    /// `sweep_s` from `world_from_sensor_at(τ)`, and reported in the sensor frame of that
+    /// instant, as a driver does: a scan taken on the move comes out bent.
+    pub fn sweep(
+        &mut self,
+        world: &World,
+        world_from_sensor_at: &dyn Fn(f64) -> Pose3,
+        rng: &mut impl Rng,
+    ) -> LidarFrame {
+        let sweep_s = self.spec.sweep_s;
+        let start = world_from_sensor_at(0.0);
+        let origin = Point3::from(start.translation.vector);
+        let rotation = start.rotation;
+        // How far the sensor moves during the sweep widens each solid's azimuth sector.
+        let travel = if sweep_s > 0.0 {
+            (world_from_sensor_at(sweep_s).translation.vector - start.translation.vector).norm()
+        } else {
+            0.0
+        };
+        let rings = match self.spec.pattern {
+            LidarPattern::Spinning => self.spec.beams.max(1),
+            LidarPattern::Livox => 1,
+        };
         let max_range = self.spec.max_range_m;
         // Azimuth bins of the solids in range.
         let mut bins: Vec<Vec<u32>> = vec![Vec::new(); BINS];
         let bin_width = std::f64::consts::TAU / BINS as f64;
         for (k, solid) in world.solids.iter().enumerate() {
             let (x, y, r) = solid.primitive.footprint();
+            let r = r + travel;
             let d = (x - origin.x).hypot(y - origin.y);
             if d - r > max_range {
                 continue;
@@ -112,8 +141,16 @@ impl Lidar {
         }
         let noise = Normal::new(0.0, self.spec.range_noise_m.max(0.0)).ok();
         let directions = self.directions();
+        let count = directions.len().div_ceil(rings).max(1);
         let mut frame = LidarFrame::default();
-        for d in directions.iter() {
+        for (k, d) in directions.iter().enumerate() {
+            let (tau, origin, rotation) = if sweep_s > 0.0 {
+                let tau = (k / rings) as f64 / count as f64 * sweep_s;
+                let pose = world_from_sensor_at(tau);
+                (tau, Point3::from(pose.translation.vector), pose.rotation)
+            } else {
+                (0.0, origin, rotation)
+            };
             let dw = rotation * d;
             let bin = (dw.y.atan2(dw.x).rem_euclid(std::f64::consts::TAU) / bin_width) as usize % BINS;
             let mut best = (f64::INFINITY, world.ground_label, u32::MAX);
@@ -147,6 +184,9 @@ impl Lidar {
             frame.points.push(Point3::from(d * t).map(|v| f64::from(v as f32)));
             frame.labels.push(label);
             frame.instances.push(instance);
+            if sweep_s > 0.0 {
+                frame.times.push(tau as f32);
+            }
         }
         frame
     }
@@ -203,6 +243,41 @@ mod tests {
             }
         }
         assert!(wall > 100 && ground > 1000, "{wall} {ground}");
+    }
+
+    /// A sweep on the move is bent (the wall smeared over the distance travelled); deskewed with
+    /// the body's twist (`model::perception::deskew`), every return lies on its surface again.
+    #[test]
+    fn a_sweep_on_the_move_is_bent_and_deskewing_straightens_it() {
+        use sgm_model::geometry::lie::{se3_exp, Tangent3};
+        use sgm_model::perception::deskew::deskew;
+        let spec = LidarSpec { range_noise_m: 0.0, sweep_s: 0.1, ..LidarSpec::default() };
+        let mut lidar = Lidar::new(&spec);
+        let start = Pose3::translation(0.0, 0.0, 1.0);
+        // 3 m/s forward, turning at 1 rad/s.
+        let twist = Tangent3::new(0.0, 0.0, 1.0, 3.0, 0.0, 0.0);
+        let pose_at = |t: f64| start * se3_exp(&(twist * t));
+        let frame = lidar.sweep(&world_with_a_wall(), &pose_at, &mut ChaCha8Rng::seed_from_u64(1));
+        assert_eq!(frame.times.len(), frame.points.len());
+        assert!(frame.times.iter().all(|t| (0.0..0.1).contains(t)));
+        assert!(frame.times.windows(2).all(|w| w[0] <= w[1]), "in sweep order");
+        let on_wall = |points: &[Point3<f64>]| {
+            points
+                .iter()
+                .zip(&frame.labels)
+                .filter(|(_, l)| **l == 1)
+                .map(|(p, _)| ((start * p).x - 9.9).abs())
+                .fold(0.0f64, f64::max)
+        };
+        let bent = on_wall(&frame.points);
+        assert!(bent > 0.1, "the wall is smeared by the motion: {bent}");
+        let straight = deskew(&frame.points, &frame.times, &twist).expect("times fit");
+        assert!(on_wall(&straight) < 1e-4, "{}", on_wall(&straight));
+        for (p, l) in straight.iter().zip(&frame.labels) {
+            if *l == 0 {
+                assert!((start * p).z.abs() < 1e-4, "ground return off the ground: {}", start * p);
+            }
+        }
     }
 
     #[test]

@@ -1,0 +1,206 @@
+//! Motion compensation of a LiDAR sweep ("deskewing"). A spinning or Livox sensor measures its
+//! points one after another while it moves; a driver reports each in the sensor frame *of its
+//! own instant*, so a scan taken on the move is bent. With each point's time τᵢ (seconds after
+//! the scan's stamp) and the body's motion over the sweep as a constant twist ξ (body frame,
+//! per second: the body at stamp + τ is Exp(τ·ξ) in the body at the stamp), the point in the
+//! frame of the stamp is
+//!
+//!   pᵢ' = Exp(τᵢ·ξ) · pᵢ
+//!
+//! (KISS-ICP's constant-velocity deskew, with the twist from consecutive odometry poses:
+//! ξ = Log(odom(t₀)⁻¹ · odom(t₁)) / (t₁ − t₀), [`twist_between`]).
+
+use crate::geometry::lie::{se3_exp, se3_log, Tangent3};
+use crate::geometry::Pose3;
+use nalgebra::Point3;
+
+/// Why a scan was not deskewed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum DeskewRefusal {
+    #[error("the scan carries no per-point time")]
+    NoTimes,
+    #[error("{times} point times for {points} points")]
+    TimesMismatch { points: usize, times: usize },
+    #[error("a point time is not finite or is farther than {MAX_SWEEP_S} s from the stamp")]
+    TimeOutOfRange,
+    #[error("no motion known yet (the first scan, or no earlier odometry pose)")]
+    NoMotion,
+}
+
+/// Point times farther from the stamp than this are refused (a sweep is ~0.1 s), s.
+pub const MAX_SWEEP_S: f64 = 1.0;
+
+/// The constant body twist (per second) that takes `earlier` (at `t0`) to `later` (at `t1`);
+/// none when the times do not increase.
+pub fn twist_between(earlier: &Pose3, t0: f64, later: &Pose3, t1: f64) -> Option<Tangent3> {
+    let dt = t1 - t0;
+    (dt.is_finite() && dt > 0.0).then(|| se3_log(&(earlier.inverse() * later)) / dt)
+}
+
+/// `points` measured at `times` (s after the stamp), moved into the body frame at the stamp
+/// under the constant twist `twist`.
+pub fn deskew(points: &[Point3<f64>], times: &[f32], twist: &Tangent3) -> Result<Vec<Point3<f64>>, DeskewRefusal> {
+    if times.len() != points.len() {
+        return Err(DeskewRefusal::TimesMismatch { points: points.len(), times: times.len() });
+    }
+    if times.iter().any(|t| !t.is_finite() || f64::from(t.abs()) > MAX_SWEEP_S) {
+        return Err(DeskewRefusal::TimeOutOfRange);
+    }
+    // Points come in time order within a sweep: one Exp per distinct time.
+    let mut cached: Option<(f32, Pose3)> = None;
+    Ok(points
+        .iter()
+        .zip(times)
+        .map(|(p, &t)| {
+            let motion = match cached {
+                Some((at, m)) if at == t => m,
+                _ => {
+                    let m = se3_exp(&(twist * f64::from(t)));
+                    cached = Some((t, m));
+                    m
+                }
+            };
+            motion * p
+        })
+        .collect())
+}
+
+/// How many scans were deskewed, and why the others were not.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct DeskewCounts {
+    pub deskewed: u64,
+    /// Scans without per-point time, used as they came.
+    pub no_times: u64,
+    /// Scans with times but no motion known yet (the first one), used as they came.
+    pub no_motion: u64,
+    /// Scans whose times did not fit their points (count or range), used as they came.
+    pub refused: u64,
+}
+
+/// The constant-velocity deskew of a stream of scans: the twist over a scan's sweep is taken
+/// from the odometry pose of the scan before it to this scan's (KISS-ICP's model).
+#[derive(Clone, Debug, Default)]
+pub struct Deskewer {
+    last: Option<(f64, Pose3)>,
+    counts: DeskewCounts,
+}
+
+impl Deskewer {
+    /// The scan at `stamp` with odometry pose `odom_from_body`, deskewed when its `times` and
+    /// the motion allow; else as it came (counted, with the reason).
+    pub fn apply(
+        &mut self,
+        stamp: f64,
+        odom_from_body: &Pose3,
+        points: Vec<Point3<f64>>,
+        times: Option<&[f32]>,
+    ) -> (Vec<Point3<f64>>, Result<(), DeskewRefusal>) {
+        let twist = self.last.and_then(|(t0, earlier)| twist_between(&earlier, t0, odom_from_body, stamp));
+        if self.last.is_none_or(|(t0, _)| stamp > t0) {
+            self.last = Some((stamp, *odom_from_body));
+        }
+        let outcome = match (times, twist) {
+            (None, _) => Err(DeskewRefusal::NoTimes),
+            (Some(_), None) => Err(DeskewRefusal::NoMotion),
+            (Some(times), Some(twist)) => deskew(&points, times, &twist),
+        };
+        match outcome {
+            Ok(straight) => {
+                self.counts.deskewed += 1;
+                (straight, Ok(()))
+            }
+            Err(refusal) => {
+                match refusal {
+                    DeskewRefusal::NoTimes => self.counts.no_times += 1,
+                    DeskewRefusal::NoMotion => self.counts.no_motion += 1,
+                    DeskewRefusal::TimesMismatch { .. } | DeskewRefusal::TimeOutOfRange => self.counts.refused += 1,
+                }
+                (points, Err(refusal))
+            }
+        }
+    }
+
+    pub fn counts(&self) -> DeskewCounts {
+        self.counts
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::pose_from_rpy_translation;
+    use nalgebra::Vector3;
+    use proptest::prelude::*;
+
+    /// The world's points seen by a sensor moving at `twist`: each measured at its time from
+    /// the sensor's pose then (as a driver reports them).
+    fn skewed(world: &[Point3<f64>], start: &Pose3, twist: &Tangent3, times: &[f32]) -> Vec<Point3<f64>> {
+        world.iter().zip(times).map(|(p, t)| (start * se3_exp(&(twist * f64::from(*t)))).inverse() * p).collect()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// Deskewing a sweep taken on the move gives the scan from the pose at the stamp.
+        #[test]
+        fn a_skewed_sweep_straightens_to_the_stamps_frame(
+            w in prop::array::uniform3(-1.0f64..1.0),
+            v in prop::array::uniform3(-3.0f64..3.0),
+            x in -10.0f64..10.0,
+            yaw in -3.0f64..3.0,
+        ) {
+            let twist = Tangent3::new(w[0], w[1], w[2], v[0], v[1], v[2]);
+            let start = pose_from_rpy_translation(0.05, -0.03, yaw, Vector3::new(x, 2.0, 0.5));
+            let world: Vec<Point3<f64>> =
+                (0..200).map(|k| { let a = f64::from(k) * 0.0314; Point3::new(8.0 * a.cos(), 8.0 * a.sin(), f64::from(k % 7) - 3.0) }).collect();
+            let times: Vec<f32> = (0..200).map(|k| k as f32 * 0.0005).collect();
+            let measured = skewed(&world, &start, &twist, &times);
+            let deskewed = deskew(&measured, &times, &twist).expect("times fit");
+            for (d, p) in deskewed.iter().zip(&world) {
+                let expected = start.inverse() * p;
+                prop_assert!((d - expected).norm() < 1e-9, "{d} vs {expected}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_stream_is_deskewed_from_its_second_scan_at_the_odometry_velocity() {
+        let twist = Tangent3::new(0.0, 0.0, 0.4, 2.0, 0.0, 0.0);
+        let odom = |t: f64| se3_exp(&(twist * t));
+        let world: Vec<Point3<f64>> = (0..50).map(|k| Point3::new(6.0, f64::from(k) * 0.2 - 5.0, 0.3)).collect();
+        let times: Vec<f32> = (0..50).map(|k| k as f32 * 0.002).collect();
+        let mut deskewer = Deskewer::default();
+        for (k, stamp) in [1.0, 1.5, 2.0].into_iter().enumerate() {
+            let measured = skewed(&world, &odom(stamp), &twist, &times);
+            let (points, outcome) = deskewer.apply(stamp, &odom(stamp), measured, Some(&times));
+            if k == 0 {
+                assert_eq!(outcome, Err(DeskewRefusal::NoMotion), "no earlier pose");
+            } else {
+                assert_eq!(outcome, Ok(()));
+                for (p, w) in points.iter().zip(&world) {
+                    assert!((p - odom(stamp).inverse() * w).norm() < 1e-9);
+                }
+            }
+        }
+        let (_, outcome) = deskewer.apply(2.5, &odom(2.5), world.clone(), None);
+        assert_eq!(outcome, Err(DeskewRefusal::NoTimes));
+        let (_, outcome) = deskewer.apply(3.0, &odom(3.0), world.clone(), Some(&times[..3]));
+        assert!(matches!(outcome, Err(DeskewRefusal::TimesMismatch { .. })));
+        assert_eq!(deskewer.counts(), DeskewCounts { deskewed: 2, no_times: 1, no_motion: 1, refused: 1 });
+    }
+
+    #[test]
+    fn the_twist_of_two_odometry_poses_is_per_second_and_bad_times_are_refused() {
+        let a = pose_from_rpy_translation(0.0, 0.0, 0.2, Vector3::new(1.0, 0.0, 0.0));
+        let b = a * pose_from_rpy_translation(0.0, 0.0, 0.1, Vector3::new(0.5, 0.0, 0.0));
+        let twist = twist_between(&a, 10.0, &b, 10.5).expect("increasing times");
+        assert!((twist[2] - 0.2).abs() < 1e-12, "0.1 rad in 0.5 s: {twist}");
+        assert!(twist_between(&a, 10.0, &b, 10.0).is_none());
+        let points = [Point3::new(1.0, 0.0, 0.0)];
+        assert_eq!(deskew(&points, &[], &twist), Err(DeskewRefusal::TimesMismatch { points: 1, times: 0 }));
+        assert_eq!(deskew(&points, &[f32::NAN], &twist), Err(DeskewRefusal::TimeOutOfRange));
+        assert_eq!(deskew(&points, &[5.0], &twist), Err(DeskewRefusal::TimeOutOfRange));
+        // Time zero: the point stays.
+        assert_eq!(deskew(&points, &[0.0], &twist).expect("fits"), points.to_vec());
+    }
+}
