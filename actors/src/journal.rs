@@ -11,9 +11,9 @@
 //! thread of its own, has `RESERVE / 2` envelopes of that sender to land before the guarantee
 //! could be outrun.
 
-use crate::snapshot::RobotSnapshot;
 use serde::{Deserialize, Serialize};
 use sgm_model::snapshot::{self, SnapshotError};
+use sgm_model::wire::ReplayGuard;
 use std::fs::{self, File};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -93,12 +93,13 @@ impl JournalFile {
     }
 }
 
-/// After loading `snapshot`: raises its replay windows to the reservations of the journal at
-/// `path`; how many (sender, incarnation) it raised, none when there is no journal.
-pub fn apply(snapshot: &mut RobotSnapshot, path: &Path) -> Result<usize, JournalError> {
+/// After loading a snapshot: raises its replay windows (`snapshot.comms.replay`) to the
+/// reservations of the journal at `path`; how many (sender, incarnation) it raised, none when
+/// there is no journal.
+pub fn apply(replay: &mut ReplayGuard, path: &Path) -> Result<usize, JournalError> {
     let Some(reservations) = JournalFile::load(path)? else { return Ok(0) };
     let n = reservations.entries.len();
-    snapshot.comms.replay.restored(reservations.entries);
+    replay.restored(reservations.entries);
     Ok(n)
 }
 

@@ -72,7 +72,7 @@ async fn envelopes_accepted_after_the_snapshot_are_refused_after_the_restore() {
     handle.halt();
     radio.detach(RobotId(1));
 
-    assert!(journal::apply(&mut snapshot, &journal_path).unwrap() > 0);
+    assert!(journal::apply(&mut snapshot.comms.replay, &journal_path).unwrap() > 0);
     let restored = start_robot_restored(
         &config(),
         Clock::starting_at(0.0),

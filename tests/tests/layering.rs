@@ -95,3 +95,78 @@ fn every_module_has_a_layer() {
         }
     }
 }
+
+/// The modules of `src` each module uses (`crate::` paths, doc comments included).
+fn uses(src: &Path) -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
+    let lib = std::fs::read_to_string(src.join("lib.rs")).expect("lib.rs");
+    let modules: std::collections::BTreeSet<String> = lib
+        .lines()
+        .filter_map(|l| l.trim_start_matches("pub ").strip_prefix("mod ")?.strip_suffix(';'))
+        .map(String::from)
+        .collect();
+    let mut files = Vec::new();
+    sources(src, &mut files);
+    let mut graph: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> =
+        modules.iter().map(|m| (m.clone(), Default::default())).collect();
+    for file in files {
+        let relative = file.strip_prefix(src).expect("under src");
+        let own = relative.components().next().and_then(|c| c.as_os_str().to_str()).unwrap_or("");
+        let own = own.trim_end_matches(".rs").to_string();
+        if !modules.contains(&own) {
+            continue;
+        }
+        let text = std::fs::read_to_string(&file).expect("source is UTF-8");
+        for (at, _) in text.match_indices("crate::") {
+            let used: String = text[at + 7..].chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
+            if used != own && modules.contains(&used) {
+                graph.entry(own.clone()).or_default().insert(used);
+            }
+        }
+    }
+    graph
+}
+
+/// A cycle among the modules of `graph`, if there is one.
+fn cycle(graph: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>) -> Option<Vec<String>> {
+    fn visit(
+        node: &str,
+        graph: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>,
+        path: &mut Vec<String>,
+        done: &mut std::collections::BTreeSet<String>,
+    ) -> Option<Vec<String>> {
+        if let Some(at) = path.iter().position(|p| p == node) {
+            return Some(path[at..].iter().cloned().chain([node.to_string()]).collect());
+        }
+        if done.contains(node) {
+            return None;
+        }
+        path.push(node.to_string());
+        for next in graph.get(node).into_iter().flatten() {
+            if let Some(found) = visit(next, graph, path, done) {
+                return Some(found);
+            }
+        }
+        path.pop();
+        done.insert(node.to_string());
+        None
+    }
+    let mut done = std::collections::BTreeSet::new();
+    graph.keys().find_map(|node| visit(node, graph, &mut Vec::new(), &mut done))
+}
+
+/// The actors and the bridge have no fixed layer table, but no two of their modules depend on
+/// each other, directly or around a loop.
+#[test]
+fn the_actors_and_the_bridge_have_no_module_cycle() {
+    for name in ["actors", "bridge", "model", "scenarios"] {
+        let graph = uses(&crate_src(name));
+        assert!(graph.len() >= 9, "{name}: {graph:?}");
+        if let Some(found) = cycle(&graph) {
+            panic!("{name}: modules in a cycle: {}", found.join(" → "));
+        }
+    }
+    // The check finds a cycle where there is one.
+    let mut looped = uses(&crate_src("actors"));
+    looped.entry("clock".into()).or_default().insert("supervisor".into());
+    assert!(cycle(&looped).is_some_and(|c| c.contains(&"clock".to_string())));
+}

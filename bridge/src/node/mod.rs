@@ -103,7 +103,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         // What the robot may have accepted after its snapshot is never accepted again.
         let journal_path = JournalFile::path_in(Path::new(&persistence.directory), &robot_name);
         if let Some(snapshot) = &mut snapshot {
-            match sgm_actors::journal::apply(snapshot, &journal_path) {
+            match sgm_actors::journal::apply(&mut snapshot.comms.replay, &journal_path) {
                 Ok(0) => tracing::warn!(robot = %robot_name, path = %journal_path.display(),
                     "no replay journal beside the snapshot: envelopes accepted after it could be replayed once"),
                 Ok(n) => tracing::info!(robot = %robot_name, windows = n,
