@@ -7,11 +7,17 @@
 
 pub mod imu;
 pub mod library;
+mod radio;
+mod robots;
+mod sensors;
 pub mod shapes;
 pub mod terrain;
 mod validate;
 
 pub use imu::ImuSpec;
+pub use radio::{PartitionSpec, RadioSpec};
+pub use robots::{RobotSpec, RouteSpec};
+pub use sensors::{CameraSpec, LidarPattern, LidarSpec, OdometrySpec};
 pub use terrain::{Platform, PlatformsSpec, TerrainSpec};
 
 use serde::{Deserialize, Serialize};
@@ -175,158 +181,6 @@ impl Default for WorldSpec {
     }
 }
 
-/// The LiDAR's scan pattern.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum LidarPattern {
-    /// A spinning multi-beam LiDAR: `beams` rings evenly over the vertical field of view, one
-    /// return per `azimuth_step_deg`.
-    Spinning,
-    /// A Livox-Mid-360-like non-repetitive pattern: `points_per_frame` directions from a
-    /// low-discrepancy sequence continued from frame to frame.
-    Livox,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct LidarSpec {
-    /// Default "spinning".
-    pub pattern: LidarPattern,
-    /// Spinning: rings. Default 32.
-    pub beams: usize,
-    /// Spinning: horizontal resolution, degrees. Default 0.4.
-    pub azimuth_step_deg: f64,
-    /// Lowest and highest beam elevation, degrees. Default [-15, 15] (spinning); a Livox
-    /// Mid-360 covers [-7, 52].
-    pub vertical_fov_deg: [f64; 2],
-    /// Livox: returns per frame. Default 20000.
-    pub points_per_frame: usize,
-    /// Farthest return, m. Default 60.
-    pub max_range_m: f64,
-    /// Standard deviation of range noise, m. Default 0.02.
-    pub range_noise_m: f64,
-    /// Duration of one sweep, s: each return is measured from the moving sensor at its own
-    /// time and carries it (0: every return at the frame's stamp, an undistorted scan). A real
-    /// 10 Hz LiDAR sweeps for 0.1 s. Default 0.
-    pub sweep_s: f64,
-}
-
-impl Default for LidarSpec {
-    fn default() -> Self {
-        Self {
-            pattern: LidarPattern::Spinning,
-            beams: 32,
-            azimuth_step_deg: 0.4,
-            vertical_fov_deg: [-15.0, 15.0],
-            points_per_frame: 20_000,
-            max_range_m: 60.0,
-            range_noise_m: 0.02,
-            sweep_s: 0.0,
-        }
-    }
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct CameraSpec {
-    /// A forward camera with a segmentation network; false: per-point labels from the
-    /// simulator (with the same mislabel rate). Default true.
-    pub enabled: bool,
-    /// Label image size, pixels. Default 320 × 240.
-    pub width: u32,
-    pub height: u32,
-    /// Horizontal field of view, degrees. Default 100.
-    pub horizontal_fov_deg: f64,
-    /// Probability that an object is given a wrong (matchable) class in one frame. Default 0.05.
-    pub mislabel_rate: f64,
-    /// Standard deviation of the label boundary jitter, pixels. Default 1.
-    pub boundary_noise_px: f64,
-}
-
-impl Default for CameraSpec {
-    fn default() -> Self {
-        Self {
-            enabled: true,
-            width: 320,
-            height: 240,
-            horizontal_fov_deg: 100.0,
-            mislabel_rate: 0.05,
-            boundary_noise_px: 1.0,
-        }
-    }
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct OdometrySpec {
-    /// Position random walk, m per √m travelled (each horizontal axis). Default 0.005.
-    pub position_walk_m: f64,
-    /// Yaw random walk, degrees per √m travelled. Default 0.03.
-    pub yaw_walk_deg: f64,
-    /// Height random walk, m per √m travelled. Default 0.002.
-    pub height_walk_m: f64,
-    /// Roll and pitch error: standard deviation of a slowly varying tilt, degrees. Default 0.1.
-    pub roll_pitch_deg: f64,
-}
-
-impl Default for OdometrySpec {
-    fn default() -> Self {
-        Self { position_walk_m: 0.005, yaw_walk_deg: 0.03, height_walk_m: 0.002, roll_pitch_deg: 0.1 }
-    }
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct RadioSpec {
-    /// Each robot's transmit rate, kbit/s (shared by everything it sends). Default 2000.
-    pub bandwidth_kbps: f64,
-    /// Propagation and stack latency, ms. Default 20.
-    pub latency_ms: f64,
-    /// Probability that a packet is lost (per destination). Default 0.
-    pub loss: f64,
-    /// Probability that a delivered packet arrives a second time (a link-layer retransmission
-    /// whose acknowledgement was lost), `jitter_ms` or up to a latency later. Default 0.
-    pub duplicate: f64,
-    /// Each copy of a packet is held back by a further uniform delay in [0, jitter_ms), so
-    /// packets overtake each other (reordering), ms. Default 0.
-    pub jitter_ms: f64,
-    /// Robots farther apart cannot hear each other, m (0: unlimited). Default 0.
-    pub range_m: f64,
-    /// A packet that would wait behind more than this many bytes in the sender's queue is
-    /// dropped. Default 4 000 000.
-    pub queue_bytes: usize,
-    /// Network partitions: while one is in force, the robots it names hear only each other and
-    /// the rest hear only the rest. Default none.
-    pub partitions: Vec<PartitionSpec>,
-}
-
-impl Default for RadioSpec {
-    fn default() -> Self {
-        Self {
-            bandwidth_kbps: 2000.0,
-            latency_ms: 20.0,
-            loss: 0.0,
-            duplicate: 0.0,
-            jitter_ms: 0.0,
-            range_m: 0.0,
-            queue_bytes: 4_000_000,
-            partitions: Vec::new(),
-        }
-    }
-}
-
-/// A partition of the team, from `start_s` until it heals at `end_s`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct PartitionSpec {
-    /// When the link between the two sides is cut, s.
-    pub start_s: f64,
-    /// When it heals, s.
-    pub end_s: f64,
-    /// The robots (names) on one side; every other robot is on the other.
-    pub robots: Vec<String>,
-}
-
 /// `count` false inter-robot factors handed to `robot`'s Optimiser at `at_s` (or as soon after
 /// as it has aligned `neighbour`), each tying one of its keyframes to one of `neighbour`'s with
 /// a measurement `translation_m` and `rotation_deg` wrong.
@@ -356,58 +210,6 @@ impl Default for FalseFactorSpec {
             count: 0,
             translation_m: 5.0,
             rotation_deg: 30.0,
-        }
-    }
-}
-
-/// A generated route: random waypoints in a rectangle.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RouteSpec {
-    /// [x_min, y_min, x_max, y_max], m.
-    pub region_m: [f64; 4],
-    /// Waypoints after the start.
-    pub legs: usize,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct RobotSpec {
-    /// Default "robot<k>".
-    pub name: String,
-    /// [x, y] waypoints in the world, m; the robot starts at the first facing the second, and
-    /// stops at the last. Either `waypoints` or `route`.
-    pub waypoints: Vec<[f64; 2]>,
-    /// A generated route (seeded): the robot starts at a random point of the region.
-    pub route: Option<RouteSpec>,
-    /// Default 1.5 m/s.
-    pub speed_mps: f64,
-    /// Height of the LiDAR above the ground, m. Default 0.8.
-    pub sensor_height_m: f64,
-    /// What carries the sensors: `wheeled`, `legged` or `handheld`. Default `wheeled`.
-    pub platform: Platform,
-    /// The robot is switched on at this time, s. Default 0.
-    pub start_s: f64,
-    /// SGM on this robot crashes at this time, s: its actors and everything they held are
-    /// gone (the vehicle and its odometry drive on). Default none.
-    pub crash_s: Option<f64>,
-    /// …and restarts at this time from its latest snapshot, s (needs `crash_s`). Default none:
-    /// it stays down.
-    pub restart_s: Option<f64>,
-}
-
-impl Default for RobotSpec {
-    fn default() -> Self {
-        Self {
-            name: String::new(),
-            waypoints: Vec::new(),
-            route: None,
-            speed_mps: 1.5,
-            sensor_height_m: 0.8,
-            platform: Platform::Wheeled,
-            start_s: 0.0,
-            crash_s: None,
-            restart_s: None,
         }
     }
 }
