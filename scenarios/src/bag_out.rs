@@ -9,7 +9,7 @@
 use crate::output_error::OutputError;
 use sgm_bridge::bag::writer::BagWriter;
 use sgm_bridge::config::RosConfig;
-use sgm_bridge::convert::cloud::cloud_msg;
+use sgm_bridge::convert::cloud::{cloud_msg, with_times};
 use sgm_bridge::convert::geometry::{odometry_msg, transform_msg};
 use sgm_bridge::convert::image::{camera_info_msg, label_image_msg};
 use sgm_bridge::convert::time::SCENARIO_EPOCH;
@@ -31,6 +31,8 @@ pub struct RecordedFrame<'a> {
     pub labels: Option<&'a [u16]>,
     /// The label image (camera on).
     pub image: Option<(&'a LabelImage, &'a CameraModel)>,
+    /// Each point's time after `t`, s (`lidar.sweep_s` > 0): written as a `time` field.
+    pub times: Option<&'a [f32]>,
 }
 
 struct RobotBag {
@@ -119,8 +121,11 @@ impl BagRecorder {
         w.write(odometry_topic, time, &odometry_msg(header(world), body, frame.odometry)).map_err(&e)?;
         w.write(truth_topic, time, &odometry_msg(header("truth"), body, frame.truth)).map_err(&e)?;
         let points: Vec<nalgebra::Point3<f32>> = frame.points.iter().map(|p| p.map(|v| v as f32)).collect();
-        w.write(points_topic, time, &cloud_msg(header(lidar), &points, frame.labels, |_| [200, 200, 200]))
-            .map_err(&e)?;
+        let mut cloud = cloud_msg(header(lidar), &points, frame.labels, |_| [200, 200, 200]);
+        if let Some(times) = frame.times {
+            cloud = with_times(cloud, times);
+        }
+        w.write(points_topic, time, &cloud).map_err(&e)?;
         Ok(())
     }
 

@@ -210,6 +210,7 @@ pub async fn run_with(
                     points: &frame.points,
                     labels: recorded_labels.as_deref(),
                     image,
+                    times: (!frame.times.is_empty()).then_some(&frame.times[..]),
                 };
                 recorder.record(k, recorded)?;
             }

@@ -100,6 +100,29 @@ fn a_scenario_replayed_from_its_bags_gives_the_same_run() {
     }
 }
 
+/// Sweeps measured on the move (`lidar.sweep_s`) go into the bags with each point's time (a
+/// `time` field); the replay reads them back and deskews exactly as the run did, and turning
+/// deskewing off changes the result.
+#[test]
+fn point_times_survive_the_bags_and_deskew_the_replay_as_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut scenario = Scenario::load_with_env("quickstart", "SGM_REPLAY_SWEEP_TEST").unwrap();
+    scenario.scenario.duration_s = 70.0;
+    scenario.lidar.sweep_s = 0.1;
+    let system = actix_rt::System::new();
+    let outcome = system.block_on(run_recording(&scenario, None, Some(dir.path()))).unwrap();
+    let ran = serde_json::to_value(report::compute(&outcome.record)).unwrap();
+    let bags = vec![dir.path().join("alpha.bag"), dir.path().join("bravo.bag")];
+    let replayed = system.block_on(replay(&scenario, &bags, None)).unwrap();
+    let again = serde_json::to_value(report::compute(&replayed.run.record)).unwrap();
+    assert_eq!(without_world(ran.clone()), without_world(again));
+    let mut straight_off = scenario.clone();
+    straight_off.fusion.deskew = false;
+    let replayed = system.block_on(replay(&straight_off, &bags, None)).unwrap();
+    let skewed = serde_json::to_value(report::compute(&replayed.run.record)).unwrap();
+    assert_ne!(without_world(ran), without_world(skewed), "deskewing changed nothing");
+}
+
 #[test]
 fn bad_bag_lists_are_named() {
     let scenario = Scenario::load_with_env("quickstart", "SGM_REPLAY_TEST").unwrap();

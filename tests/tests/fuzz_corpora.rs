@@ -122,6 +122,7 @@ fn write_rosbag_seeds() {
                         points: &points,
                         labels: (!camera_on).then_some(&labels[..]),
                         image: camera_on.then_some((&image, &camera)),
+                        times: None,
                     },
                 )
                 .expect("recorded");

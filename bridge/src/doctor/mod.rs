@@ -309,7 +309,8 @@ mod tests {
             let labels = LabelImage::new(image_width, 2, pixels);
             d.observe("odometry", Ok(Payload::Odometry(at(t), Pose3::translation(t, 0.0, 0.0))));
             d.observe("labels", Ok(Payload::Image(at(t), labels.unwrap(), Default::default())));
-            let scan = Scan { points: vec![Point3::new(5.0, 0.0, 0.0); 32], labels: None, dropped_non_finite: 0 };
+            let scan =
+                Scan { points: vec![Point3::new(5.0, 0.0, 0.0); 32], labels: None, dropped_non_finite: 0, times: None };
             d.observe("points", Ok(Payload::Cloud(at(t), scan)));
         }
     }
@@ -339,7 +340,7 @@ mod tests {
         let mut no_odometry = Doctor::new(&config()).unwrap();
         no_odometry.observe(
             "points",
-            Ok(Payload::Cloud(at(0.0), Scan { points: vec![], labels: None, dropped_non_finite: 0 })),
+            Ok(Payload::Cloud(at(0.0), Scan { points: vec![], labels: None, dropped_non_finite: 0, times: None })),
         );
         let report = no_odometry.finish("test".into(), true);
         assert_eq!(report.verdict, Verdict::Fail);
@@ -371,12 +372,14 @@ mod tests {
     #[test]
     fn a_cloud_waiting_when_a_live_window_closes_is_not_judged() {
         let last_cloud = |d: &mut Doctor| {
-            let scan = Scan { points: vec![Point3::new(5.0, 0.0, 0.0); 32], labels: None, dropped_non_finite: 0 };
+            let scan =
+                Scan { points: vec![Point3::new(5.0, 0.0, 0.0); 32], labels: None, dropped_non_finite: 0, times: None };
             d.observe("points", Ok(Payload::Cloud(at(1.05), scan)));
         };
         let mut live = Doctor::new(&config()).unwrap().live();
         // The window opens between a frame's odometry and its cloud: that cloud is not judged.
-        let early = Scan { points: vec![Point3::new(5.0, 0.0, 0.0); 32], labels: None, dropped_non_finite: 0 };
+        let early =
+            Scan { points: vec![Point3::new(5.0, 0.0, 0.0); 32], labels: None, dropped_non_finite: 0, times: None };
         live.observe("points", Ok(Payload::Cloud(at(-0.1), early)));
         feed(&mut live, 8, 0);
         last_cloud(&mut live);

@@ -61,7 +61,7 @@ impl Synchroniser {
                         stamp: t,
                         odom_from_body: pose,
                         points_in_body: scan.points,
-                        point_times: None,
+                        point_times: scan.times,
                         labels,
                     });
                 }

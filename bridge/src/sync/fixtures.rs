@@ -5,7 +5,7 @@ use nalgebra::Point3;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
 
 pub(super) fn scan(n: usize) -> Scan {
-    Scan { points: vec![Point3::new(1.0, 0.0, 0.0); n], labels: Some(vec![3; n]), dropped_non_finite: 0 }
+    Scan { points: vec![Point3::new(1.0, 0.0, 0.0); n], labels: Some(vec![3; n]), dropped_non_finite: 0, times: None }
 }
 
 pub(super) fn camera() -> CameraModel {

@@ -199,7 +199,7 @@ mod tests {
         // Sampled: the 1st and the 17th point, one ahead and one behind.
         let mut points = vec![Point3::new(1.0, 0.0, 0.0); PROJECTION_SAMPLE];
         points.push(Point3::new(-1.0, 0.0, 0.0));
-        let two_points = Scan { points, labels: None, dropped_non_finite: 0 };
+        let two_points = Scan { points, labels: None, dropped_non_finite: 0, times: None };
         s.camera_info(camera());
         s.feed(epoch, Payload::Odometry(at(0.0), Pose3::identity()));
         s.feed(epoch, Payload::Image(at(0.0), image(), Default::default()));

@@ -16,4 +16,4 @@ mod write;
 pub const NO_LABEL: u16 = u16::MAX;
 
 pub use read::{read_cloud, Scan};
-pub use write::{cloud_msg, semantic_map, voxels_msg};
+pub use write::{cloud_msg, semantic_map, voxels_msg, with_times};

@@ -1,6 +1,13 @@
 //! A cloud read into a [`Scan`]: `x`, `y`, `z` as float32 or float64 at any offsets, either byte
-//! order, organised or not, points with a non-finite coordinate dropped, and an optional integer
-//! label field.
+//! order, organised or not, points with a non-finite coordinate dropped, an optional integer
+//! label field, and each point's time when the driver gives it, as seconds after the header's
+//! stamp:
+//!
+//! | field | drivers | read as |
+//! |---|---|---|
+//! | `time` (float32/64) | velodyne_pointcloud, LIO-SAM, Hesai (relative) | seconds after the stamp |
+//! | `t` (uint32) | ouster_ros | nanoseconds after the stamp |
+//! | `timestamp` (float64) | livox_ros_driver2 (absolute ns), hesai_ros (absolute s) | minus the stamp: > 10¹⁵ as ns, > 10⁶ as s, else already relative |
 
 use super::datatypes::{type_name, type_size, FLOAT32, FLOAT64, INT16, INT32, INT8, UINT16, UINT32, UINT8};
 use super::NO_LABEL;
@@ -78,6 +85,49 @@ pub struct Scan {
     pub labels: Option<Vec<u16>>,
     /// Points dropped for a non-finite coordinate.
     pub dropped_non_finite: usize,
+    /// Each point's time after the header's stamp, s, when the cloud has a time field.
+    pub times: Option<Vec<f32>>,
+}
+
+/// A cloud's per-point time field and how its values become seconds after the stamp.
+#[derive(Clone, Copy, Debug)]
+enum TimeField {
+    /// `time`: seconds after the stamp.
+    Seconds(Field),
+    /// `t`: nanoseconds after the stamp.
+    Nanoseconds(Field),
+    /// `timestamp`: absolute (ns or s) or relative seconds.
+    Timestamp(Field),
+}
+
+impl TimeField {
+    fn find(msg: &sensor_msgs::PointCloud2) -> Result<Option<Self>, InputError> {
+        if let Some(f) = Field::find(msg, "time", &[FLOAT32, FLOAT64], "float32 or float64")? {
+            return Ok(Some(Self::Seconds(f)));
+        }
+        if let Some(f) = Field::find(msg, "t", &[UINT32], "uint32 (nanoseconds)")? {
+            return Ok(Some(Self::Nanoseconds(f)));
+        }
+        Ok(Field::find(msg, "timestamp", &[FLOAT64], "float64")?.map(Self::Timestamp))
+    }
+
+    /// Seconds after the stamp (`stamp_s`, the header's).
+    fn after(&self, point: &[u8], big_endian: bool, stamp_s: f64) -> f64 {
+        match self {
+            Self::Seconds(f) => f.float(point, big_endian),
+            Self::Nanoseconds(f) => f.integer(point, big_endian) as f64 * 1e-9,
+            Self::Timestamp(f) => {
+                let v = f.float(point, big_endian);
+                if v > 1e15 {
+                    (v - stamp_s * 1e9) * 1e-9
+                } else if v > 1e6 {
+                    v - stamp_s
+                } else {
+                    v
+                }
+            }
+        }
+    }
 }
 
 /// Reads the points (and the `label_field`, if named and present) of a cloud.
@@ -109,11 +159,14 @@ pub fn read_cloud(msg: &sensor_msgs::PointCloud2, label_field: &str) -> Result<S
             what: format!("{} × {} points of {} bytes", msg.width, msg.height, msg.point_step),
         });
     }
+    let time = TimeField::find(msg)?;
+    let stamp_s = f64::from(msg.header.stamp.sec) + f64::from(msg.header.stamp.nsec) * 1e-9;
     let be = msg.is_bigendian;
     let mut scan = Scan {
         points: Vec::with_capacity(count as usize),
         labels: label.map(|_| Vec::with_capacity(count as usize)),
         dropped_non_finite: 0,
+        times: time.map(|_| Vec::with_capacity(count as usize)),
     };
     for row in 0..msg.height as usize {
         let row_data = &msg.data[row * msg.row_step as usize..][..msg.width as usize * step];
@@ -126,6 +179,9 @@ pub fn read_cloud(msg: &sensor_msgs::PointCloud2, label_field: &str) -> Result<S
             scan.points.push(p);
             if let (Some(field), Some(labels)) = (label, scan.labels.as_mut()) {
                 labels.push(u16::try_from(field.integer(point, be)).unwrap_or(NO_LABEL));
+            }
+            if let (Some(field), Some(times)) = (time, scan.times.as_mut()) {
+                times.push(field.after(point, be, stamp_s) as f32);
             }
         }
     }
@@ -233,6 +289,47 @@ mod tests {
             let scan = read_cloud(&layout_cloud(layout, &pts, true), field).unwrap();
             assert_eq!(scan.labels, Some(vec![0, 2]), "{field}");
         }
+    }
+
+    #[test]
+    fn point_times_are_read_as_seconds_after_the_stamp_in_every_drivers_convention() {
+        let pts = [[1.0, 2.0, 3.0], [f32::NAN, 0.0, 0.0], [-4.5, 0.25, 1e3]];
+        // The time fields hold each point's index: Velodyne's `time` in seconds, Ouster's `t`
+        // in nanoseconds, a small Livox `timestamp` as relative seconds; the dropped point's
+        // time goes with it.
+        for (layout, expected) in [(VELODYNE, [0.0, 2.0]), (OUSTER, [0.0, 2e-9]), (LIVOX, [0.0, 2.0])] {
+            for be in [false, true] {
+                let times = read_cloud(&layout_cloud(layout, &pts, be), "").unwrap().times.expect("a time field");
+                assert_eq!(times, expected.map(|t: f64| t as f32).to_vec());
+            }
+        }
+        // livox_ros_driver2: absolute nanoseconds; Hesai: absolute seconds.
+        let mut msg = layout_cloud(LIVOX, &pts[..1], false);
+        msg.header.stamp = rosrust::Time { sec: 1_700_000_000, nsec: 500_000_000 };
+        let at = |msg: &mut sensor_msgs::PointCloud2, v: f64| msg.data[18..26].copy_from_slice(&v.to_le_bytes());
+        at(&mut msg, 1_700_000_000.55e9);
+        let t = read_cloud(&msg, "").unwrap().times.expect("times")[0];
+        assert!((t - 0.05).abs() < 1e-6, "{t}");
+        at(&mut msg, 1_700_000_000.6);
+        let t = read_cloud(&msg, "").unwrap().times.expect("times")[0];
+        assert!((t - 0.1).abs() < 1e-5, "{t}");
+        // Our writer's `time` field reads back.
+        let timed = crate::convert::cloud::write::with_times(
+            cloud_msg(std_msgs::Header::default(), &[Point3::new(1.0, 2.0, 3.0); 3], Some(&[4, 5, 6]), |_| [0; 3]),
+            &[0.0, 0.05, 0.1],
+        );
+        let scan = read_cloud(&timed, "label").unwrap();
+        assert_eq!((scan.times, scan.labels), (Some(vec![0.0, 0.05, 0.1]), Some(vec![4, 5, 6])));
+        // No time field: none.
+        let plain = cloud_msg(std_msgs::Header::default(), &[Point3::new(1.0, 2.0, 3.0)], None, |_| [0; 3]);
+        assert_eq!(read_cloud(&plain, "").unwrap().times, None);
+        // A time field of the wrong type is refused, naming it.
+        let mut wrong = layout_cloud(OUSTER, &pts, false);
+        wrong.fields.iter_mut().filter(|f| f.name == "t").for_each(|f| f.datatype = FLOAT32);
+        assert_eq!(
+            read_cloud(&wrong, "").unwrap_err().to_string(),
+            "field `t` has datatype 7 (float32), uint32 (nanoseconds) expected"
+        );
     }
 
     #[test]

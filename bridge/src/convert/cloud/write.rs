@@ -15,6 +15,23 @@ fn packed_rgb([r, g, b]: [u8; 3]) -> f32 {
     f32::from_bits((u32::from(r) << 16) | (u32::from(g) << 8) | u32::from(b))
 }
 
+/// `cloud` with each point's time appended as a float32 `time` field, seconds after the
+/// header's stamp (velodyne_pointcloud's and LIO-SAM's convention, read back by `read_cloud`).
+/// `times` shorter than the cloud leaves the rest at 0.
+pub fn with_times(mut cloud: sensor_msgs::PointCloud2, times: &[f32]) -> sensor_msgs::PointCloud2 {
+    let step = cloud.point_step as usize;
+    let mut data = Vec::with_capacity(cloud.data.len() + 4 * times.len());
+    for (k, point) in cloud.data.chunks_exact(step.max(1)).enumerate() {
+        data.extend_from_slice(point);
+        data.extend_from_slice(&times.get(k).copied().unwrap_or(0.0).to_le_bytes());
+    }
+    cloud.fields.push(point_field("time", cloud.point_step, FLOAT32));
+    cloud.point_step += 4;
+    cloud.row_step = cloud.point_step * cloud.width;
+    cloud.data = data;
+    cloud
+}
+
 /// An unorganised little-endian cloud: x y z float32, plus `label` uint16 and `rgb` (from
 /// `colour_of(label)`) when labels are given.
 pub fn cloud_msg(
