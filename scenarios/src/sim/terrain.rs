@@ -82,6 +82,10 @@ pub struct Terrain {
     tiles_y: usize,
     /// The highest sample of each tile and its eight neighbours.
     tile_max: Vec<f64>,
+    /// A bound on the ground's slope |∇h| over each tile and its eight neighbours.
+    tile_slope: Vec<f64>,
+    /// The highest sample.
+    highest: f64,
 }
 
 impl Default for Terrain {
@@ -102,6 +106,8 @@ impl Terrain {
             tiles_x: 0,
             tiles_y: 0,
             tile_max: Vec::new(),
+            tile_slope: Vec::new(),
+            highest: 0.0,
         }
     }
 
@@ -166,19 +172,38 @@ impl Terrain {
                 }
             }
         }
-        let mut tile_max = own.clone();
-        for tj in 0..tiles_y {
-            for ti in 0..tiles_x {
-                let mut m = f64::NEG_INFINITY;
-                for nj in tj.saturating_sub(1)..=(tj + 1).min(tiles_y - 1) {
-                    for ni in ti.saturating_sub(1)..=(ti + 1).min(tiles_x - 1) {
-                        m = m.max(own[nj * tiles_x + ni]);
-                    }
-                }
-                tile_max[tj * tiles_x + ti] = m;
+        // Within a cell the bilinear surface is no steeper along an axis than its steeper edge
+        // along it, so |∇h| ≤ √2 · the steepest edge of the cell.
+        let mut steepest = vec![0.0f64; tiles_x * tiles_y];
+        for j in 0..ny - 1 {
+            for i in 0..nx - 1 {
+                let h = heights[j * nx + i];
+                let edge = (heights[j * nx + i + 1] - h).abs().max((heights[(j + 1) * nx + i] - h).abs());
+                let (ti, tj) = ((i / TILE).min(tiles_x - 1), (j / TILE).min(tiles_y - 1));
+                let top = (heights[(j + 1) * nx + i + 1] - heights[(j + 1) * nx + i]).abs();
+                let right = (heights[(j + 1) * nx + i + 1] - heights[j * nx + i + 1]).abs();
+                let m = &mut steepest[tj * tiles_x + ti];
+                *m = m.max(edge.max(top).max(right) * std::f64::consts::SQRT_2 / cell);
             }
         }
-        Self { flat: false, origin, cell, nx, ny, heights, tiles_x, tiles_y, tile_max }
+        let dilate = |own: &[f64]| {
+            let mut out = own.to_vec();
+            for tj in 0..tiles_y {
+                for ti in 0..tiles_x {
+                    let mut m = f64::NEG_INFINITY;
+                    for nj in tj.saturating_sub(1)..=(tj + 1).min(tiles_y - 1) {
+                        for ni in ti.saturating_sub(1)..=(ti + 1).min(tiles_x - 1) {
+                            m = m.max(own[nj * tiles_x + ni]);
+                        }
+                    }
+                    out[tj * tiles_x + ti] = m;
+                }
+            }
+            out
+        };
+        let (tile_max, tile_slope) = (dilate(&own), dilate(&steepest));
+        let highest = heights.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        Self { flat: false, origin, cell, nx, ny, heights, tiles_x, tiles_y, tile_max, tile_slope, highest }
     }
 
     pub fn is_flat(&self) -> bool {
@@ -206,12 +231,14 @@ impl Terrain {
         bottom * (1.0 - fy) + top * fy
     }
 
-    /// No point of the ground within a tile of (x, y) is higher than this.
-    fn ceiling_near(&self, x: f64, y: f64) -> f64 {
+    /// No point of the ground within a tile of (x, y) is higher than the first, nor steeper
+    /// than the second.
+    fn bounds_near(&self, x: f64, y: f64) -> (f64, f64) {
         let (gx, gy) = self.grid(x, y);
         let ti = (gx as usize / TILE).min(self.tiles_x - 1);
         let tj = (gy as usize / TILE).min(self.tiles_y - 1);
-        self.tile_max[tj * self.tiles_x + ti]
+        let k = tj * self.tiles_x + ti;
+        (self.tile_max[k], self.tile_slope[k])
     }
 
     /// Distance along the ray `origin + t·direction` (|direction| = 1) to the ground, up to
@@ -230,17 +257,29 @@ impl Terrain {
         let horizontal = direction.x.hypot(direction.y);
         let fine = (0.5 * self.cell / horizontal.max(1e-9)).min(0.25);
         let coarse = fine * (TILE / 2) as f64;
-        let mut t0 = 0.0;
+        // Above the highest ground and not descending: no hit. Descending from above it: the
+        // ray cannot meet the ground before it comes down to that height.
+        let highest = self.highest;
+        let mut t0 = if origin.z > highest && direction.z < 0.0 { (origin.z - highest) / -direction.z } else { 0.0 };
         while t0 < max_t {
+            if direction.z >= 0.0 && origin.z + direction.z * t0 > highest {
+                return None;
+            }
             let t1 = (t0 + coarse).min(max_t);
             let lowest = (origin.z + direction.z * t0).min(origin.z + direction.z * t1);
             let middle = origin + direction * (0.5 * (t0 + t1));
-            if lowest <= self.ceiling_near(middle.x, middle.y) {
-                let mut last = t0;
+            let (ceiling, slope) = self.bounds_near(middle.x, middle.y);
+            if lowest <= ceiling {
+                // Along the ray the gap to the ground closes at most this fast: a step shorter
+                // than gap / closing cannot cross it, so longer steps than `fine` are safe
+                // while the ray is high above the ground.
+                let closing = slope * horizontal + (-direction.z).max(0.0);
+                let (mut last, mut gap) = (t0, above(t0));
                 let mut t = t0;
                 while t < t1 {
-                    t = (t + fine).min(t1);
-                    if above(t) <= 0.0 {
+                    t = (t + fine.max(0.9 * gap / closing.max(1e-9))).min(t1);
+                    gap = above(t);
+                    if gap <= 0.0 {
                         return Some(bisect(&above, last, t));
                     }
                     last = t;
@@ -330,7 +369,7 @@ mod tests {
         }
 
         /// A ray's hit lies on the ground, and no point of the ray before it is below ground
-        /// (checked every centimetre).
+        /// (checked every centimetre), over hills, kerbs and ramps.
         #[test]
         fn rays_stop_at_the_first_crossing(
             seed in 0u64..1000,
@@ -339,7 +378,8 @@ mod tests {
             azimuth in 0.0f64..std::f64::consts::TAU,
             elevation in -0.6f64..0.2,
         ) {
-            let t = hills(15.0, seed);
+            let spec = TerrainSpec { max_slope_deg: 15.0, kerbs: 3, ramps: 3, ..TerrainSpec::default() };
+            let t = Terrain::generate(&spec, [-40.0, -40.0, 40.0, 40.0], seed);
             let origin = Point3::new(x, y, t.height(x, y) + 0.8);
             let d = Vector3::new(elevation.cos() * azimuth.cos(), elevation.cos() * azimuth.sin(), elevation.sin());
             let max_t = 60.0;
