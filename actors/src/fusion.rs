@@ -2,7 +2,8 @@
 //! A scan whose points carry their times is first deskewed (`model::perception::deskew`, the
 //! twist from the previous frame's odometry pose to this one's); one without is used as it came
 //! and counted. Points take the class of their pixel in the segmented image (`model::perception::projection`),
-//! or keep per-point labels given upstream; the scan is fused (the segmenter's values mapped to
+//! the motion between the image's stamp and the scan's compensated at the same velocity
+//! (`model::perception::motion`), or keep per-point labels given upstream; the scan is fused (the segmenter's values mapped to
 //! SGM classes, the label vote, ranges, clustering) and goes on as a [`LabelledScan`] to the
 //! Tracker. Pixel values `[classes]` does not know are logged once each and counted.
 
@@ -11,16 +12,22 @@ use crate::containment::contained;
 use crate::messages::{FrameLabels, LabelledScan, SensorFrame};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use serde::{Deserialize, Serialize};
+use sgm_model::geometry::lie::Tangent3;
+use sgm_model::geometry::Pose3;
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::perception::deskew::{DeskewCounts, DeskewRefusal, Deskewer};
 use sgm_model::perception::label_map::LabelMap;
+use sgm_model::perception::motion::{camera_at_offset, ConstantVelocity};
 use sgm_model::perception::projection::label_points;
 use sgm_model::perception::scan_fusion::{ScanFusion, ScanFusionConfig};
 
 pub struct Fusion {
     fusion: ScanFusion,
+    /// The odometry's velocity over the last frame.
+    velocity: ConstantVelocity,
     /// `fusion.deskew`: none when off.
     deskewer: Option<Deskewer>,
+    images: ImageTiming,
     tracker: Recipient<LabelledScan>,
 }
 
@@ -38,6 +45,19 @@ pub struct FusionStatus {
     pub unknown_label_other_points: u64,
     /// Scans deskewed, and those used as they came with the reason (`fusion.deskew`).
     pub deskew: DeskewCounts,
+    /// Label images taken at another time than their scan, and how they were used.
+    pub images: ImageTiming,
+}
+
+/// Label images whose stamp is not their scan's (the camera fires at its own time).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ImageTiming {
+    /// Images whose offset from their scan was compensated at the odometry's velocity.
+    pub compensated: u64,
+    /// Images with an offset but no velocity known yet (the first frame): used as they came.
+    pub uncompensated: u64,
+    /// Largest |image stamp − scan stamp| seen, ms (rounded up).
+    pub offset_max_ms: u64,
 }
 
 /// Fusion's [`FusionStatus`].
@@ -62,19 +82,24 @@ impl Fusion {
             label_vote: config.label_vote.clone(),
         };
         let deskewer = config.deskew.then(Deskewer::default);
-        Self { fusion: ScanFusion::new(classes, label_map, fusion_config), deskewer, tracker }
+        Self {
+            fusion: ScanFusion::new(classes, label_map, fusion_config),
+            velocity: ConstantVelocity::default(),
+            deskewer,
+            images: ImageTiming::default(),
+            tracker,
+        }
     }
 }
 
 impl Fusion {
     /// `frame` with its points deskewed when it carries their times; else as it came (the
     /// first refusal of each kind is logged).
-    fn deskewed(&mut self, mut frame: SensorFrame) -> SensorFrame {
+    fn deskewed(&mut self, mut frame: SensorFrame, twist: Option<&Tangent3>) -> SensorFrame {
         let Some(deskewer) = self.deskewer.as_mut() else { return frame };
         let before = deskewer.counts();
         let points = std::mem::take(&mut frame.points_in_body);
-        let (points, outcome) =
-            deskewer.apply(frame.stamp, &frame.odom_from_body, points, frame.point_times.as_deref());
+        let (points, outcome) = deskewer.apply(twist, points, frame.point_times.as_deref());
         frame.points_in_body = points;
         if let Err(refusal) = outcome {
             let first = match refusal {
@@ -88,6 +113,26 @@ impl Fusion {
         }
         frame
     }
+
+    /// The camera from the body at the scan's stamp: the mount, moved by the body's motion
+    /// over `offset_s` when the image was taken at another time and the velocity is known.
+    fn camera_for_scan(&mut self, camera_from_body: &Pose3, offset_s: f64, twist: Option<&Tangent3>) -> Pose3 {
+        if offset_s == 0.0 || !offset_s.is_finite() {
+            return *camera_from_body;
+        }
+        let offset_ms = (offset_s.abs() * 1000.0).ceil() as u64;
+        self.images.offset_max_ms = self.images.offset_max_ms.max(offset_ms);
+        match twist {
+            Some(twist) => {
+                self.images.compensated += 1;
+                camera_at_offset(camera_from_body, twist, offset_s)
+            }
+            None => {
+                self.images.uncompensated += 1;
+                *camera_from_body
+            }
+        }
+    }
 }
 
 impl Actor for Fusion {
@@ -100,11 +145,13 @@ impl Handler<SensorFrame> for Fusion {
     type Result = ();
     fn handle(&mut self, frame: SensorFrame, ctx: &mut Context<Self>) {
         contained(ctx, "fusion", || {
-            let frame = self.deskewed(frame);
+            let twist = self.velocity.update(frame.stamp, &frame.odom_from_body);
+            let frame = self.deskewed(frame, twist.as_ref());
             let labels = match &frame.labels {
                 FrameLabels::PerPoint(labels) => labels.clone(),
-                FrameLabels::Image { image, camera, camera_from_body } => {
-                    match label_points(&frame.points_in_body, camera_from_body, camera, image) {
+                FrameLabels::Image { image, camera, camera_from_body, image_offset_s } => {
+                    let camera_from_body = self.camera_for_scan(camera_from_body, *image_offset_s, twist.as_ref());
+                    match label_points(&frame.points_in_body, &camera_from_body, camera, image) {
                         Ok(l) => l,
                         Err(e) => {
                             tracing::warn!(stamp = frame.stamp, "label image unusable: {e}");
@@ -142,6 +189,7 @@ impl Handler<GetFusionStatus> for Fusion {
             unknown_label_ids: unknown.ids.clone(),
             unknown_label_other_points: unknown.other_points,
             deskew: self.deskewer.as_ref().map(Deskewer::counts).unwrap_or_default(),
+            images: self.images,
         })
     }
 }

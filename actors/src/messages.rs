@@ -17,7 +17,17 @@ pub enum FrameLabels {
     /// One class per point (`None`: unlabelled), e.g. from a simulator or an upstream fuser.
     PerPoint(Vec<Option<LabelId>>),
     /// A segmented image: points are projected into it (paper §IV-A).
-    Image { image: LabelImage, camera: CameraModel, camera_from_body: Pose3 },
+    Image {
+        image: LabelImage,
+        camera: CameraModel,
+        /// The camera's mount: the camera from the body at the scan's stamp, once any motion
+        /// between the image and the scan is compensated upstream.
+        camera_from_body: Pose3,
+        /// The image's stamp minus the scan's, s, for motion not compensated upstream: Fusion
+        /// compensates it at the odometry's velocity (`model::perception::motion`). The ROS
+        /// synchroniser compensates from the odometry at both stamps and sends 0.
+        image_offset_s: f64,
+    },
 }
 
 /// One synchronised sensor frame: a LiDAR scan in the body frame, its labels, and the

@@ -152,6 +152,15 @@ impl Layout for sensor_msgs::CameraInfo {
     }
 }
 
+impl Layout for sensor_msgs::Imu {
+    fn walk(w: &mut Walker) -> Result<(), LayoutError> {
+        header(w)?;
+        w.skip("orientation, covariance", (4 + 9) * 8)?;
+        w.skip("angular_velocity, covariance", (3 + 9) * 8)?;
+        w.skip("linear_acceleration, covariance", (3 + 9) * 8)
+    }
+}
+
 impl Layout for nav_msgs::Odometry {
     fn walk(w: &mut Walker) -> Result<(), LayoutError> {
         header(w)?;
@@ -284,6 +293,10 @@ mod tests {
             ..Default::default()
         });
         round_trip(nav_msgs::Odometry { child_frame_id: "alpha/base_link".into(), ..Default::default() });
+        round_trip(sensor_msgs::Imu {
+            header: std_msgs::Header { frame_id: "alpha/imu_link".into(), ..Default::default() },
+            ..Default::default()
+        });
         round_trip(sgm_msgs::Envelope { from_robot: 2, data: vec![1; 40] });
         let transform = geometry_msgs::TransformStamped {
             header: std_msgs::Header { frame_id: "base_link".into(), ..Default::default() },

@@ -21,6 +21,7 @@ rosrust::rosmsg_include!(
     sensor_msgs / Image,
     sensor_msgs / RegionOfInterest,
     sensor_msgs / CameraInfo,
+    sensor_msgs / Imu,
     nav_msgs / Odometry,
     nav_msgs / Path,
     visualization_msgs / Marker,

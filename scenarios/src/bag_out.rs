@@ -1,17 +1,21 @@
 //! `sgm run --bag-out DIR`: each robot's simulated sensor streams as a ROS 1 bag
 //! (`DIR/NAME.bag`), on the `[ros]` section's topics under the robot's namespace, stamped from
 //! [`SCENARIO_EPOCH`]: the LiDAR cloud (float32 x y z, plus the label field when the camera is
-//! off), the label image and camera info (camera on), the drifting odometry, the true pose
+//! off), the label image and camera info (camera on, at the image's own stamp), the IMU's
+//! samples (`[imu]` on, `sensor_msgs/Imu` at their stamps), the drifting odometry, the true pose
 //! (`ground_truth`, for the replay's ATE), and the sensors' mounts on `/tf_static` (latched,
 //! once, before the first frame), as a robot's `robot_state_publisher` would publish them.
 //! `sgm replay` of these bags gives the scenario's run.
 
 use crate::output_error::OutputError;
+use crate::scenario::ImuSpec;
+use crate::sim::imu::ImuSample;
 use sgm_bridge::bag::writer::BagWriter;
 use sgm_bridge::config::RosConfig;
 use sgm_bridge::convert::cloud::{cloud_msg, with_times};
 use sgm_bridge::convert::geometry::{odometry_msg, transform_msg};
 use sgm_bridge::convert::image::{camera_info_msg, label_image_msg};
+use sgm_bridge::convert::imu::{imu_msg, ImuReading};
 use sgm_bridge::convert::time::SCENARIO_EPOCH;
 use sgm_bridge::msg::geometry_msgs::TransformStamped;
 use sgm_bridge::msg::std_msgs::Header;
@@ -30,15 +34,27 @@ pub struct RecordedFrame<'a> {
     /// Per-point class ids (camera off).
     pub labels: Option<&'a [u16]>,
     /// The label image (camera on).
-    pub image: Option<(&'a LabelImage, &'a CameraModel)>,
+    pub image: Option<RecordedImage<'a>>,
     /// Each point's time after `t`, s (`lidar.sweep_s` > 0): written as a `time` field.
     pub times: Option<&'a [f32]>,
+    /// The IMU's samples since the last frame (`[imu]`), each at its own stamp.
+    pub imu: &'a [ImuSample],
+}
+
+/// A label image as the camera publishes it.
+pub struct RecordedImage<'a> {
+    pub image: &'a LabelImage,
+    pub camera: &'a CameraModel,
+    /// Its stamp (`camera.exposure_offset_s` and `clock_offset_s` after the scan's).
+    pub stamp: Stamp,
+    /// The mount the robot is told (written on `/tf_static`).
+    pub camera_from_body: Pose3,
 }
 
 struct RobotBag {
     writer: BagWriter,
-    /// points, labels, camera_info, odometry, ground_truth.
-    topics: [String; 5],
+    /// points, labels, camera_info, odometry, ground_truth, imu.
+    topics: [String; 6],
     /// world, body, lidar, camera.
     frames: [String; 4],
     /// `ros.tf.static_topic`, resolved.
@@ -52,12 +68,27 @@ pub struct BagRecorder {
     bags: Vec<Option<RobotBag>>,
     ros: RosConfig,
     names: Vec<String>,
+    /// Per-sample white noise variances of the IMU, gyro (rad²/s²) and accelerometer (m²/s⁴),
+    /// written as the messages' covariances.
+    imu_variances: [f64; 2],
 }
 
 impl BagRecorder {
     pub fn new(dir: &Path, ros: &RosConfig, names: Vec<String>) -> Result<Self, OutputError> {
         std::fs::create_dir_all(dir).map_err(OutputError::at(dir))?;
-        Ok(Self { dir: dir.to_path_buf(), bags: names.iter().map(|_| None).collect(), ros: ros.clone(), names })
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            bags: names.iter().map(|_| None).collect(),
+            ros: ros.clone(),
+            names,
+            imu_variances: [0.0; 2],
+        })
+    }
+
+    /// The IMU's noise densities, for the covariances of its messages (`[imu]`).
+    pub fn with_imu(mut self, imu: &ImuSpec) -> Self {
+        self.imu_variances = [imu.gyro_noise.powi(2) * imu.rate_hz, imu.accel_noise.powi(2) * imu.rate_hz];
+        self
     }
 
     fn bag(&mut self, k: usize) -> Result<&mut RobotBag, OutputError> {
@@ -85,6 +116,7 @@ impl BagRecorder {
                         topic(&t.camera_info),
                         topic(&t.odometry),
                         topic(&t.ground_truth),
+                        topic(&t.imu),
                     ],
                     frames: [inputs.world_frame(), inputs.body_frame(), inputs.lidar_frame(), inputs.camera_frame()]
                         .map(str::to_string),
@@ -98,15 +130,17 @@ impl BagRecorder {
 
     pub fn record(&mut self, k: usize, frame: RecordedFrame<'_>) -> Result<(), OutputError> {
         let path = self.dir.join(format!("{}.bag", self.names[k]));
+        let [gyro_variance, accel_variance] = self.imu_variances;
         let bag = self.bag(k)?;
         let time = SCENARIO_EPOCH.time(frame.t);
         let header = |frame_id: &str| Header { seq: 0, stamp: time, frame_id: frame_id.to_string() };
         let [world, body, lidar, camera] = &bag.frames;
-        let [points_topic, labels_topic, info_topic, odometry_topic, truth_topic] = &bag.topics;
+        let [points_topic, labels_topic, info_topic, odometry_topic, truth_topic, imu_topic] = &bag.topics;
         let e = OutputError::at(&path);
         if !bag.mounts_written {
             bag.mounts_written = true;
-            let mounts = mounts(header(body), lidar, frame.image.is_some().then_some(camera.as_str()));
+            let camera_mount = frame.image.as_ref().map(|i| (camera.as_str(), i.camera_from_body));
+            let mounts = mounts(header(body), lidar, camera_mount);
             if !mounts.transforms.is_empty() {
                 bag.writer.write_latched(&bag.tf_static, time, &mounts).map_err(&e)?;
             }
@@ -114,9 +148,18 @@ impl BagRecorder {
         let w = &mut bag.writer;
         // Camera info first, as a camera driver publishes it: a replay must not take its epoch
         // from a message without a stamp (regression: `replay_bags.rs`).
-        if let Some((image, model)) = frame.image {
-            w.write(info_topic, time, &camera_info_msg(header(camera), model)).map_err(&e)?;
-            w.write(labels_topic, time, &label_image_msg(header(camera), image)).map_err(&e)?;
+        if let Some(shot) = frame.image {
+            let time = SCENARIO_EPOCH.time(shot.stamp);
+            let header = Header { seq: 0, stamp: time, frame_id: camera.to_string() };
+            w.write(info_topic, time, &camera_info_msg(header.clone(), shot.camera)).map_err(&e)?;
+            w.write(labels_topic, time, &label_image_msg(header, shot.image)).map_err(&e)?;
+        }
+        for sample in frame.imu {
+            let time = SCENARIO_EPOCH.time(sample.stamp);
+            let header = Header { seq: 0, stamp: time, frame_id: body.to_string() };
+            let reading =
+                ImuReading { angular_velocity: sample.angular_velocity, linear_acceleration: sample.specific_force };
+            w.write(imu_topic, time, &imu_msg(header, &reading, gyro_variance, accel_variance)).map_err(&e)?;
         }
         w.write(odometry_topic, time, &odometry_msg(header(world), body, frame.odometry)).map_err(&e)?;
         w.write(truth_topic, time, &odometry_msg(header("truth"), body, frame.truth)).map_err(&e)?;
@@ -145,8 +188,8 @@ impl BagRecorder {
 
 /// The simulated sensors' mounts as tf gives them (`header` names the body frame): the LiDAR at
 /// the body origin (written only when its frame has another name), the camera's optical frame
-/// looking along the body's +x ([`crate::sim::camera::camera_from_body`], inverted).
-fn mounts(header: Header, lidar: &str, camera: Option<&str>) -> TFMessage {
+/// where the robot is told it is (`camera_from_body`, inverted).
+fn mounts(header: Header, lidar: &str, camera: Option<(&str, Pose3)>) -> TFMessage {
     let body = header.frame_id.clone();
     let mount = |child: &str, body_from_child: &Pose3| TransformStamped {
         header: header.clone(),
@@ -157,8 +200,10 @@ fn mounts(header: Header, lidar: &str, camera: Option<&str>) -> TFMessage {
     if lidar.trim_start_matches('/') != body.trim_start_matches('/') {
         transforms.push(mount(lidar, &Pose3::identity()));
     }
-    if let Some(camera) = camera.filter(|c| c.trim_start_matches('/') != body.trim_start_matches('/')) {
-        transforms.push(mount(camera, &crate::sim::camera::camera_from_body().inverse()));
+    if let Some((camera, camera_from_body)) =
+        camera.filter(|(c, _)| c.trim_start_matches('/') != body.trim_start_matches('/'))
+    {
+        transforms.push(mount(camera, &camera_from_body.inverse()));
     }
     TFMessage { transforms }
 }

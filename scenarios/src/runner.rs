@@ -8,15 +8,16 @@
 //! `restart_s` comes back from its latest snapshot: the run keeps snapshots whenever a robot
 //! crashes or `persistence.directory` is set.
 
-use crate::bag_out::{BagRecorder, RecordedFrame};
+use crate::bag_out::{BagRecorder, RecordedFrame, RecordedImage};
 use crate::observation::Observation;
 use crate::record::Timing;
 use crate::record::{RobotTruth, RunOutcome, RunRecord, TruthTrack, RAW_BYTES_PER_POINT};
 use crate::report::series_point;
 use crate::result_bag::ResultBag;
-use crate::scenario::Scenario;
-use crate::sim::camera::{camera_from_body, camera_model, mislabels, noisy_labels, render, segmenter_ids};
+use crate::scenario::{CameraSpec, Scenario};
+use crate::sim::camera::{camera_model, mislabels, noisy_labels, render, segmenter_ids, CameraMount};
 use crate::sim::false_factors::FalseFactors;
+use crate::sim::imu::Imu;
 use crate::sim::lidar::Lidar;
 use crate::sim::odometry::Odometry;
 use crate::sim::platform::Motion;
@@ -32,7 +33,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_actors::transport::InProcessRadio;
-use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, LabelId, RobotId};
+use sgm_model::geometry::Pose3;
+use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, LabelId, RobotId, Stamp};
 use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -42,6 +44,9 @@ struct SimRobot {
     route: Route,
     odometry: Odometry,
     lidar: Lidar,
+    camera: CameraMount,
+    /// `[imu]`: the IMU and its own noise stream (the other sensors' draws do not depend on it).
+    imu: Option<(Imu, ChaCha8Rng)>,
     rng: ChaCha8Rng,
     frames: u64,
     raw_bytes: u64,
@@ -114,7 +119,7 @@ pub async fn run_with(
         None => None,
     };
     let mut recorder = match bag_out {
-        Some(dir) => Some(BagRecorder::new(dir, &scenario.ros, names)?),
+        Some(dir) => Some(BagRecorder::new(dir, &scenario.ros, names)?.with_imu(&scenario.imu)),
         None => None,
     };
     let camera = camera_model(&scenario.camera);
@@ -132,6 +137,13 @@ pub async fn run_with(
             route,
             odometry: Odometry::new(&scenario.odometry),
             lidar: Lidar::new(&scenario.lidar),
+            camera: CameraMount::new(&scenario.camera, seed, k),
+            imu: scenario.imu.enabled.then(|| {
+                (
+                    Imu::new(&scenario.imu),
+                    ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ (k as u64 + 1)),
+                )
+            }),
             rng: ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (k as u64 + 1)),
             frames: 0,
             raw_bytes: 0,
@@ -181,14 +193,25 @@ pub async fn run_with(
                 continue;
             }
             let route = &robot.route;
+            let imu_samples = match robot.imu.as_mut() {
+                Some((imu, rng)) => imu.samples_until(t, &|s| route.pose_at(s), rng),
+                None => Vec::new(),
+            };
             let frame = robot.lidar.sweep(&world, &|tau| route.pose_at(t + tau).unwrap_or(truth), &mut robot.rng);
             let wrong = mislabels(&frame, scenario.camera.mislabel_rate, &world.matchable_labels, &mut robot.rng);
             let (labels, recorded_labels) = if scenario.camera.enabled {
-                let mut image = render(&scenario.camera, &frame, &wrong, splat, &mut robot.rng);
+                let shot = camera_shot(&scenario.camera, robot.camera.camera_from_body, route, t, &truth);
+                let mut image = render(&scenario.camera, &frame, &wrong, splat, &shot, &mut robot.rng);
                 if pixel_values.is_some() {
                     image.labels.iter_mut().for_each(|l| *l = as_pixel(*l));
                 }
-                (FrameLabels::Image { image, camera: camera.clone(), camera_from_body: camera_from_body() }, None)
+                let labels = FrameLabels::Image {
+                    image,
+                    camera: camera.clone(),
+                    camera_from_body: robot.camera.configured_camera_from_body,
+                    image_offset_s: scenario.camera.exposure_offset_s + scenario.camera.clock_offset_s,
+                };
+                (labels, None)
             } else {
                 let labels: Vec<u16> = noisy_labels(&frame, &wrong).into_iter().map(as_pixel).collect();
                 let per_point = labels.iter().map(|&l| (l != NO_LABEL).then_some(LabelId(l))).collect();
@@ -200,7 +223,12 @@ pub async fn run_with(
             robot.raw_max_bytes = robot.raw_max_bytes.max(raw);
             if let Some(recorder) = recorder.as_mut() {
                 let image = match &labels {
-                    FrameLabels::Image { image, camera, .. } => Some((image, camera)),
+                    FrameLabels::Image { image, camera, camera_from_body, image_offset_s } => Some(RecordedImage {
+                        image,
+                        camera,
+                        stamp: t + image_offset_s,
+                        camera_from_body: *camera_from_body,
+                    }),
                     FrameLabels::PerPoint(_) => None,
                 };
                 let recorded = RecordedFrame {
@@ -211,6 +239,7 @@ pub async fn run_with(
                     labels: recorded_labels.as_deref(),
                     image,
                     times: (!frame.times.is_empty()).then_some(&frame.times[..]),
+                    imu: &imu_samples,
                 };
                 recorder.record(k, recorded)?;
             }
@@ -311,6 +340,26 @@ impl Drop for SnapshotDir {
         if self.temporary {
             let _ = std::fs::remove_dir_all(&self.path);
         }
+    }
+}
+
+/// The camera at its exposure (`exposure_offset_s` after the stamp `t`) from the body at τ
+/// after `t` (a return's time): `camera_from_body · B(t + e)⁻¹ · B(t + τ)`, the true poses of
+/// `route` (`truth`, the pose at `t`, where the route has none).
+fn camera_shot<'a>(
+    spec: &CameraSpec,
+    camera_from_body: Pose3,
+    route: &'a Route,
+    t: Stamp,
+    truth: &'a Pose3,
+) -> impl Fn(f32) -> Pose3 + 'a {
+    let exposure = spec.exposure_offset_s;
+    let at = move |s: Stamp| route.pose_at(s).unwrap_or(*truth);
+    let body_at_exposure = (exposure != 0.0).then(|| at(t + exposure).inverse());
+    move |tau: f32| match (body_at_exposure, tau == 0.0) {
+        (None, true) => camera_from_body,
+        (None, false) => camera_from_body * truth.inverse() * at(t + f64::from(tau)),
+        (Some(inverse), _) => camera_from_body * inverse * at(t + f64::from(tau)),
     }
 }
 

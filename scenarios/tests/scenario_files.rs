@@ -92,6 +92,17 @@ fn impossible_terrain_platforms_and_imus_are_refused_with_their_key() {
         "imu.rate_hz = 5: allowed ≥ the frame rate (1 / scenario.frame_interval_s) and ≤ 2000 Hz",
     );
     refused("[imu]\ngyro_noise = -1e-4", "imu.gyro_noise = -0.0001: allowed 0 ≤ x ≤ 1");
+    // A camera firing further from its scan than a frame, a wild mount, a clock a second off.
+    refused(
+        "[scenario]\nframe_interval_s = 0.1\n[camera]\nexposure_offset_s = 0.2",
+        "camera.exposure_offset_s = 0.2: allowed −scenario.frame_interval_s ≤ x ≤ scenario.frame_interval_s",
+    );
+    refused(
+        "[camera]\nmount_xyz_m = [0.0, 9.0, 0.0]",
+        "camera.mount_xyz_m = [0.0, 9.0, 0.0]: allowed each −5 ≤ x ≤ 5 m",
+    );
+    refused("[camera]\nmount_error_deg = 45.0", "camera.mount_error_deg = 45: allowed 0 ≤ x ≤ 10°");
+    refused("[camera]\nclock_offset_s = -1.0", "camera.clock_offset_s = -1: allowed −0.5 ≤ x ≤ 0.5 s");
     let e =
         parse("[[robots]]\nplatform = \"hovercraft\"\nwaypoints = [[0.0, 0.0], [1.0, 0.0]]\n").unwrap_err().to_string();
     assert!(e.contains("hovercraft") && e.contains("platform"), "{e}");

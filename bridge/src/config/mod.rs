@@ -172,6 +172,7 @@ impl RosConfig {
             ("topics.labels", &t.labels),
             ("topics.camera_info", &t.camera_info),
             ("topics.odometry", &t.odometry),
+            ("topics.imu", &t.imu),
             ("topics.markers", &t.markers),
             ("topics.path", &t.path),
             ("topics.map", &t.map),

@@ -14,6 +14,9 @@ pub struct RosTopics {
     pub camera_info: String,
     /// nav_msgs/Odometry in. Default `odometry`.
     pub odometry: String,
+    /// sensor_msgs/Imu: written into bags from scenarios with an IMU (`[imu]`); the
+    /// LiDAR-inertial odometry's input. Default `imu`.
+    pub imu: String,
     /// nav_msgs/Odometry of the true pose, in bags written from scenarios (replay's ATE).
     /// Default `ground_truth`.
     pub ground_truth: String,
@@ -44,6 +47,7 @@ impl Default for RosTopics {
             labels: "labels".into(),
             camera_info: "camera_info".into(),
             odometry: "odometry".into(),
+            imu: "imu".into(),
             ground_truth: "ground_truth".into(),
             markers: "sgm/markers".into(),
             path: "sgm/path".into(),

@@ -5,5 +5,6 @@
 pub mod cloud;
 pub mod geometry;
 pub mod image;
+pub mod imu;
 pub mod markers;
 pub mod time;

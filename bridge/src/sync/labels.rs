@@ -1,7 +1,7 @@
 //! A cloud's labels: its own label field (`labels = "cloud"`), or the label image nearest its
-//! stamp. An image within `image_tolerance_s` labels it as it is; one farther but within
-//! `max_label_skew_s` labels it with the body's motion in between compensated (the odometry
-//! at both stamps); a cloud no image reaches is kept without labels or dropped
+//! stamp. An image within `image_tolerance_s` labels it with the skew left to Fusion (which
+//! compensates it at the odometry's velocity); one farther but within `max_label_skew_s` labels
+//! it with the body's motion in between compensated here (the odometry at both stamps); a cloud no image reaches is kept without labels or dropped
 //! (`unlabelled`). The share of a labelled frame's points that lands in the image is sampled.
 
 use super::{Outcome, Synchroniser};
@@ -88,13 +88,14 @@ impl Synchroniser {
                     return self.without_image(scan);
                 };
                 let skew = (t_image - t).abs();
-                let camera_from_body = if skew <= self.config.image_tolerance_s {
-                    mounted
+                // Within the tolerance Fusion compensates the skew at the odometry's velocity.
+                let (camera_from_body, image_offset_s) = if skew <= self.config.image_tolerance_s {
+                    (mounted, t_image - t)
                 } else {
                     match self.pose_at(t_image) {
                         Outcome::Ready(world_from_body_at_image) => {
                             self.counts.compensated += 1;
-                            mounted * world_from_body_at_image.inverse() * world_from_body
+                            (mounted * world_from_body_at_image.inverse() * world_from_body, 0.0)
                         }
                         Outcome::Wait if !stale => return Outcome::Wait,
                         // No odometry at the image's stamp: its labels cannot be placed.
@@ -112,7 +113,7 @@ impl Synchroniser {
                     .count();
                 self.counts.sampled_points += sample.count() as u64;
                 self.counts.sampled_in_image += in_image as u64;
-                Outcome::Ready(FrameLabels::Image { image, camera, camera_from_body })
+                Outcome::Ready(FrameLabels::Image { image, camera, camera_from_body, image_offset_s })
             }
         }
     }

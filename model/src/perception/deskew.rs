@@ -8,9 +8,9 @@
 //!   pᵢ' = Exp(τᵢ·ξ) · pᵢ
 //!
 //! (KISS-ICP's constant-velocity deskew, with the twist from consecutive odometry poses:
-//! ξ = Log(odom(t₀)⁻¹ · odom(t₁)) / (t₁ − t₀), [`twist_between`]).
+//! ξ = Log(odom(t₀)⁻¹ · odom(t₁)) / (t₁ − t₀), [`super::motion`]).
 
-use crate::geometry::lie::{se3_exp, se3_log, Tangent3};
+use crate::geometry::lie::{se3_exp, Tangent3};
 use crate::geometry::Pose3;
 use nalgebra::Point3;
 
@@ -29,13 +29,6 @@ pub enum DeskewRefusal {
 
 /// Point times farther from the stamp than this are refused (a sweep is ~0.1 s), s.
 pub const MAX_SWEEP_S: f64 = 1.0;
-
-/// The constant body twist (per second) that takes `earlier` (at `t0`) to `later` (at `t1`);
-/// none when the times do not increase.
-pub fn twist_between(earlier: &Pose3, t0: f64, later: &Pose3, t1: f64) -> Option<Tangent3> {
-    let dt = t1 - t0;
-    (dt.is_finite() && dt > 0.0).then(|| se3_log(&(earlier.inverse() * later)) / dt)
-}
 
 /// `points` measured at `times` (s after the stamp), moved into the body frame at the stamp
 /// under the constant twist `twist`.
@@ -77,32 +70,27 @@ pub struct DeskewCounts {
     pub refused: u64,
 }
 
-/// The constant-velocity deskew of a stream of scans: the twist over a scan's sweep is taken
-/// from the odometry pose of the scan before it to this scan's (KISS-ICP's model).
+/// The constant-velocity deskew of a stream of scans, counted: the twist over a scan's sweep is
+/// the one from the odometry pose of the scan before it to this scan's (KISS-ICP's model,
+/// [`super::motion::ConstantVelocity`]).
 #[derive(Clone, Debug, Default)]
 pub struct Deskewer {
-    last: Option<(f64, Pose3)>,
     counts: DeskewCounts,
 }
 
 impl Deskewer {
-    /// The scan at `stamp` with odometry pose `odom_from_body`, deskewed when its `times` and
-    /// the motion allow; else as it came (counted, with the reason).
+    /// A scan deskewed under `twist` when its `times` and the motion allow; else as it came
+    /// (counted, with the reason).
     pub fn apply(
         &mut self,
-        stamp: f64,
-        odom_from_body: &Pose3,
+        twist: Option<&Tangent3>,
         points: Vec<Point3<f64>>,
         times: Option<&[f32]>,
     ) -> (Vec<Point3<f64>>, Result<(), DeskewRefusal>) {
-        let twist = self.last.and_then(|(t0, earlier)| twist_between(&earlier, t0, odom_from_body, stamp));
-        if self.last.is_none_or(|(t0, _)| stamp > t0) {
-            self.last = Some((stamp, *odom_from_body));
-        }
         let outcome = match (times, twist) {
             (None, _) => Err(DeskewRefusal::NoTimes),
             (Some(_), None) => Err(DeskewRefusal::NoMotion),
-            (Some(times), Some(twist)) => deskew(&points, times, &twist),
+            (Some(times), Some(twist)) => deskew(&points, times, twist),
         };
         match outcome {
             Ok(straight) => {
@@ -129,6 +117,7 @@ impl Deskewer {
 mod tests {
     use super::*;
     use crate::geometry::pose_from_rpy_translation;
+    use crate::perception::motion::ConstantVelocity;
     use nalgebra::Vector3;
     use proptest::prelude::*;
 
@@ -170,9 +159,11 @@ mod tests {
         let world: Vec<Point3<f64>> = (0..50).map(|k| Point3::new(6.0, f64::from(k) * 0.2 - 5.0, 0.3)).collect();
         let times: Vec<f32> = (0..50).map(|k| k as f32 * 0.002).collect();
         let mut deskewer = Deskewer::default();
+        let mut velocity = ConstantVelocity::default();
         for (k, stamp) in [1.0, 1.5, 2.0].into_iter().enumerate() {
             let measured = skewed(&world, &odom(stamp), &twist, &times);
-            let (points, outcome) = deskewer.apply(stamp, &odom(stamp), measured, Some(&times));
+            let v = velocity.update(stamp, &odom(stamp));
+            let (points, outcome) = deskewer.apply(v.as_ref(), measured, Some(&times));
             if k == 0 {
                 assert_eq!(outcome, Err(DeskewRefusal::NoMotion), "no earlier pose");
             } else {
@@ -182,20 +173,18 @@ mod tests {
                 }
             }
         }
-        let (_, outcome) = deskewer.apply(2.5, &odom(2.5), world.clone(), None);
+        let v = velocity.update(2.5, &odom(2.5));
+        let (_, outcome) = deskewer.apply(v.as_ref(), world.clone(), None);
         assert_eq!(outcome, Err(DeskewRefusal::NoTimes));
-        let (_, outcome) = deskewer.apply(3.0, &odom(3.0), world.clone(), Some(&times[..3]));
+        let v = velocity.update(3.0, &odom(3.0));
+        let (_, outcome) = deskewer.apply(v.as_ref(), world.clone(), Some(&times[..3]));
         assert!(matches!(outcome, Err(DeskewRefusal::TimesMismatch { .. })));
         assert_eq!(deskewer.counts(), DeskewCounts { deskewed: 2, no_times: 1, no_motion: 1, refused: 1 });
     }
 
     #[test]
-    fn the_twist_of_two_odometry_poses_is_per_second_and_bad_times_are_refused() {
-        let a = pose_from_rpy_translation(0.0, 0.0, 0.2, Vector3::new(1.0, 0.0, 0.0));
-        let b = a * pose_from_rpy_translation(0.0, 0.0, 0.1, Vector3::new(0.5, 0.0, 0.0));
-        let twist = twist_between(&a, 10.0, &b, 10.5).expect("increasing times");
-        assert!((twist[2] - 0.2).abs() < 1e-12, "0.1 rad in 0.5 s: {twist}");
-        assert!(twist_between(&a, 10.0, &b, 10.0).is_none());
+    fn bad_times_are_refused() {
+        let twist = Tangent3::new(0.0, 0.0, 0.2, 1.0, 0.0, 0.0);
         let points = [Point3::new(1.0, 0.0, 0.0)];
         assert_eq!(deskew(&points, &[], &twist), Err(DeskewRefusal::TimesMismatch { points: 1, times: 0 }));
         assert_eq!(deskew(&points, &[f32::NAN], &twist), Err(DeskewRefusal::TimeOutOfRange));

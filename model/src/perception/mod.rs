@@ -13,6 +13,7 @@ pub mod label_map;
 pub mod label_vote;
 pub mod loop_closure;
 pub mod mapper;
+pub mod motion;
 pub mod normals;
 pub mod object_cloud;
 pub mod palettes;

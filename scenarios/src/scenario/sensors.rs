@@ -69,6 +69,24 @@ pub struct CameraSpec {
     pub mislabel_rate: f64,
     /// Standard deviation of the label boundary jitter, pixels. Default 1.
     pub boundary_noise_px: f64,
+    /// Where the camera sits on the body (the body is the LiDAR's frame): its position, m, in
+    /// the body frame. Default [0, 0, 0].
+    pub mount_xyz_m: [f64; 3],
+    /// Its orientation: roll, pitch, yaw, degrees (extrinsic x-y-z, as
+    /// `geometry::pose_from_rpy_translation`) of the camera's forward frame (x along the view)
+    /// in the body frame. Default [0, 0, 0]: looking along the body's x.
+    pub mount_rpy_deg: [f64; 3],
+    /// The mount the robot is told is off from the true one by a rotation of this angle about
+    /// a seeded axis, degrees (a calibration error). Default 0.
+    pub mount_error_deg: f64,
+    /// … and by a displacement of this length in a seeded direction, m. Default 0.
+    pub mount_error_m: f64,
+    /// The image's mid-exposure time after the scan's stamp, s: the camera fires at its own
+    /// time, which its stamp says (the pipeline compensates the motion in between). Default 0.
+    pub exposure_offset_s: f64,
+    /// The camera clock's error: the image's stamp is its true time plus this, s (a clock the
+    /// pipeline cannot know of). Default 0.
+    pub clock_offset_s: f64,
 }
 
 impl Default for CameraSpec {
@@ -80,6 +98,12 @@ impl Default for CameraSpec {
             horizontal_fov_deg: 100.0,
             mislabel_rate: 0.05,
             boundary_noise_px: 1.0,
+            mount_xyz_m: [0.0; 3],
+            mount_rpy_deg: [0.0; 3],
+            mount_error_deg: 0.0,
+            mount_error_m: 0.0,
+            exposure_offset_s: 0.0,
+            clock_offset_s: 0.0,
         }
     }
 }

@@ -146,6 +146,28 @@ impl Scenario {
             c.boundary_noise_px,
             "0 ≤ x ≤ 50 px",
         )?;
+        check(
+            c.mount_xyz_m.iter().all(|v| within(*v, -5.0, 5.0)),
+            "camera.mount_xyz_m",
+            format!("{:?}", c.mount_xyz_m),
+            "each −5 ≤ x ≤ 5 m",
+        )?;
+        check(
+            c.mount_rpy_deg.iter().all(|v| within(*v, -180.0, 180.0)),
+            "camera.mount_rpy_deg",
+            format!("{:?}", c.mount_rpy_deg),
+            "each −180 ≤ x ≤ 180°",
+        )?;
+        check(within(c.mount_error_deg, 0.0, 10.0), "camera.mount_error_deg", c.mount_error_deg, "0 ≤ x ≤ 10°")?;
+        check(within(c.mount_error_m, 0.0, 0.5), "camera.mount_error_m", c.mount_error_m, "0 ≤ x ≤ 0.5 m")?;
+        let dt = s.frame_interval_s;
+        check(
+            within(c.exposure_offset_s, -dt, dt),
+            "camera.exposure_offset_s",
+            c.exposure_offset_s,
+            "−scenario.frame_interval_s ≤ x ≤ scenario.frame_interval_s",
+        )?;
+        check(within(c.clock_offset_s, -0.5, 0.5), "camera.clock_offset_s", c.clock_offset_s, "−0.5 ≤ x ≤ 0.5 s")?;
 
         let o = &self.odometry;
         for (key, v) in [
