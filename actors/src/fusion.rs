@@ -1,6 +1,7 @@
 //! `Fusion` (paper §IV-A): a thin actor over `model::perception::scan_fusion::ScanFusion`.
 //! A scan whose points carry their times is first deskewed (`model::perception::deskew`, the
-//! twist from the previous frame's odometry pose to this one's); one without is used as it came
+//! twist from the previous frame's odometry pose to this one's, its rotation from the gyro when
+//! the frame brings IMU samples that cover the sweep); one without is used as it came
 //! and counted. Points take the class of their pixel in the segmented image (`model::perception::projection`),
 //! the motion between the image's stamp and the scan's compensated at the same velocity
 //! (`model::perception::motion`), or keep per-point labels given upstream; the scan is fused (the segmenter's values mapped to
@@ -16,6 +17,7 @@ use sgm_model::geometry::lie::Tangent3;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::perception::deskew::{DeskewCounts, DeskewRefusal, Deskewer};
+use sgm_model::perception::imu::{GyroBuffer, GyroCounts};
 use sgm_model::perception::label_map::LabelMap;
 use sgm_model::perception::motion::{camera_at_offset, ConstantVelocity};
 use sgm_model::perception::projection::label_points;
@@ -27,6 +29,8 @@ pub struct Fusion {
     velocity: ConstantVelocity,
     /// `fusion.deskew`: none when off.
     deskewer: Option<Deskewer>,
+    /// The IMU's recent gyro samples (the deskew's rotation when they cover a sweep).
+    gyro: GyroBuffer,
     images: ImageTiming,
     tracker: Recipient<LabelledScan>,
 }
@@ -47,6 +51,8 @@ pub struct FusionStatus {
     pub deskew: DeskewCounts,
     /// Label images taken at another time than their scan, and how they were used.
     pub images: ImageTiming,
+    /// IMU samples kept for the deskew's rotation, and those refused.
+    pub imu: GyroCounts,
 }
 
 /// Label images whose stamp is not their scan's (the camera fires at its own time).
@@ -86,6 +92,7 @@ impl Fusion {
             fusion: ScanFusion::new(classes, label_map, fusion_config),
             velocity: ConstantVelocity::default(),
             deskewer,
+            gyro: GyroBuffer::default(),
             images: ImageTiming::default(),
             tracker,
         }
@@ -99,7 +106,8 @@ impl Fusion {
         let Some(deskewer) = self.deskewer.as_mut() else { return frame };
         let before = deskewer.counts();
         let points = std::mem::take(&mut frame.points_in_body);
-        let (points, outcome) = deskewer.apply(twist, points, frame.point_times.as_deref());
+        let gyro = (self.gyro.counts().kept > 0).then_some((&self.gyro, frame.stamp));
+        let (points, outcome) = deskewer.apply(twist, gyro, points, frame.point_times.as_deref());
         frame.points_in_body = points;
         if let Err(refusal) = outcome {
             let first = match refusal {
@@ -146,6 +154,7 @@ impl Handler<SensorFrame> for Fusion {
     fn handle(&mut self, frame: SensorFrame, ctx: &mut Context<Self>) {
         contained(ctx, "fusion", || {
             let twist = self.velocity.update(frame.stamp, &frame.odom_from_body);
+            self.gyro.extend(&frame.imu);
             let frame = self.deskewed(frame, twist.as_ref());
             let labels = match &frame.labels {
                 FrameLabels::PerPoint(labels) => labels.clone(),
@@ -190,6 +199,7 @@ impl Handler<GetFusionStatus> for Fusion {
             unknown_label_other_points: unknown.other_points,
             deskew: self.deskewer.as_ref().map(Deskewer::counts).unwrap_or_default(),
             images: self.images,
+            imu: self.gyro.counts(),
         })
     }
 }

@@ -6,6 +6,7 @@ use nalgebra::{Matrix6, Point3};
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::scan_context::ScanContext;
 use sgm_model::perception::clustering::ObjectCandidate;
+use sgm_model::perception::imu::ImuSample;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
 use sgm_model::scene_graph::{Keyframe, KeyframeEdge, KeyframeId, LabelId, ObjectId, RobotId, Stamp};
 use sgm_model::wire::messages::{KeyframeRefusalReason, ObjectCloud, ObjectData};
@@ -43,6 +44,9 @@ pub struct SensorFrame {
     /// move): Fusion deskews the scan with it. `None`: the scan is used as it came.
     pub point_times: Option<Vec<f32>>,
     pub labels: FrameLabels,
+    /// The IMU's samples since the previous frame, up to the end of this one's sweep (empty
+    /// without an IMU): Fusion deskews with the gyro's rotation where they cover the sweep.
+    pub imu: Vec<ImuSample>,
 }
 
 /// Fusion → Tracker: a labelled scan and its object candidates (body frame).

@@ -107,6 +107,7 @@ mod tests {
             points_in_body: vec![Point3::origin(); 2],
             point_times: None,
             labels: FrameLabels::PerPoint(vec![Some(LabelId(1)); labels]),
+            imu: Vec::new(),
         }
     }
 

@@ -87,6 +87,7 @@ fn fusion_maps_ade_ids_and_counts_an_unknown_one() {
             points_in_body: points,
             point_times: None,
             labels: FrameLabels::PerPoint(labels),
+            imu: Vec::new(),
         };
         fusion.send(frame.clone()).await.unwrap();
         fusion.send(frame).await.unwrap();

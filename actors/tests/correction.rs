@@ -58,6 +58,7 @@ async fn map_of_a_loop(loop_closure: bool) -> SceneGraph {
             points_in_body: points,
             point_times: None,
             labels: FrameLabels::PerPoint(labels),
+            imu: Vec::new(),
         });
         settle().await;
         robot.supervisor.do_send(Tick { now: t });

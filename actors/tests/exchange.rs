@@ -76,6 +76,7 @@ async fn run_team(paths: Vec<(Vec<Point3<f64>>, Pose3)>, seconds: usize, panic_a
                 points_in_body: points,
                 point_times: None,
                 labels: FrameLabels::PerPoint(labels),
+                imu: Vec::new(),
             });
         }
         settle().await;
@@ -195,6 +196,7 @@ async fn foreign_replayed_truncated_and_oversized_envelopes_are_refused_and_coun
             points_in_body: points,
             point_times: None,
             labels: FrameLabels::PerPoint(labels),
+            imu: Vec::new(),
         });
         settle().await;
         handle.supervisor.do_send(Tick { now: t });

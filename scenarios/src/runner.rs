@@ -193,8 +193,9 @@ pub async fn run_with(
                 continue;
             }
             let route = &robot.route;
+            // A driver hands on a sweep once it ends: the IMU has sampled it by then.
             let imu_samples = match robot.imu.as_mut() {
-                Some((imu, rng)) => imu.samples_until(t, &|s| route.pose_at(s), rng),
+                Some((imu, rng)) => imu.samples_until(t + scenario.lidar.sweep_s, &|s| route.pose_at(s), rng),
                 None => Vec::new(),
             };
             let frame = robot.lidar.sweep(&world, &|tau| route.pose_at(t + tau).unwrap_or(truth), &mut robot.rng);
@@ -244,8 +245,14 @@ pub async fn run_with(
                 recorder.record(k, recorded)?;
             }
             let point_times = (!frame.times.is_empty()).then_some(frame.times);
-            let sensor_frame =
-                SensorFrame { stamp: t, odom_from_body: odometry, points_in_body: frame.points, point_times, labels };
+            let sensor_frame = SensorFrame {
+                stamp: t,
+                odom_from_body: odometry,
+                points_in_body: frame.points,
+                point_times,
+                labels,
+                imu: imu_samples,
+            };
             team.frame(k, || scenario.robot_config(k), sensor_frame)?;
         }
         simulation += sim_started.elapsed();

@@ -63,6 +63,7 @@ impl Synchroniser {
                         points_in_body: scan.points,
                         point_times: scan.times,
                         labels,
+                        imu: Vec::new(),
                     });
                 }
                 Outcome::Wait if !stale => {

@@ -8,6 +8,7 @@ pub mod clustering;
 pub mod colour_ids;
 pub mod deskew;
 pub mod icp;
+pub mod imu;
 pub mod keyframes;
 pub mod label_map;
 pub mod label_vote;

@@ -19,15 +19,7 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use sgm_model::geometry::Pose3;
 
-/// One IMU sample, body frame.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ImuSample {
-    pub stamp: f64,
-    /// rad/s.
-    pub angular_velocity: Vector3<f64>,
-    /// Specific force (acceleration minus gravity), m/s².
-    pub specific_force: Vector3<f64>,
-}
+pub use sgm_model::perception::imu::ImuSample;
 
 /// A robot's IMU: its biases now, and the next tick it samples.
 #[derive(Clone, Debug)]
