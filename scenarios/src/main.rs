@@ -248,7 +248,21 @@ enum BenchCommand {
         #[arg(long)]
         plots: Option<PathBuf>,
     },
-    /// Every bench above in one report (report.md, report.json and plots) in --out.
+    /// What each effect of the unkind world (terrain, legged gait, Livox pattern, sweeps, the
+    /// IMU's deskew, the camera's mount and timing, calibration errors) costs outdoor_two_robots,
+    /// alone and all together (legged_campus).
+    Realism {
+        /// Cut each mission to this many simulated seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Only the effects whose names contain this.
+        #[arg(long)]
+        only: Option<String>,
+        /// Also write the table as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+    /// Every bench above but realism in one report (report.md, report.json and plots) in --out.
     All {
         #[arg(long, default_value = "bench-report")]
         out: PathBuf,
@@ -383,6 +397,9 @@ fn main() -> ExitCode {
         Command::Bench { which: BenchCommand::Sweeps { duration, json, plots } } => {
             let options = bench::sweeps::Options { duration, plots };
             emit("sweeps", bench::sweeps::run_bench(&options), json.as_deref())
+        }
+        Command::Bench { which: BenchCommand::Realism { duration, only, json } } => {
+            emit("realism", bench::realism::run_bench(duration, only.as_deref()), json.as_deref())
         }
         Command::Bench { which: BenchCommand::All { out, reps, duration } } => {
             match bench::all::run_bench(bench::all::Options { out, reps, duration }) {

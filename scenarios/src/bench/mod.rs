@@ -6,6 +6,7 @@ pub mod all;
 pub mod baselines;
 pub mod matching;
 pub mod messages;
+pub mod realism;
 pub mod sweeps;
 
 use anyhow::Context;

@@ -119,10 +119,19 @@ pub struct OdometrySpec {
     pub height_walk_m: f64,
     /// Roll and pitch error: standard deviation of a slowly varying tilt, degrees. Default 0.1.
     pub roll_pitch_deg: f64,
+    /// Roll and pitch random walk, degrees per √m travelled: an odometry without a gravity
+    /// reference (no IMU), whose frame tilts over the mission. Default 0.
+    pub tilt_walk_deg: f64,
 }
 
 impl Default for OdometrySpec {
     fn default() -> Self {
-        Self { position_walk_m: 0.005, yaw_walk_deg: 0.03, height_walk_m: 0.002, roll_pitch_deg: 0.1 }
+        Self {
+            position_walk_m: 0.005,
+            yaw_walk_deg: 0.03,
+            height_walk_m: 0.002,
+            roll_pitch_deg: 0.1,
+            tilt_walk_deg: 0.0,
+        }
     }
 }

@@ -175,6 +175,7 @@ impl Scenario {
             ("odometry.yaw_walk_deg", o.yaw_walk_deg),
             ("odometry.height_walk_m", o.height_walk_m),
             ("odometry.roll_pitch_deg", o.roll_pitch_deg),
+            ("odometry.tilt_walk_deg", o.tilt_walk_deg),
         ] {
             check(within(v, 0.0, 10.0), key, v, "0 ≤ x ≤ 10")?;
         }

@@ -55,6 +55,12 @@ impl Odometry {
                 );
                 let yaw = s.yaw_walk_deg.to_radians() * root * n();
                 noisy.rotation = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw) * noisy.rotation;
+                if s.tilt_walk_deg > 0.0 {
+                    // No gravity reference: roll and pitch errors accumulate, the frame tilts.
+                    let sigma = s.tilt_walk_deg.to_radians() * root;
+                    let (roll, pitch) = (sigma * n(), sigma * n());
+                    noisy.rotation = UnitQuaternion::from_euler_angles(roll, pitch, 0.0) * noisy.rotation;
+                }
                 self.estimate *= noisy;
             }
         }
@@ -77,7 +83,13 @@ mod tests {
 
     #[test]
     fn noiseless_odometry_is_the_truth_in_the_start_frame() {
-        let spec = OdometrySpec { position_walk_m: 0.0, yaw_walk_deg: 0.0, height_walk_m: 0.0, roll_pitch_deg: 0.0 };
+        let spec = OdometrySpec {
+            position_walk_m: 0.0,
+            yaw_walk_deg: 0.0,
+            height_walk_m: 0.0,
+            roll_pitch_deg: 0.0,
+            tilt_walk_deg: 0.0,
+        };
         let mut o = Odometry::new(&spec);
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         for k in 0..20 {
@@ -92,7 +104,13 @@ mod tests {
     #[test]
     fn the_yaw_walk_grows_with_the_square_root_of_distance() {
         // 400 runs of 100 one-metre steps: the yaw error's spread is σ·√100.
-        let spec = OdometrySpec { position_walk_m: 0.0, yaw_walk_deg: 0.1, height_walk_m: 0.0, roll_pitch_deg: 0.0 };
+        let spec = OdometrySpec {
+            position_walk_m: 0.0,
+            yaw_walk_deg: 0.1,
+            height_walk_m: 0.0,
+            roll_pitch_deg: 0.0,
+            tilt_walk_deg: 0.0,
+        };
         let mut rng = ChaCha8Rng::seed_from_u64(2);
         let mut sum_sq = 0.0;
         for _ in 0..400 {
@@ -104,6 +122,31 @@ mod tests {
             sum_sq += yaw_of(&last).to_degrees().powi(2);
         }
         let sd = (sum_sq / 400.0).sqrt();
+        assert!((sd - 1.0).abs() < 0.1, "{sd}");
+    }
+
+    #[test]
+    fn without_a_gravity_reference_the_frame_tilts_with_the_square_root_of_distance() {
+        // 400 runs of 100 one-metre steps at 0.1°/√m: roll and pitch spread 1° each.
+        let spec = OdometrySpec {
+            position_walk_m: 0.0,
+            yaw_walk_deg: 0.0,
+            height_walk_m: 0.0,
+            roll_pitch_deg: 0.0,
+            tilt_walk_deg: 0.1,
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut sum_sq = 0.0;
+        for _ in 0..400 {
+            let mut o = Odometry::new(&spec);
+            let mut last = Pose3::identity();
+            for k in 0..=100 {
+                last = o.step(&pose_from_yaw_translation(0.0, Vector3::new(k as f64, 0.0, 0.0)), &mut rng);
+            }
+            let (roll, pitch, _) = last.rotation.euler_angles();
+            sum_sq += roll.to_degrees().powi(2) + pitch.to_degrees().powi(2);
+        }
+        let sd = (sum_sq / 800.0).sqrt();
         assert!((sd - 1.0).abs() < 0.1, "{sd}");
     }
 }
