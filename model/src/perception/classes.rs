@@ -172,7 +172,8 @@ mod tests {
         assert!(ok.is_matchable(LabelId(3)) && !ok.is_matchable(LabelId(0)) && !ok.is_matchable(LabelId(9)));
         assert_eq!(ok.object_label(3), Some(LabelId(3)));
         assert_eq!(ok.object_label(0), None);
-        let people = ClassTable::new(vec![ClassSpec { dynamic: true, matchable: false, ..spec("person", 10) }]).unwrap();
+        let people =
+            ClassTable::new(vec![ClassSpec { dynamic: true, matchable: false, ..spec("person", 10) }]).unwrap();
         assert_eq!(people.object_label(10), None, "a dynamic class is never an object");
         assert!(people.is_dynamic(LabelId(10)) && !ok.is_dynamic(LabelId(3)));
         assert_eq!(ok.by_name("chair").map(|c| c.id), Some(3));
