@@ -432,7 +432,7 @@ mod tests {
             let l = frame.labels[k];
             assert!(l == BENCH || l == TREE && from_tree.abs() <= 4.0, "{k} ({from_tree} px): {l}");
         }
-        assert!(frame.labels[..20].iter().any(|l| *l == TREE));
+        assert!(frame.labels[..20].contains(&TREE));
     }
 
     #[test]
