@@ -112,6 +112,7 @@ mod tests {
             colour: [1, 2, 3],
             matchable,
             object: true,
+            dynamic: false,
             min_points: 1,
             max_points: 100,
             max_extent_m: 2.0,

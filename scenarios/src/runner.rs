@@ -20,8 +20,10 @@ use crate::sim::false_factors::FalseFactors;
 use crate::sim::imu::Imu;
 use crate::sim::lidar::Lidar;
 use crate::sim::odometry::Odometry;
+use crate::sim::people::People;
 use crate::sim::platform::Motion;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
+use crate::sim::segmenter_errors::SegmenterErrors;
 use crate::sim::terrain::Terrain;
 use crate::sim::trajectory::Route;
 use crate::sim::world::{generate, NO_LABEL};
@@ -48,6 +50,9 @@ struct SimRobot {
     /// `[imu]`: the IMU and its own noise stream (the other sensors' draws do not depend on it).
     imu: Option<(Imu, ChaCha8Rng)>,
     rng: ChaCha8Rng,
+    /// The segmenter's errors (`[segmentation]`), apart from `rng` so that with them off the
+    /// run is the same.
+    segmenter_rng: ChaCha8Rng,
     frames: u64,
     raw_bytes: u64,
     raw_max_bytes: u64,
@@ -99,6 +104,8 @@ pub async fn run_with(
     let paths: Vec<Vec<Point2<f64>>> = routes.iter().map(|r| r.points.clone()).collect();
     let mut world = generate(&scenario.world, &scenario.fusion.classes, &paths, seed);
     world.settle_on(terrain);
+    let people = People::of_scenario(scenario, &world, &paths);
+    let segmenter_errors = SegmenterErrors::of_scenario(scenario);
     let shared = RadioShared::default();
     let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
     let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&scenario.radio, seed, shared.clone(), &names)));
@@ -145,6 +152,7 @@ pub async fn run_with(
                 )
             }),
             rng: ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (k as u64 + 1)),
+            segmenter_rng: ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x5E67_4D45_4E54_4552) ^ (k as u64 + 1)),
             frames: 0,
             raw_bytes: 0,
             raw_max_bytes: 0,
@@ -178,6 +186,7 @@ pub async fn run_with(
     for step in 1..=steps {
         let t = stamp_from_nanos(step as i64 * dt_nanos);
         let sim_started = Instant::now();
+        people.place(&mut world, t);
         for (k, robot) in robots.iter_mut().enumerate() {
             let Some(truth) = robot.route.pose_at(t) else { continue };
             team.advance(k, t);
@@ -198,7 +207,10 @@ pub async fn run_with(
                 Some((imu, rng)) => imu.samples_until(t + scenario.lidar.sweep_s, &|s| route.pose_at(s), rng),
                 None => Vec::new(),
             };
-            let frame = robot.lidar.sweep(&world, &|tau| route.pose_at(t + tau).unwrap_or(truth), &mut robot.rng);
+            let mut frame = robot.lidar.sweep(&world, &|tau| route.pose_at(t + tau).unwrap_or(truth), &mut robot.rng);
+            if let Some(errors) = &segmenter_errors {
+                errors.apply(&mut frame, &truth, &mut robot.segmenter_rng);
+            }
             let wrong = mislabels(&frame, scenario.camera.mislabel_rate, &world.matchable_labels, &mut robot.rng);
             let (labels, recorded_labels) = if scenario.camera.enabled {
                 let shot = camera_shot(&scenario.camera, robot.camera.camera_from_body, route, t, &truth);
@@ -286,6 +298,7 @@ pub async fn run_with(
         recorder.finish()?;
     }
 
+    people.remove(&mut world);
     let maps = team.maps().await?;
     if let Some(result) = result {
         result.finish(&maps, &last)?;

@@ -109,3 +109,48 @@ fn impossible_terrain_platforms_and_imus_are_refused_with_their_key() {
     let ok = parse(&format!("[terrain]\nmax_slope_deg = 15.0\nramps = 2\n[imu]\nenabled = true\n{ONE_ROBOT}")).unwrap();
     assert!(!ok.terrain.is_flat() && ok.imu.enabled);
 }
+
+#[test]
+fn impossible_segmenter_errors_are_refused_with_their_key() {
+    let refused = |toml: &str, expected: &str| {
+        let e = parse(&format!("{toml}\n{ONE_ROBOT}")).unwrap_err().to_string();
+        assert_eq!(e, format!("test.toml: {expected}"));
+    };
+    refused(
+        "[segmentation.confusion]\nbench = { bench = 0.8, tree = 0.1 }",
+        "segmentation.confusion.bench = (row sum 0.9): allowed probabilities summing to 1 (± 1e-6)",
+    );
+    refused(
+        "[segmentation.confusion]\nbench = { bench = 0.5, unicorn = 0.5 }",
+        "segmentation.confusion.bench.unicorn = 0.5: allowed a class of [fusion].classes",
+    );
+    refused(
+        "[segmentation.confusion]\nunicorn = { bench = 1.0 }",
+        "segmentation.confusion.unicorn = (row): allowed a class of [fusion].classes",
+    );
+    refused(
+        "[segmentation.confusion]\nbench = { bench = 1.5, tree = -0.5 }",
+        "segmentation.confusion.bench.bench = 1.5: allowed 0 ≤ x ≤ 1",
+    );
+    refused(
+        "[segmentation]\nfalse_blobs_per_frame = -1.0",
+        "segmentation.false_blobs_per_frame = -1: allowed 0 ≤ x ≤ 100",
+    );
+    refused("[segmentation]\nedge_bleed_px = -2.0", "segmentation.edge_bleed_px = -2: allowed 0 ≤ x ≤ 50 px");
+    refused("[segmentation]\nmin_pixels = -1.0", "segmentation.min_pixels = -1: allowed 0 ≤ x ≤ 1e6 px²");
+    refused("[segmentation]\nmax_range_m = 0.0", "segmentation.max_range_m = 0: allowed 0 < x ≤ 10000 m, or unset");
+    refused("[segmentation]\nperson_speed_mps = -1.2", "segmentation.person_speed_mps = -1.2: allowed 0 ≤ x ≤ 5 m/s");
+    let e = parse(&format!("[segmentation]\npeople = -3\n{ONE_ROBOT}")).unwrap_err().to_string();
+    assert!(e.contains("segmentation.people"), "{e}");
+
+    // Rows within 1e-6 of 1 are taken; people bring their class, dynamic, when it is missing.
+    let ok = parse(&format!(
+        "[segmentation]\npeople = 2\n[segmentation.confusion]\nbench = {{ bench = 0.6, tree = 0.4000004 }}\n{ONE_ROBOT}"
+    ))
+    .unwrap();
+    let person = ok.fusion.classes.iter().find(|c| c.name == "person").expect("person added");
+    assert!(person.dynamic && !person.matchable);
+    assert!(ok.fusion.classes.iter().filter(|c| c.id == person.id).count() == 1, "a free id");
+    let none = parse(ONE_ROBOT).unwrap();
+    assert!(none.fusion.classes.iter().all(|c| c.name != "person"), "no people, no class");
+}

@@ -17,11 +17,18 @@ use std::collections::BTreeMap;
 const CONFIGURATION: &str = include_str!("../../book/src/configuration.md");
 const SCENARIOS: &str = include_str!("../../book/src/scenarios.md");
 const ROS: &str = include_str!("../../book/src/ros.md");
-const OWN_SECTIONS: [&str; 9] =
-    ["scenario", "world", "terrain", "platforms", "lidar", "camera", "imu", "odometry", "radio"];
+const OWN_SECTIONS: [&str; 10] =
+    ["scenario", "world", "terrain", "platforms", "lidar", "camera", "segmentation", "imu", "odometry", "radio"];
 /// Tables documented as a whole rather than key by key.
-const WHOLE: [&str; 6] =
-    ["fusion.classes", "classes.map", "classes.palette", "ros.frames.aliases", "world.objects", "robots[].route"];
+const WHOLE: [&str; 7] = [
+    "fusion.classes",
+    "classes.map",
+    "classes.palette",
+    "ros.frames.aliases",
+    "world.objects",
+    "robots[].route",
+    "segmentation.confusion",
+];
 
 /// Dotted key → default value; arrays and the `WHOLE` tables are leaves.
 fn flatten(prefix: &str, value: &Value, out: &mut BTreeMap<String, Value>) {

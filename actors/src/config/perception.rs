@@ -75,6 +75,7 @@ pub fn default_classes() -> Vec<ClassSpec> {
         colour,
         matchable,
         object,
+        dynamic: false,
         min_points: 5,
         max_points: 50_000,
         max_extent_m,

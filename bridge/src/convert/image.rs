@@ -292,6 +292,7 @@ mod tests {
             colour: [0, 0, 0],
             matchable: true,
             object: true,
+            dynamic: false,
             min_points: 5,
             max_points: 100,
             max_extent_m: 2.0,

@@ -23,6 +23,11 @@ pub struct ClassSpec {
     /// Objects of this class are clustered at all (ground, sky, walls: false). Default true.
     #[serde(default = "yes")]
     pub object: bool,
+    /// Things of this class move (people, animals): they never become map objects, and Fusion
+    /// drops their returns from the scan, so that neither the object layer nor a keyframe's
+    /// cloud holds them. Default false (and then not written out).
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub dynamic: bool,
     #[serde(default = "default_min_points")]
     pub min_points: usize,
     #[serde(default = "default_max_points")]
@@ -37,6 +42,9 @@ fn grey() -> [u8; 3] {
 }
 fn yes() -> bool {
     true
+}
+fn is_false(v: &bool) -> bool {
+    !*v
 }
 fn default_min_points() -> usize {
     10
@@ -100,9 +108,15 @@ impl ClassTable {
         self.get(label).is_some_and(|c| c.matchable)
     }
 
-    /// The class of a label-image pixel if it names an object class (others are not clustered).
+    /// The class of a label-image pixel if it names an object class (others are not clustered;
+    /// nor is a dynamic class).
     pub fn object_label(&self, pixel: u16) -> Option<LabelId> {
-        self.get(LabelId(pixel)).filter(|c| c.object).map(|c| LabelId(c.id))
+        self.get(LabelId(pixel)).filter(|c| c.object && !c.dynamic).map(|c| LabelId(c.id))
+    }
+
+    /// Whether `label` is a dynamic class (its returns are dropped).
+    pub fn is_dynamic(&self, label: LabelId) -> bool {
+        self.get(label).is_some_and(|c| c.dynamic)
     }
 
     /// Clustering limits per class.
@@ -143,6 +157,7 @@ mod tests {
             colour: [1, 2, 3],
             matchable: true,
             object: true,
+            dynamic: false,
             min_points: 5,
             max_points: 100,
             max_extent_m: 2.0,
@@ -157,6 +172,10 @@ mod tests {
         assert!(ok.is_matchable(LabelId(3)) && !ok.is_matchable(LabelId(0)) && !ok.is_matchable(LabelId(9)));
         assert_eq!(ok.object_label(3), Some(LabelId(3)));
         assert_eq!(ok.object_label(0), None);
+        let people =
+            ClassTable::new(vec![ClassSpec { dynamic: true, matchable: false, ..spec("person", 10) }]).unwrap();
+        assert_eq!(people.object_label(10), None, "a dynamic class is never an object");
+        assert!(people.is_dynamic(LabelId(10)) && !ok.is_dynamic(LabelId(3)));
         assert_eq!(ok.by_name("chair").map(|c| c.id), Some(3));
         assert_eq!(ok.cluster_config(0.3).classes[&3].max_extent_m, 2.0);
         let err = ClassTable::new(vec![spec("chair", 3), spec("bench", 3)]).unwrap_err();

@@ -123,6 +123,7 @@ mod tests {
             colour,
             matchable: true,
             object: true,
+            dynamic: false,
             min_points: 5,
             max_points: 50_000,
             max_extent_m: 3.0,

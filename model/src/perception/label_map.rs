@@ -309,6 +309,7 @@ mod tests {
                     colour: [0, 0, 0],
                     matchable: id >= 2,
                     object: id >= 2,
+                    dynamic: false,
                     min_points: 5,
                     max_points: 50_000,
                     max_extent_m: 3.0,

@@ -2,7 +2,9 @@
 //! label image, `projection::label_points`, or given per point) becomes an SGM class through the
 //! segmenter's table (`label_map`; values it does not know are counted and carry no class); a
 //! vote among 3-D neighbours undoes labels that bled across depth edges (`label_vote`); classes
-//! that are not objects are cleared; returns beyond `max_range_m` (or not finite) are dropped;
+//! that are not objects are cleared; returns of a dynamic class (people: `ClassSpec::dynamic`)
+//! are dropped, so that nothing that moves reaches the object layer or a keyframe's cloud;
+//! returns beyond `max_range_m` (or not finite) are dropped;
 //! objects are clustered per class from the returns within `object_range_m` only
 //! (`clustering`). The Fusion actor owns one.
 
@@ -85,6 +87,9 @@ impl ScanFusion {
         let (mut points, mut kept, mut clustered) =
             (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
         for (p, l) in points_in_body.iter().zip(labels) {
+            if l.is_some_and(|l| self.classes.is_dynamic(l)) {
+                continue;
+            }
             let d2 = p.coords.norm_squared();
             if p.coords.iter().all(|v| v.is_finite()) && d2 <= r2 {
                 let label = l.and_then(|LabelId(id)| self.classes.object_label(id));
@@ -111,6 +116,7 @@ mod tests {
             colour: [0, 0, 0],
             matchable: object,
             object,
+            dynamic: false,
             min_points: 5,
             max_points: 10_000,
             max_extent_m: 5.0,
@@ -118,7 +124,8 @@ mod tests {
     }
 
     fn fusion() -> ScanFusion {
-        let classes = ClassTable::new(vec![class("ground", 0, false), class("tree", 1, true)]).expect("table");
+        let person = ClassSpec { dynamic: true, matchable: false, ..class("person", 2, true) };
+        let classes = ClassTable::new(vec![class("ground", 0, false), class("tree", 1, true), person]).expect("table");
         let config = ScanFusionConfig {
             clustering: classes.cluster_config(0.5),
             max_range_m: 50.0,
@@ -170,5 +177,19 @@ mod tests {
         assert!(again.new_unknown_ids.is_empty(), "already reported");
         assert_eq!(fusion.unknown().points, 4);
         assert_eq!(fusion.unknown().ids.get(&7), Some(&4));
+    }
+
+    #[test]
+    fn returns_of_a_dynamic_class_are_dropped_and_never_become_objects() {
+        let mut fusion = fusion();
+        let mut points = block(5.0); // a tree
+        points.extend(block(8.0)); // a person
+        let mut pixels = vec![Some(LabelId(1)); 27];
+        pixels.extend(vec![Some(LabelId(2)); 27]);
+        let fused = fusion.fuse(&points, pixels);
+        assert_eq!(fused.points_in_body.len(), 27, "the person's returns are gone from the scan");
+        assert!(fused.points_in_body.iter().all(|p| p.x < 6.0));
+        assert_eq!(fused.candidates.len(), 1);
+        assert_eq!(fused.candidates[0].label, LabelId(1));
     }
 }

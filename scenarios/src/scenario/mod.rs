@@ -9,6 +9,7 @@ pub mod imu;
 pub mod library;
 mod radio;
 mod robots;
+pub mod segmentation;
 mod sensors;
 pub mod shapes;
 pub mod terrain;
@@ -17,6 +18,7 @@ mod validate;
 pub use imu::ImuSpec;
 pub use radio::{PartitionSpec, RadioSpec};
 pub use robots::{RobotSpec, RouteSpec};
+pub use segmentation::SegmentationSpec;
 pub use sensors::{CameraSpec, LidarPattern, LidarSpec, OdometrySpec};
 pub use terrain::{Platform, PlatformsSpec, TerrainSpec};
 
@@ -54,6 +56,8 @@ pub struct Scenario {
     pub platforms: PlatformsSpec,
     pub lidar: LidarSpec,
     pub camera: CameraSpec,
+    /// How the segmentation network errs, and people walking through.
+    pub segmentation: SegmentationSpec,
     pub imu: ImuSpec,
     pub odometry: OdometrySpec,
     pub radio: RadioSpec,
@@ -85,6 +89,7 @@ impl Default for Scenario {
             platforms: PlatformsSpec::default(),
             lidar: LidarSpec::default(),
             camera: CameraSpec::default(),
+            segmentation: SegmentationSpec::default(),
             imu: ImuSpec::default(),
             odometry: OdometrySpec::default(),
             radio: RadioSpec::default(),
@@ -246,7 +251,9 @@ impl Scenario {
             .add_source(environment(prefix))
             .build()
             .map_err(load)?;
-        let scenario: Scenario = merged.try_deserialize().map_err(load)?;
+        let mut scenario: Scenario = merged.try_deserialize().map_err(load)?;
+        // People are labelled `person`: a dynamic class unless the file says otherwise.
+        scenario.segmentation.add_person_class(&mut scenario.fusion.classes);
         scenario.validate().map_err(|(key, value, allowed)| ScenarioError::Invalid {
             source_name: source_name.into(),
             key,

@@ -105,6 +105,8 @@ impl Scenario {
         }
         check(within(i.gravity_mps2, 9.7, 9.9), "imu.gravity_mps2", i.gravity_mps2, "9.7 ≤ x ≤ 9.9 m/s²")?;
 
+        self.validate_segmentation()?;
+
         let l = &self.lidar;
         check((1..=256).contains(&l.beams), "lidar.beams", l.beams, "1 ≤ x ≤ 256")?;
         check(within(l.azimuth_step_deg, 0.05, 10.0), "lidar.azimuth_step_deg", l.azimuth_step_deg, "0.05 ≤ x ≤ 10°")?;
@@ -280,6 +282,44 @@ impl Scenario {
                 format!("{name:?}"),
                 "a name no other robot has",
             )?;
+        }
+        Ok(())
+    }
+
+    /// `[segmentation]`: rates and sizes in range; the confusion matrix names classes of
+    /// `[fusion].classes`, with probabilities whose rows sum to 1.
+    fn validate_segmentation(&self) -> Result<(), Failure> {
+        let g = &self.segmentation;
+        check(within(g.edge_bleed_px, 0.0, 50.0), "segmentation.edge_bleed_px", g.edge_bleed_px, "0 ≤ x ≤ 50 px")?;
+        check(within(g.min_pixels, 0.0, 1e6), "segmentation.min_pixels", g.min_pixels, "0 ≤ x ≤ 1e6 px²")?;
+        if let Some(r) = g.max_range_m {
+            check(r.is_finite() && r > 0.0 && r <= 1e4, "segmentation.max_range_m", r, "0 < x ≤ 10000 m, or unset")?;
+        }
+        check(
+            within(g.false_blobs_per_frame, 0.0, 100.0),
+            "segmentation.false_blobs_per_frame",
+            g.false_blobs_per_frame,
+            "0 ≤ x ≤ 100",
+        )?;
+        check(within(g.false_blob_px, 1.0, 200.0), "segmentation.false_blob_px", g.false_blob_px, "1 ≤ x ≤ 200 px")?;
+        check(g.people <= 1000, "segmentation.people", g.people, "≤ 1000")?;
+        check(
+            within(g.person_speed_mps, 0.0, 5.0),
+            "segmentation.person_speed_mps",
+            g.person_speed_mps,
+            "0 ≤ x ≤ 5 m/s",
+        )?;
+        let is_class = |name: &str| self.fusion.classes.iter().any(|c| c.name == name);
+        for (row, entries) in &g.confusion {
+            let key = format!("segmentation.confusion.{row}");
+            check(is_class(row), &key, "(row)", "a class of [fusion].classes")?;
+            for (class, p) in entries {
+                let key = format!("{key}.{class}");
+                check(is_class(class), &key, p, "a class of [fusion].classes")?;
+                check(within(*p, 0.0, 1.0), &key, p, "0 ≤ x ≤ 1")?;
+            }
+            let sum: f64 = entries.values().sum();
+            check((sum - 1.0).abs() <= 1e-6, &key, format!("(row sum {sum})"), "probabilities summing to 1 (± 1e-6)")?;
         }
         Ok(())
     }
