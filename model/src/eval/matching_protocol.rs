@@ -57,7 +57,10 @@ fn tilt(tilt_deg: f64, seed: u64) -> Pose3 {
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ TILT_STREAM);
     let azimuth: f64 = rng.random_range(-PI..PI);
     let axis = nalgebra::Unit::new_normalize(Vector3::new(azimuth.cos(), azimuth.sin(), 0.0));
-    Pose3::from_parts(nalgebra::Translation3::identity(), nalgebra::UnitQuaternion::from_axis_angle(&axis, tilt_deg.to_radians()))
+    Pose3::from_parts(
+        nalgebra::Translation3::identity(),
+        nalgebra::UnitQuaternion::from_axis_angle(&axis, tilt_deg.to_radians()),
+    )
 }
 
 impl SyntheticWorld {

@@ -150,12 +150,7 @@ impl MatcherConfig {
         check(self.hypothesis_samples <= 1_000_000, "hypothesis_samples", self.hypothesis_samples, "0..=1000000")?;
         check(positive(self.inlier_distance_m), "inlier_distance_m", self.inlier_distance_m, "finite and > 0")?;
         check(positive(self.inlier_height_m), "inlier_height_m", self.inlier_height_m, "finite and > 0")?;
-        check(
-            (0.0..=30.0).contains(&self.max_tilt_deg),
-            "max_tilt_deg",
-            self.max_tilt_deg,
-            "0 <= x <= 30",
-        )?;
+        check((0.0..=30.0).contains(&self.max_tilt_deg), "max_tilt_deg", self.max_tilt_deg, "0 <= x <= 30")?;
         check(positive(self.max_false_alarms), "max_false_alarms", self.max_false_alarms, "finite and > 0")?;
         check(
             self.ambiguity_ratio > 0.0 && self.ambiguity_ratio <= 1.0,
@@ -203,5 +198,10 @@ mod tests {
         assert!(err.to_string().contains("matcher.inlier_distance_m = -1"), "{err}");
         let bad = MatcherConfig { min_matches: 2, ..Default::default() };
         assert_eq!(bad.validate().unwrap_err().key, "min_matches");
+        for tilt in [-1.0, 31.0, f64::NAN] {
+            let bad = MatcherConfig { max_tilt_deg: tilt, ..Default::default() };
+            assert_eq!(bad.validate().unwrap_err().key, "max_tilt_deg", "{tilt}");
+        }
+        MatcherConfig { max_tilt_deg: 0.0, ..Default::default() }.validate().unwrap();
     }
 }

@@ -227,11 +227,8 @@ fn settle(
     if config.max_tilt_deg <= 0.0 {
         return (refined, config.model);
     }
-    let search = TiltSearch {
-        max_tilt_deg: config.max_tilt_deg,
-        radius_m: config.inlier_distance_m,
-        rounds: REFINE_ROUNDS,
-    };
+    let search =
+        TiltSearch { max_tilt_deg: config.max_tilt_deg, radius_m: config.inlier_distance_m, rounds: REFINE_ROUNDS };
     match tilt::refit(scorer, local, remote, &refined, search) {
         Some(tilted) => (tilted, RigidModel::Full3d),
         None => (refined, config.model),

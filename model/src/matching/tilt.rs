@@ -22,8 +22,8 @@
 //!    planar hypothesis stands.
 
 use super::verification::{Evaluation, Scorer};
-use crate::geometry::{fit_rigid, Correspondence, RigidModel};
 use super::ObjectGraph;
+use crate::geometry::{fit_rigid, Correspondence, RigidModel};
 use nalgebra::{Matrix2, Point3, Vector2, Vector3};
 
 /// Fewest relaxed inliers to fit a tilt (3 for the plane, 2 more for its noise).
@@ -55,11 +55,11 @@ pub fn refit(
     planar: &Evaluation,
     search: TiltSearch,
 ) -> Option<Evaluation> {
-    if !(search.max_tilt_deg > 0.0) || planar.inliers.len() < 2 {
+    if search.max_tilt_deg.is_nan() || search.max_tilt_deg <= 0.0 || planar.inliers.len() < 2 {
         return None;
     }
     let total: f64 = planar.inliers.iter().map(|i| i.weight).sum();
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         return None;
     }
     let pivot = planar
@@ -111,7 +111,7 @@ fn tilt_is_significant(pairs: &[Correspondence], planar: &crate::geometry::Pose3
     }
     let (a, off, d) = (s[(0, 0)], s[(0, 1)], s[(1, 1)]);
     let smallest = 0.5 * (a + d) - (0.25 * (a - d) * (a - d) + off * off).sqrt();
-    if !(smallest / n as f64 >= radius_m * radius_m) {
+    if smallest.is_nan() || smallest / (n as f64) < radius_m * radius_m {
         return false;
     }
     let Some(s_inverse) = s.try_inverse() else { return false };

@@ -285,7 +285,10 @@ fn tilt_table(table1: &[Row], false_claims: &[Row], tilted: &[Row]) -> String {
     };
     let nan = CellResult { success_pct: f64::NAN, recall_pct: f64::NAN, claims_pct: f64::NAN, median_ms: f64::NAN };
     let mut s = String::new();
-    let _ = writeln!(s, "\n## Frames tilted by {TILT_DEG}° (35 / 32 objects, the same pairs as above, remote frame tilted)\n");
+    let _ = writeln!(
+        s,
+        "\n## Frames tilted by {TILT_DEG}° (35 / 32 objects, the same pairs as above, remote frame tilted)\n"
+    );
     let _ = writeln!(
         s,
         "| frames | success NoErr % | success Err % | recall NoErr % | recall Err % | false claims NoErr % | false claims Err % | time ms |"
