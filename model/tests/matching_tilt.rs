@@ -94,7 +94,8 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
     /// Any tilt up to 5°, yaw and translation, with ±0.2 m / ±0.1 m of position noise on the
-    /// remote graph: the transform is recovered to the noise.
+    /// remote graph: the transform is recovered to the noise; a tilt under 0.5° may be left
+    /// (the planar estimate keeps it, `tilt::MIN_TILT_DEG`).
     #[test]
     fn recovers_any_tilt_up_to_five_degrees(
         tilt_deg in 0.0f64..=5.0, azimuth in -std::f64::consts::PI..std::f64::consts::PI,
@@ -107,10 +108,12 @@ proptest! {
         let remote = graph(&objects, &truth.inverse(), (0.2, 0.1), seed + 1);
         let estimate = aligned(&local, &remote, &MatcherConfig::default());
         let e = pose_error(&estimate, &truth);
-        prop_assert!(e.max_axis_rotation_deg() < 0.3, "{e:?}");
+        let left = if tilt_deg < 0.5 { tilt_deg } else { 0.0 };
+        prop_assert!(e.max_axis_rotation_deg() < 0.3 + left, "{e:?}");
         for q in remote.objects() {
+            // A tilt left in the estimate moves objects up to ~60 m from the pivot.
             let d = (estimate * q.centroid - truth * q.centroid).norm();
-            prop_assert!(d < 0.3, "object {:?} displaced {d} m", q.id);
+            prop_assert!(d < 0.3 + 60.0 * left.to_radians(), "object {:?} displaced {d} m", q.id);
         }
     }
 }
