@@ -17,7 +17,7 @@
 //!    seen in two directions). A flat world's ĝ is noise, χ² ≥ 16 in 0.03 % of them (e^−8).
 //!    A tilt under `MIN_TILT_DEG` is left to the planar estimate even when significant: it moves
 //!    an object 30 m from c by < 0.26 m vertically, well inside r_z, and inter-robot ICP refines
-//!    it (nearly exact simulated centroids made 0.1° slopes significant and moved level results).
+//!    it.
 //! 3. The 6-DoF weighted Kabsch fit min Σ w_i ‖p_i − (R q_i + t)‖² of those inliers
 //!    (`geometry::fit_rigid`, Full3d), re-scored and refined under the normal gates.
 //! 4. Adopted when its tilt acos((R e_z) · e_z) ≤ θ_max + `ADOPT_MARGIN_DEG` (a true tilt of
