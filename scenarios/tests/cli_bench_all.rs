@@ -18,6 +18,7 @@ fn bench_all_writes_every_table_with_its_rows() {
         "## Object-graph matching, paper §V-A",
         "### Table 1",
         "### Table 2",
+        "### Frames tilted by 3°",
         "## Team ATE against baselines, paper §V-B Table 3",
         "## Message sizes, paper §V-C Table 4",
         "## Sweeps",
@@ -45,6 +46,7 @@ fn bench_all_writes_every_table_with_its_rows() {
     let len = |v: &serde_json::Value| v.as_array().map_or(0, Vec::len);
     assert_eq!((len(&json["matching"]["table1"]), len(&json["matching"]["table2"])), (3, 4));
     assert_eq!(len(&json["matching"]["false_claims"]), 3);
+    assert_eq!(len(&json["matching"]["tilted"]), 2);
 
     let rows = json["baselines"]["rows"].as_array().unwrap();
     let methods = ["SGM", "Swarm-SC (ours)", "no association", "raw sharing, oracle join"];

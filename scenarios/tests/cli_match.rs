@@ -161,3 +161,64 @@ fn bad_input_exits_2_naming_the_file_with_nothing_on_stdout() {
         assert!(stderr.contains(expected), "{name}: says what is wrong ({expected}): {stderr}");
     }
 }
+
+/// Ten objects over 40 m seen by a robot whose frame is yawed, shifted and tilted by 3° (roll and
+/// pitch drift without an IMU); returns the files and the true local_from_remote.
+fn tilted_pair(dir: &Path) -> (PathBuf, PathBuf, nalgebra::Isometry3<f64>) {
+    use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
+    let points = [
+        (0.0, 0.0, 0.5, "chair"),
+        (18.0, 3.0, 0.4, "bench"),
+        (5.0, 27.0, 0.6, "chair"),
+        (-14.0, 9.0, 0.3, "trash_can"),
+        (24.0, 21.0, 2.5, "lamp_post"),
+        (-6.0, -15.0, 0.4, "bench"),
+        (11.0, -9.0, 0.5, "trash_can"),
+        (-19.0, 24.0, 2.4, "lamp_post"),
+        (30.0, -4.0, 0.6, "chair"),
+        (2.0, 12.0, 0.4, "bench"),
+    ];
+    let axis = Unit::new_normalize(Vector3::new(0.6, 0.8, 0.0));
+    let rotation = UnitQuaternion::from_axis_angle(&axis, 3f64.to_radians())
+        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.9);
+    let local_from_remote = Isometry3::from_parts(Translation3::new(7.0, -4.0, 0.3), rotation);
+    let object = |id: usize, p: Point3<f64>, label: &str| {
+        format!(r#"{{"id": {id}, "label": "{label}", "centroid": [{}, {}, {}]}}"#, p.x, p.y, p.z)
+    };
+    let local: Vec<String> =
+        points.iter().enumerate().map(|(k, &(x, y, z, l))| object(k, Point3::new(x, y, z), l)).collect();
+    let remote: Vec<String> = points
+        .iter()
+        .enumerate()
+        .map(|(k, &(x, y, z, l))| object(100 + k, local_from_remote.inverse() * Point3::new(x, y, z), l))
+        .collect();
+    let a = write(dir, "level.json", &format!(r#"{{"robot": "a", "objects": [{}]}}"#, local.join(",")));
+    let b = write(dir, "tilted.json", &format!(r#"{{"robot": "b", "objects": [{}]}}"#, remote.join(",")));
+    (a, b, local_from_remote)
+}
+
+#[test]
+fn tilted_frames_match_with_the_tilt_in_the_transform() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b, truth) = tilted_pair(dir.path());
+    let (a, b) = (a.to_str().unwrap(), b.to_str().unwrap());
+    let out = sgm(&["match", a, b], &[]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(v["success"], true, "{v}");
+    let t: Vec<Vec<f64>> = serde_json::from_value(v["T"].clone()).unwrap();
+    let expected = truth.to_homogeneous();
+    for r in 0..4 {
+        for c in 0..4 {
+            assert!((t[r][c] - expected[(r, c)]).abs() < 1e-6, "T = {t:?}, truth {expected}");
+        }
+    }
+    let matches: Vec<[u32; 2]> = serde_json::from_value(v["matches"].clone()).unwrap();
+    assert_eq!(matches, (0..10).map(|k| [k, 100 + k]).collect::<Vec<_>>());
+    // Gravity-aligned frames declared (an IMU): the transform stays x, y, z, yaw.
+    let out = sgm(&["match", a, b], &[("SGM__MATCHER__MAX_TILT_DEG", "0")]);
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["success"], true, "{v}");
+    let t: Vec<Vec<f64>> = serde_json::from_value(v["T"].clone()).unwrap();
+    assert_eq!((t[2][0], t[2][1], t[0][2], t[1][2], t[2][2]), (0.0, 0.0, 0.0, 0.0, 1.0), "T = {t:?}");
+}

@@ -7,6 +7,9 @@
 //! uniform errors (or only the remote graph, `ErrorOn::RemoteOnly`): ±1 m in x and y, ±0.5 m in z, ±2.5° roll/pitch, ±10° yaw (the rotation error
 //! changes the reported axis-aligned size). `mislabels` of the shared objects get another label
 //! in the remote graph. A pair with no overlap draws the remote graph from an independent world.
+//! With `tilt_deg` > 0 the remote graph's frame is also tilted by that angle about a horizontal
+//! axis of random direction (roll/pitch drift of an odometry without IMU): the same pair as
+//! without tilt (the direction comes from its own random stream), its remote frame tilted.
 //! Success: translation error < 2 m and every per-axis rotation error < 20°.
 
 use crate::geometry::{pose_error, pose_from_rpy_translation, pose_from_yaw_translation, Pose3};
@@ -36,12 +39,28 @@ pub struct SyntheticWorld {
     pub error_on: ErrorOn,
     /// Scales the "Err" errors (1: the paper's ±1 m, ±0.5 m, ±2.5°, ±10°), for sweeps.
     pub noise_scale: f64,
+    /// Tilt of the remote graph's frame against the local one's, degrees. Default 0.
+    pub tilt_deg: f64,
 }
 
 impl Default for SyntheticWorld {
     fn default() -> Self {
-        Self { side_m: 60.0, objects: 50, classes: 6, error_on: ErrorOn::Both, noise_scale: 1.0 }
+        Self { side_m: 60.0, objects: 50, classes: 6, error_on: ErrorOn::Both, noise_scale: 1.0, tilt_deg: 0.0 }
     }
+}
+
+/// Seed offset of the tilt direction's own random stream.
+const TILT_STREAM: u64 = 0x7469_6c74;
+
+/// A rotation by `tilt_deg` about a horizontal axis whose direction is drawn from `seed`.
+fn tilt(tilt_deg: f64, seed: u64) -> Pose3 {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ TILT_STREAM);
+    let azimuth: f64 = rng.random_range(-PI..PI);
+    let axis = nalgebra::Unit::new_normalize(Vector3::new(azimuth.cos(), azimuth.sin(), 0.0));
+    Pose3::from_parts(
+        nalgebra::Translation3::identity(),
+        nalgebra::UnitQuaternion::from_axis_angle(&axis, tilt_deg.to_radians()),
+    )
 }
 
 impl SyntheticWorld {
@@ -185,7 +204,10 @@ pub fn generate_pair(world_spec: &SyntheticWorld, spec: &PairSpec, seed: u64) ->
     }
 
     let world_from_local = random_frame(world_spec, &mut rng);
-    let world_from_remote = random_frame(world_spec, &mut rng);
+    let mut world_from_remote = random_frame(world_spec, &mut rng);
+    if world_spec.tilt_deg != 0.0 {
+        world_from_remote *= tilt(world_spec.tilt_deg, seed);
+    }
     let (local, local_ids) = make_graph(
         &objects,
         &local_chosen,

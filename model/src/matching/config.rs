@@ -39,6 +39,11 @@ pub struct MatcherConfig {
     pub inlier_distance_m: f64,
     /// ... and within this vertical distance, m. Default 1.5.
     pub inlier_height_m: f64,
+    /// Largest tilt between the two robots' world frames (roll/pitch drift of an odometry
+    /// without IMU), degrees: a planar hypothesis whose vertical residuals show a significant
+    /// tilt up to this is refitted in 6-DoF (`matching::tilt`). 0: gravity-aligned frames (an
+    /// IMU), the transform stays 4-DoF (x, y, z, yaw). Default 5.
+    pub max_tilt_deg: f64,
     /// Largest expected number of false alarms (a-contrario NFA) of an accepted transform.
     /// Default 0.1: the bound is conservative; measured false claims stay near 1% (book,
     /// matching chapter, `sgm bench matching`).
@@ -89,6 +94,7 @@ impl Default for MatcherConfig {
             hypothesis_samples: 1024,
             inlier_distance_m: 3.0,
             inlier_height_m: 1.5,
+            max_tilt_deg: 5.0,
             max_false_alarms: 0.1,
             ambiguity_ratio: 0.8,
             min_matches: 3,
@@ -144,6 +150,7 @@ impl MatcherConfig {
         check(self.hypothesis_samples <= 1_000_000, "hypothesis_samples", self.hypothesis_samples, "0..=1000000")?;
         check(positive(self.inlier_distance_m), "inlier_distance_m", self.inlier_distance_m, "finite and > 0")?;
         check(positive(self.inlier_height_m), "inlier_height_m", self.inlier_height_m, "finite and > 0")?;
+        check((0.0..=30.0).contains(&self.max_tilt_deg), "max_tilt_deg", self.max_tilt_deg, "0 <= x <= 30")?;
         check(positive(self.max_false_alarms), "max_false_alarms", self.max_false_alarms, "finite and > 0")?;
         check(
             self.ambiguity_ratio > 0.0 && self.ambiguity_ratio <= 1.0,
@@ -191,5 +198,10 @@ mod tests {
         assert!(err.to_string().contains("matcher.inlier_distance_m = -1"), "{err}");
         let bad = MatcherConfig { min_matches: 2, ..Default::default() };
         assert_eq!(bad.validate().unwrap_err().key, "min_matches");
+        for tilt in [-1.0, 31.0, f64::NAN] {
+            let bad = MatcherConfig { max_tilt_deg: tilt, ..Default::default() };
+            assert_eq!(bad.validate().unwrap_err().key, "max_tilt_deg", "{tilt}");
+        }
+        MatcherConfig { max_tilt_deg: 0.0, ..Default::default() }.validate().unwrap();
     }
 }

@@ -7,6 +7,8 @@
 //! 5. rigid hypotheses from pairs of the best associations (then, if none is significant, from
 //!    pairs sampled along the affinity rows), inlier scoring, refinement (beyond the paper):
 //!    `verification`
+//!    A hypothesis whose vertical residuals show a significant tilt of the frames is refitted in
+//!    6-DoF: `tilt`
 //! 6. refusal: too few, collinear, not significant (NFA), ambiguous → `significance`
 //! 7. weighted least-squares transform (§IV-C) → `geometry::fit_rigid` (inside refinement)
 
@@ -16,6 +18,7 @@ use super::labels::LabelSimilarity;
 use super::outcome::*;
 use super::significance::log10_nfa_adaptive;
 use super::spectral::principal_eigenvector;
+use super::tilt::{self, TiltSearch};
 use super::verification::{max_displacement, Evaluation, Scorer};
 use super::vertex::VertexCompare;
 use super::{MatcherConfig, ObjectGraph};
@@ -107,12 +110,9 @@ pub fn match_graphs(
             search.try_seed(local, remote, &strong, (a, b), config, &scorer);
         }
     }
-    let stage_one_significant = search
-        .best()
-        .map(|b| {
-            null.significance(&scorer.refine(b.clone(), config.model, REFINE_ROUNDS), search.tests, remote) >= required
-        })
-        .unwrap_or(false);
+    let settle = |e: &Evaluation| settle(&scorer, local, remote, e, config);
+    let stage_one_significant =
+        search.best().map(|b| null.significance(&settle(b).0, search.tests, remote) >= required).unwrap_or(false);
     if !stage_one_significant && config.hypothesis_samples > 0 {
         let mut rng = ChaCha8Rng::seed_from_u64(SAMPLING_SEED);
         for _ in 0..config.hypothesis_samples {
@@ -133,7 +133,7 @@ pub fn match_graphs(
         return refused(RefusalReason::NoConsistentPair, stats, spectral_matches);
     }
     hypotheses.sort_by(|a, b| b.score.total_cmp(&a.score));
-    let best = scorer.refine(hypotheses[0].clone(), config.model, REFINE_ROUNDS);
+    let (best, model) = settle(&hypotheses[0]);
 
     // 6: refusals.
     let significance = null.significance(&best, tests, remote);
@@ -165,7 +165,7 @@ pub fn match_graphs(
         if displacement <= 2.0 * config.inlier_distance_m {
             continue;
         }
-        let runner_up = scorer.refine(other.clone(), config.model, REFINE_ROUNDS);
+        let (runner_up, _) = settle(other);
         let displacement = max_displacement(&best.local_from_remote, &runner_up.local_from_remote, remote_points());
         let ratio = runner_up.score / best.score;
         if displacement > 2.0 * config.inlier_distance_m
@@ -189,7 +189,7 @@ pub fn match_graphs(
                 weight: vertices.similarity(&local.objects()[i.local as usize], &remote.objects()[i.remote as usize]),
             })
             .collect::<Vec<_>>(),
-        config.model,
+        model,
     )
     .unwrap_or(best.local_from_remote);
     let mut matches: Vec<VerifiedMatch> = best
@@ -211,6 +211,27 @@ pub fn match_graphs(
         outcome: MatchOutcome::Aligned(Alignment { local_from_remote, matches, significance, rmse_m }),
         spectral_matches,
         stats,
+    }
+}
+
+/// A hypothesis refined under the configured model, then refitted in 6-DoF when its frames are
+/// tilted (`tilt`); with the model of the result.
+fn settle(
+    scorer: &Scorer,
+    local: &ObjectGraph,
+    remote: &ObjectGraph,
+    hypothesis: &Evaluation,
+    config: &MatcherConfig,
+) -> (Evaluation, RigidModel) {
+    let refined = scorer.refine(hypothesis.clone(), config.model, REFINE_ROUNDS);
+    if config.max_tilt_deg <= 0.0 {
+        return (refined, config.model);
+    }
+    let search =
+        TiltSearch { max_tilt_deg: config.max_tilt_deg, radius_m: config.inlier_distance_m, rounds: REFINE_ROUNDS };
+    match tilt::refit(scorer, local, remote, &refined, search) {
+        Some(tilted) => (tilted, RigidModel::Full3d),
+        None => (refined, config.model),
     }
 }
 

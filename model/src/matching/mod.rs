@@ -18,6 +18,7 @@ pub mod place_candidates;
 pub mod scan_context;
 pub mod significance;
 mod spectral;
+pub mod tilt;
 mod verification;
 mod vertex;
 

@@ -139,14 +139,27 @@ impl<'a> Scorer<'a> {
 
     /// Inliers and score of `local_from_remote`.
     pub fn evaluate(&self, local_from_remote: &Pose3) -> Evaluation {
+        self.evaluate_gated(local_from_remote, |_| self.height)
+    }
+
+    /// Inliers and score of `local_from_remote` under a vertical gate r_z + s·‖(p̂ − c)_xy‖ that
+    /// grows with the horizontal distance of the prediction p̂ from `pivot` c at slope s (a tilt
+    /// of up to atan s about c moves a centroid that far vertically): see `tilt`.
+    pub fn evaluate_relaxed(&self, local_from_remote: &Pose3, pivot: Point3<f64>, slope: f64) -> Evaluation {
+        self.evaluate_gated(local_from_remote, |p: &Point3<f64>| self.height + slope * (p - pivot).xy().norm())
+    }
+
+    /// Inliers and score of `local_from_remote` with the vertical gate `height(p̂)` at prediction p̂.
+    fn evaluate_gated(&self, local_from_remote: &Pose3, height: impl Fn(&Point3<f64>) -> f64) -> Evaluation {
         let local = self.local.objects();
         let mut claims = self.claims.borrow_mut();
-        let (r2, h) = (self.radius * self.radius, self.height);
+        let r2 = self.radius * self.radius;
         // p = R q + t with the rotation as a matrix (cheaper than a quaternion per point).
         let rotation = local_from_remote.rotation.to_rotation_matrix();
         let translation = local_from_remote.translation.vector;
         for (m, q) in self.remote.objects().iter().enumerate() {
             let predicted = Point3::from(rotation * q.centroid.coords + translation);
+            let h = height(&predicted);
             let mut best: Option<Inlier> = None;
             self.grid.around(predicted.x, predicted.y, |i| {
                 let p = &local[i as usize];

@@ -1,6 +1,8 @@
 //! `sgm bench matching`: paper §V-A, Tables 1 and 2, with the paper's figures beside ours, the
 //! dense paper formulation re-implemented and run on the same pairs, and false claims on
 //! non-overlapping pairs. Success: translation error < 2 m and every axis rotation error < 20°.
+//! A last family repeats the 35 / 32 pairs (shared and not) with the remote frame tilted by
+//! `TILT_DEG` (odometry roll/pitch drift without IMU): the same pairs, tilted.
 
 use super::Section;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -12,6 +14,9 @@ use sgm_scenarios::settings::load_matcher_config;
 use std::fmt::Write;
 use std::path::PathBuf;
 use std::time::Instant;
+
+/// Tilt of the remote frame in the tilted family, degrees (issue 31's target case).
+const TILT_DEG: f64 = 3.0;
 
 /// The paper's published figure for a cell (success NoErr, Err; recall NoErr, Err; time ms).
 #[derive(Clone, Copy, Serialize)]
@@ -50,6 +55,9 @@ struct Report {
     table1: Vec<Row>,
     table2: Vec<Row>,
     false_claims: Vec<Row>,
+    tilt_deg: f64,
+    /// 35 / 32 with 17 shared, then with none: the pairs of `table1` and `false_claims`, tilted.
+    tilted: Vec<Row>,
 }
 
 struct Accumulator {
@@ -160,7 +168,7 @@ pub fn run(options: Options) -> anyhow::Result<Section> {
         (12, PaperFigures { success: [55.0, 30.0], recall: [29.0, 27.0], time_ms: 178.0 }),
     ];
     let false_claim_specs = [(8, 8), (15, 15), (35, 32)];
-    let cells = (table1_specs.len() * 2 + table2_specs.len() * 2 + false_claim_specs.len() * 2) as u64;
+    let cells = (table1_specs.len() * 2 + table2_specs.len() * 2 + false_claim_specs.len() * 2 + 4) as u64;
     let progress = ProgressBar::new(cells * reps as u64);
     progress.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} trials ({eta})")
@@ -168,12 +176,19 @@ pub fn run(options: Options) -> anyhow::Result<Section> {
     );
 
     let setup = Setup { reps, seed, world, config: &config, skip_dense, progress: &progress };
+    let tilted_world = SyntheticWorld { tilt_deg: TILT_DEG, ..world };
+    let tilted_setup = Setup { world: tilted_world, skip_dense: true, ..setup };
+    // Cell numbers seed the pairs: the tilted family reuses those of its untilted rows.
     let mut cell = 0u64;
+    let mut untilted_cells = Vec::new();
     let mut row = |local, remote, overlap, mislabels, paper| {
         let mut sgm = [CellResult::default(); 2];
         let mut dense = [CellResult::default(); 2];
         for (k, noisy) in [false, true].into_iter().enumerate() {
             let spec = PairSpec { local, remote, overlap, noisy, mislabels };
+            if (local, remote, mislabels) == (35, 32, 0) {
+                untilted_cells.push((spec, cell));
+            }
             let (s, d) = run_cell(spec, cell, &setup);
             sgm[k] = s;
             dense[k] = d.unwrap_or(CellResult {
@@ -189,6 +204,25 @@ pub fn run(options: Options) -> anyhow::Result<Section> {
     let table1: Vec<Row> = table1_specs.iter().map(|&(l, r, o, p)| row(l, r, o, 0, Some(p))).collect();
     let table2: Vec<Row> = table2_specs.iter().map(|&(m, p)| row(35, 32, 17, m, Some(p))).collect();
     let false_claims: Vec<Row> = false_claim_specs.iter().map(|&(l, r)| row(l, r, 0, 0, None)).collect();
+    let tilted: Vec<Row> = untilted_cells
+        .chunks(2)
+        .map(|noisy_and_not| {
+            let mut sgm = [CellResult::default(); 2];
+            for (k, &(spec, cell)) in noisy_and_not.iter().enumerate() {
+                sgm[k] = run_cell(spec, cell, &tilted_setup).0;
+            }
+            let spec = noisy_and_not[0].0;
+            Row {
+                local: spec.local,
+                remote: spec.remote,
+                overlap: spec.overlap,
+                mislabels: 0,
+                paper: None,
+                sgm,
+                dense_paper_formulation: None,
+            }
+        })
+        .collect();
     progress.finish_and_clear();
 
     let config_arg = config_path.map(|p| format!(" --config {}", p.display())).unwrap_or_default();
@@ -198,8 +232,9 @@ pub fn run(options: Options) -> anyhow::Result<Section> {
         ErrorOnArg::Remote => format!("{skip_arg} --error-on remote"),
     };
     let command = format!("{}sgm bench matching --reps {reps} --seed {seed}{config_arg}{skip_arg}", overrides.concat());
-    let markdown = tables(&command, reps, &table1, &table2, &false_claims);
-    let report = Report { command, reps, seed, table1, table2, false_claims };
+    let mut markdown = tables(&command, reps, &table1, &table2, &false_claims);
+    markdown.push_str(&tilt_table(&table1, &false_claims, &tilted));
+    let report = Report { command, reps, seed, table1, table2, false_claims, tilt_deg: TILT_DEG, tilted };
     Ok(Section { markdown, json: serde_json::to_value(report)? })
 }
 
@@ -238,6 +273,43 @@ fn tables(command: &str, reps: usize, table1: &[Row], table2: &[Row], false_clai
             num(r.sgm[0].claims_pct, 1),
             num(d[1].claims_pct, 0),
             num(r.sgm[1].claims_pct, 1)
+        );
+    }
+    s
+}
+
+/// The tilted family beside the same pairs untilted: success, recall and false claims.
+fn tilt_table(table1: &[Row], false_claims: &[Row], tilted: &[Row]) -> String {
+    let untilted = |rows: &[Row], overlap: bool| {
+        rows.iter().find(|r| (r.local, r.remote) == (35, 32) && (r.overlap > 0) == overlap).map(|r| r.sgm)
+    };
+    let nan = CellResult { success_pct: f64::NAN, recall_pct: f64::NAN, claims_pct: f64::NAN, median_ms: f64::NAN };
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "\n## Frames tilted by {TILT_DEG}° (35 / 32 objects, the same pairs as above, remote frame tilted)\n"
+    );
+    let _ = writeln!(
+        s,
+        "| frames | success NoErr % | success Err % | recall NoErr % | recall Err % | false claims NoErr % | false claims Err % | time ms |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+    let families = [
+        ("level", untilted(table1, true), untilted(false_claims, false)),
+        ("tilted", untilted(tilted, true), untilted(tilted, false)),
+    ];
+    for (name, shared, disjoint) in families {
+        let (a, b) = (shared.unwrap_or([nan; 2]), disjoint.unwrap_or([nan; 2]));
+        let _ = writeln!(
+            s,
+            "| {name} | {} | {} | {} | {} | {} | {} | {} |",
+            num(a[0].success_pct, 1),
+            num(a[1].success_pct, 1),
+            num(a[0].recall_pct, 1),
+            num(a[1].recall_pct, 1),
+            num(b[0].claims_pct, 1),
+            num(b[1].claims_pct, 1),
+            num(a[1].median_ms, 3),
         );
     }
     s

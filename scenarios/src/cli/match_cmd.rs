@@ -2,7 +2,8 @@
 //!
 //! Output (one JSON object on stdout, exit 0):
 //! `{"success": true, "T": [[4×4]], "matches": [[local_id, remote_id], ...], "score": f64, "time_ms": f64}`
-//! with p_local = T · p_remote; on refusal `"success": false` and `"reason"`, no `T`.
+//! with p_local = T · p_remote (rigid; roll and pitch too when the frames are tilted,
+//! `matcher.max_tilt_deg`); on refusal `"success": false` and `"reason"`, no `T`.
 //! Bad input: exit 2, one line on stderr naming the file and the fault, nothing on stdout.
 
 use serde_json::json;
