@@ -100,7 +100,7 @@ fn write_rosbag_seeds() {
     use sgm_bridge::config::RosConfig;
     use sgm_model::geometry::Pose3;
     use sgm_model::perception::projection::{CameraModel, LabelImage};
-    use sgm_scenarios::bag_out::{BagRecorder, RecordedFrame};
+    use sgm_scenarios::bag_out::{BagRecorder, RecordedFrame, RecordedImage};
     let dir = PathBuf::from(std::env::var("SGM_FUZZ_SEEDS").expect("SGM_FUZZ_SEEDS=DIR"));
     let camera = CameraModel { width: 4, height: 3, fx: 2.0, fy: 2.0, cx: 2.0, cy: 1.5, distortion: [0.0; 5] };
     let image = LabelImage::new(4, 3, (0..12).map(|i| i % 3).collect()).expect("a 4 × 3 image");
@@ -121,8 +121,14 @@ fn write_rosbag_seeds() {
                         truth: &pose,
                         points: &points,
                         labels: (!camera_on).then_some(&labels[..]),
-                        image: camera_on.then_some((&image, &camera)),
+                        image: camera_on.then_some(RecordedImage {
+                            image: &image,
+                            camera: &camera,
+                            stamp: t,
+                            camera_from_body: sgm_scenarios::sim::camera::camera_from_body(),
+                        }),
                         times: None,
+                        imu: &[],
                     },
                 )
                 .expect("recorded");

@@ -1,4 +1,5 @@
-//! `sgm bench realism`: what each of the unkind world's effects costs. The paper's outdoor
+//! `sgm bench realism`: what each of the unkind world's effects costs (the simulator's terrain,
+//! platforms, LiDAR, camera, segmenter and odometry keys). The paper's outdoor
 //! mission (`outdoor_two_robots`) is run as it is, with each effect alone, and with all of them
 //! (`legged_campus`, the same mission on the paper's robots); for each: the pairs aligned (and
 //! none more than [`super::WRONG_M`] off), the mean inter-robot error at the end of the mission
@@ -54,6 +55,24 @@ fn calibration_errors(s: &mut Scenario) {
     s.camera.clock_offset_s = 0.01;
 }
 
+fn confusion(s: &mut Scenario) {
+    let row = |pairs: &[(&str, f64)]| pairs.iter().map(|(c, p)| (c.to_string(), *p)).collect();
+    let c = &mut s.segmentation.confusion;
+    c.insert("bench".into(), row(&[("bench", 0.9), ("trash_can", 0.1)]));
+    c.insert("trash_can".into(), row(&[("trash_can", 0.9), ("bench", 0.1)]));
+    c.insert("lamp_post".into(), row(&[("lamp_post", 0.85), ("tree", 0.15)]));
+    c.insert("tree".into(), row(&[("tree", 0.95), ("lamp_post", 0.05)]));
+}
+
+fn people(s: &mut Scenario) {
+    s.segmentation.people = 10;
+    s.segmentation.add_person_class(&mut s.fusion.classes);
+}
+
+fn tilt_drift(s: &mut Scenario) {
+    s.odometry.tilt_walk_deg = 0.1;
+}
+
 const EFFECTS: &[Effect] = &[
     Effect { name: "none", what: "outdoor_two_robots as it is", apply: |_| {} },
     Effect { name: "terrain", what: "10° hills, 3 sidewalks with kerbs, 2 ramps", apply: terrain },
@@ -90,6 +109,43 @@ const EFFECTS: &[Effect] = &[
         name: "calibration errors",
         what: "that mount told 1° and 2 cm off, camera clock 10 ms off",
         apply: calibration_errors,
+    },
+    Effect {
+        name: "confusion",
+        what: "a systematic confusion matrix (bench ↔ trash can 10 %, lamp post → tree 15 %, tree → lamp post 5 %)",
+        apply: confusion,
+    },
+    Effect {
+        name: "edge bleed",
+        what: "labels bleeding 3 px over farther surfaces",
+        apply: |s| s.segmentation.edge_bleed_px = 3.0,
+    },
+    Effect {
+        name: "misses",
+        what: "objects under 100 px² or beyond 25 m missed",
+        apply: |s| {
+            s.segmentation.min_pixels = 100.0;
+            s.segmentation.max_range_m = Some(25.0);
+        },
+    },
+    Effect {
+        name: "false blobs",
+        what: "one false-positive blob per frame",
+        apply: |s| s.segmentation.false_blobs_per_frame = 1.0,
+    },
+    Effect { name: "people", what: "10 people walking through (a dynamic class)", apply: people },
+    Effect {
+        name: "tilt drift",
+        what: "odometry without gravity: roll/pitch walk 0.1°/√m, tilt estimated",
+        apply: tilt_drift,
+    },
+    Effect {
+        name: "tilt drift, 4-DoF",
+        what: "the same, the matcher told the frames are level (matcher.max_tilt_deg = 0)",
+        apply: |s| {
+            tilt_drift(s);
+            s.matcher.matching.max_tilt_deg = 0.0;
+        },
     },
 ];
 
