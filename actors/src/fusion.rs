@@ -119,13 +119,27 @@ impl Fusion {
                 tracing::info!(stamp = frame.stamp, "scan not deskewed: {refusal}");
             }
         }
+        if before.imu_not_covering == 0 && deskewer.counts().imu_not_covering == 1 {
+            tracing::warn!(
+                stamp = frame.stamp,
+                "the IMU's samples do not cover this sweep (a gap, or samples late): deskewed with the odometry's \
+                 twist; the fusion status counts each (deskew.imu_not_covering)"
+            );
+        }
         frame
     }
 
     /// The camera from the body at the scan's stamp: the mount, moved by the body's motion
     /// over `offset_s` when the image was taken at another time and the velocity is known.
     fn camera_for_scan(&mut self, camera_from_body: &Pose3, offset_s: f64, twist: Option<&Tangent3>) -> Pose3 {
-        if offset_s == 0.0 || !offset_s.is_finite() {
+        if offset_s == 0.0 {
+            return *camera_from_body;
+        }
+        if !offset_s.is_finite() {
+            if self.images.uncompensated == 0 {
+                tracing::warn!("a label image's offset from its scan is {offset_s}: used as if taken with the scan");
+            }
+            self.images.uncompensated += 1;
             return *camera_from_body;
         }
         let offset_ms = (offset_s.abs() * 1000.0).ceil() as u64;
@@ -154,7 +168,21 @@ impl Handler<SensorFrame> for Fusion {
     fn handle(&mut self, frame: SensorFrame, ctx: &mut Context<Self>) {
         contained(ctx, "fusion", || {
             let twist = self.velocity.update(frame.stamp, &frame.odom_from_body);
+            let refused_before = self.gyro.counts();
             self.gyro.extend(&frame.imu);
+            let refused = self.gyro.counts();
+            if refused_before.invalid == 0 && refused.invalid > 0 {
+                tracing::warn!(
+                    stamp = frame.stamp,
+                    "IMU samples refused: a non-finite or saturated rate (fusion status imu.invalid)"
+                );
+            }
+            if refused_before.out_of_order == 0 && refused.out_of_order > 0 {
+                tracing::warn!(
+                    stamp = frame.stamp,
+                    "IMU samples refused: not after the newest kept (fusion status imu.out_of_order)"
+                );
+            }
             let frame = self.deskewed(frame, twist.as_ref());
             let labels = match &frame.labels {
                 FrameLabels::PerPoint(labels) => labels.clone(),

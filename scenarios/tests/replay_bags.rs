@@ -39,16 +39,26 @@ fn without_world(mut value: serde_json::Value) -> serde_json::Value {
     value
 }
 
+/// `scenario` run and recorded as bags into a fresh temporary directory (kept alive by the
+/// returned handle): the run's outcome and alpha's and bravo's bags.
+fn recorded(
+    system: &actix_rt::SystemRunner,
+    scenario: &Scenario,
+) -> (sgm_scenarios::record::RunOutcome, tempfile::TempDir, Vec<std::path::PathBuf>) {
+    let dir = tempfile::tempdir().unwrap();
+    let outcome = system.block_on(run_recording(scenario, None, Some(dir.path()))).unwrap();
+    let bags = vec![dir.path().join("alpha.bag"), dir.path().join("bravo.bag")];
+    (outcome, dir, bags)
+}
+
 #[test]
 fn a_scenario_replayed_from_its_bags_gives_the_same_run() {
-    let dir = tempfile::tempdir().unwrap();
     let scenario = Scenario::load_with_env("quickstart", "SGM_REPLAY_TEST").unwrap();
     let system = actix_rt::System::new();
-    let outcome = system.block_on(run_recording(&scenario, None, Some(dir.path()))).unwrap();
+    let (outcome, _dir, bags) = recorded(&system, &scenario);
     let ran = report::compute(&outcome.record);
     assert!(ran.alignments.iter().all(|a| a.first_aligned_s.is_some()), "the scenario aligns");
 
-    let bags = vec![dir.path().join("alpha.bag"), dir.path().join("bravo.bag")];
     let replayed = system.block_on(replay(&scenario, &bags, None)).unwrap();
     for b in &replayed.bags {
         assert!(b.refused.is_empty(), "{b:?}");
@@ -105,14 +115,12 @@ fn a_scenario_replayed_from_its_bags_gives_the_same_run() {
 /// deskewing off changes the result.
 #[test]
 fn point_times_survive_the_bags_and_deskew_the_replay_as_the_run() {
-    let dir = tempfile::tempdir().unwrap();
     let mut scenario = Scenario::load_with_env("quickstart", "SGM_REPLAY_SWEEP_TEST").unwrap();
     scenario.scenario.duration_s = 70.0;
     scenario.lidar.sweep_s = 0.1;
     let system = actix_rt::System::new();
-    let outcome = system.block_on(run_recording(&scenario, None, Some(dir.path()))).unwrap();
+    let (outcome, _dir, bags) = recorded(&system, &scenario);
     let ran = serde_json::to_value(report::compute(&outcome.record)).unwrap();
-    let bags = vec![dir.path().join("alpha.bag"), dir.path().join("bravo.bag")];
     let replayed = system.block_on(replay(&scenario, &bags, None)).unwrap();
     let again = serde_json::to_value(report::compute(&replayed.run.record)).unwrap();
     assert_eq!(without_world(ran.clone()), without_world(again));
@@ -143,17 +151,15 @@ fn bad_bag_lists_are_named() {
 /// later, so some frames are handled a step later).
 #[test]
 fn a_camera_off_the_lidar_firing_late_replays_to_the_runs_result() {
-    let dir = tempfile::tempdir().unwrap();
     let mut scenario = Scenario::load_with_env("quickstart", "SGM_REPLAY_CAMERA_TEST").unwrap();
     scenario.scenario.duration_s = 70.0;
     scenario.camera.mount_xyz_m = [0.12, -0.03, 0.08];
     scenario.camera.mount_rpy_deg = [0.0, 4.0, -6.0];
     scenario.camera.exposure_offset_s = 0.03;
     let system = actix_rt::System::new();
-    let outcome = system.block_on(run_recording(&scenario, None, Some(dir.path()))).unwrap();
+    let (outcome, _dir, bags) = recorded(&system, &scenario);
     let ran = report::compute(&outcome.record);
     assert!(ran.alignments.iter().all(|a| a.first_aligned_s.is_some()), "the scenario aligns");
-    let bags = vec![dir.path().join("alpha.bag"), dir.path().join("bravo.bag")];
     let replayed = system.block_on(replay(&scenario, &bags, None)).unwrap();
     for b in &replayed.bags {
         assert!(b.health.is_empty(), "a healthy bag: {:?}", b.health);

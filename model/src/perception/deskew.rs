@@ -109,6 +109,9 @@ pub struct DeskewCounts {
     pub refused: u64,
     /// Of the deskewed, those whose rotation came from the gyro.
     pub with_imu: u64,
+    /// Of the deskewed, those whose IMU samples did not cover the sweep (a gap, or samples not
+    /// yet arrived): deskewed with the odometry's twist instead.
+    pub imu_not_covering: u64,
 }
 
 /// The constant-velocity deskew of a stream of scans, counted: the twist over a scan's sweep is
@@ -146,7 +149,13 @@ impl Deskewer {
                 straight
             }
             (Some(_), None, None) => Err(DeskewRefusal::NoMotion),
-            (Some(times), Some(twist), None) => deskew(&points, times, twist),
+            (Some(times), Some(twist), None) => {
+                let straight = deskew(&points, times, twist);
+                if straight.is_ok() && gyro.is_some() {
+                    self.counts.imu_not_covering += 1;
+                }
+                straight
+            }
         };
         match outcome {
             Ok(straight) => {
@@ -235,7 +244,10 @@ mod tests {
         let v = velocity.update(3.0, &odom(3.0));
         let (_, outcome) = deskewer.apply(v.as_ref(), None, world.clone(), Some(&times[..3]));
         assert!(matches!(outcome, Err(DeskewRefusal::TimesMismatch { .. })));
-        assert_eq!(deskewer.counts(), DeskewCounts { deskewed: 2, no_times: 1, no_motion: 1, refused: 1, with_imu: 0 });
+        assert_eq!(
+            deskewer.counts(),
+            DeskewCounts { deskewed: 2, no_times: 1, no_motion: 1, refused: 1, with_imu: 0, imu_not_covering: 0 }
+        );
     }
 
     #[test]
@@ -294,5 +306,6 @@ mod tests {
         // A gyro that does not cover the sweep: the twist, counted as such.
         let (_, outcome) = deskewer.apply(Some(&twist), Some((&gyro, stamp + 5.0)), measured, Some(&times));
         assert_eq!((outcome, deskewer.counts().with_imu), (Ok(()), 1));
+        assert_eq!(deskewer.counts().imu_not_covering, 1);
     }
 }

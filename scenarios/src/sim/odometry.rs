@@ -101,51 +101,48 @@ mod tests {
         assert!((o.truth_from_world.translation.vector - Vector3::new(5.0, -2.0, 0.0)).norm() < 1e-12);
     }
 
+    /// The pose each of 400 runs of 100 one-metre steps along x ends at, under `spec` (seeded).
+    fn after_100_m(spec: &OdometrySpec, seed: u64) -> Vec<Pose3> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        (0..400)
+            .map(|_| {
+                let mut o = Odometry::new(spec);
+                let mut last = Pose3::identity();
+                for k in 0..=100 {
+                    last = o.step(&pose_from_yaw_translation(0.0, Vector3::new(k as f64, 0.0, 0.0)), &mut rng);
+                }
+                last
+            })
+            .collect()
+    }
+
+    const STILL: OdometrySpec = OdometrySpec {
+        position_walk_m: 0.0,
+        yaw_walk_deg: 0.0,
+        height_walk_m: 0.0,
+        roll_pitch_deg: 0.0,
+        tilt_walk_deg: 0.0,
+    };
+
     #[test]
     fn the_yaw_walk_grows_with_the_square_root_of_distance() {
-        // 400 runs of 100 one-metre steps: the yaw error's spread is σ·√100.
-        let spec = OdometrySpec {
-            position_walk_m: 0.0,
-            yaw_walk_deg: 0.1,
-            height_walk_m: 0.0,
-            roll_pitch_deg: 0.0,
-            tilt_walk_deg: 0.0,
-        };
-        let mut rng = ChaCha8Rng::seed_from_u64(2);
-        let mut sum_sq = 0.0;
-        for _ in 0..400 {
-            let mut o = Odometry::new(&spec);
-            let mut last = Pose3::identity();
-            for k in 0..=100 {
-                last = o.step(&pose_from_yaw_translation(0.0, Vector3::new(k as f64, 0.0, 0.0)), &mut rng);
-            }
-            sum_sq += yaw_of(&last).to_degrees().powi(2);
-        }
-        let sd = (sum_sq / 400.0).sqrt();
+        // At 0.1°/√m the yaw error's spread is σ·√100 = 1°.
+        let ends = after_100_m(&OdometrySpec { yaw_walk_deg: 0.1, ..STILL }, 2);
+        let sd = (ends.iter().map(|p| yaw_of(p).to_degrees().powi(2)).sum::<f64>() / 400.0).sqrt();
         assert!((sd - 1.0).abs() < 0.1, "{sd}");
     }
 
     #[test]
     fn without_a_gravity_reference_the_frame_tilts_with_the_square_root_of_distance() {
-        // 400 runs of 100 one-metre steps at 0.1°/√m: roll and pitch spread 1° each.
-        let spec = OdometrySpec {
-            position_walk_m: 0.0,
-            yaw_walk_deg: 0.0,
-            height_walk_m: 0.0,
-            roll_pitch_deg: 0.0,
-            tilt_walk_deg: 0.1,
-        };
-        let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let mut sum_sq = 0.0;
-        for _ in 0..400 {
-            let mut o = Odometry::new(&spec);
-            let mut last = Pose3::identity();
-            for k in 0..=100 {
-                last = o.step(&pose_from_yaw_translation(0.0, Vector3::new(k as f64, 0.0, 0.0)), &mut rng);
-            }
-            let (roll, pitch, _) = last.rotation.euler_angles();
-            sum_sq += roll.to_degrees().powi(2) + pitch.to_degrees().powi(2);
-        }
+        // At 0.1°/√m roll and pitch spread 1° each.
+        let ends = after_100_m(&OdometrySpec { tilt_walk_deg: 0.1, ..STILL }, 3);
+        let sum_sq: f64 = ends
+            .iter()
+            .map(|p| {
+                let (roll, pitch, _) = p.rotation.euler_angles();
+                roll.to_degrees().powi(2) + pitch.to_degrees().powi(2)
+            })
+            .sum();
         let sd = (sum_sq / 800.0).sqrt();
         assert!((sd - 1.0).abs() < 0.1, "{sd}");
     }
