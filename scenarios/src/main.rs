@@ -258,6 +258,9 @@ enum BenchCommand {
         /// Only the effects whose names contain this.
         #[arg(long)]
         only: Option<String>,
+        /// Run each effect with the scenario's seed and the seeds after it, this many in all.
+        #[arg(long, default_value_t = 1)]
+        seeds: u64,
         /// Also write the table as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -398,8 +401,9 @@ fn main() -> ExitCode {
             let options = bench::sweeps::Options { duration, plots };
             emit("sweeps", bench::sweeps::run_bench(&options), json.as_deref())
         }
-        Command::Bench { which: BenchCommand::Realism { duration, only, json } } => {
-            emit("realism", bench::realism::run_bench(duration, only.as_deref()), json.as_deref())
+        Command::Bench { which: BenchCommand::Realism { duration, only, seeds, json } } => {
+            let options = bench::realism::Options { duration, only: only.as_deref(), seeds };
+            emit("realism", bench::realism::run_bench(&options), json.as_deref())
         }
         Command::Bench { which: BenchCommand::All { out, reps, duration } } => {
             match bench::all::run_bench(bench::all::Options { out, reps, duration }) {

@@ -360,6 +360,7 @@ pub async fn replay_with(
         final_keyframes: maps.iter().map(|m| m.keyframes().map(|k| k.id).collect()).collect(),
         false_factors: Vec::new(),
         optimisers: team.optimiser_statuses().await?,
+        deskew: team.deskew_counts().await?,
     };
     let timing = Timing::measure(wall, sim_s, decoding, memory);
     Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing }, bags: bag_stats })

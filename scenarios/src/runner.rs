@@ -304,6 +304,7 @@ pub async fn run_with(
         result.finish(&maps, &last)?;
     }
     let optimisers = team.optimiser_statuses().await?;
+    let deskew = team.deskew_counts().await?;
     for (truth, robot) in truths.iter_mut().zip(&robots) {
         (truth.frames, truth.raw_bytes, truth.raw_max_bytes) = (robot.frames, robot.raw_bytes, robot.raw_max_bytes);
     }
@@ -322,6 +323,7 @@ pub async fn run_with(
         final_keyframes: maps.iter().map(|m| m.keyframes().map(|k| k.id).collect()).collect(),
         false_factors: false_factors.injected,
         optimisers,
+        deskew,
     };
     drop(snapshots);
     Ok(RunOutcome { record, world, maps, timing })

@@ -11,6 +11,8 @@ use crate::observation::Observation;
 use crate::record::Restart;
 use sgm_actors::clock::Clock;
 use sgm_actors::comms::GetCommsStatus;
+use sgm_actors::fusion::GetFusionStatus;
+use sgm_model::perception::deskew::DeskewCounts;
 use sgm_actors::config::{PersistenceConfig, RobotConfig};
 use sgm_actors::matcher::GetNeighbours;
 use sgm_actors::messages::{InterRobotConstraints, SensorFrame, Tick};
@@ -250,6 +252,18 @@ impl Team {
         for member in &self.members {
             out.push(match &member.handle {
                 Some(handle) => Some(handle.optimiser.send(GetOptimiserStatus).await.map_err(mailbox)?),
+                None => None,
+            });
+        }
+        Ok(out)
+    }
+
+    /// Each robot's deskew counts since its Fusion (re)started (`None`: not running).
+    pub async fn deskew_counts(&self) -> Result<Vec<Option<DeskewCounts>>, RunError> {
+        let mut out = Vec::new();
+        for member in &self.members {
+            out.push(match &member.handle {
+                Some(handle) => Some(handle.fusion.send(GetFusionStatus).await.map_err(mailbox)?.deskew),
                 None => None,
             });
         }

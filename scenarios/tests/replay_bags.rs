@@ -58,6 +58,11 @@ fn a_scenario_replayed_from_its_bags_gives_the_same_run() {
     let (outcome, _dir, bags) = recorded(&system, &scenario);
     let ran = report::compute(&outcome.record);
     assert!(ran.alignments.iter().all(|a| a.first_aligned_s.is_some()), "the scenario aligns");
+    for r in &ran.robots {
+        // Scans without per-point time are used as they came, and the report says so.
+        let d = &r.deskew;
+        assert_eq!((d.deskewed, d.no_times), (0, r.frames), "{}: {d:?}", r.name);
+    }
 
     let replayed = system.block_on(replay(&scenario, &bags, None)).unwrap();
     for b in &replayed.bags {
@@ -120,14 +125,22 @@ fn point_times_survive_the_bags_and_deskew_the_replay_as_the_run() {
     scenario.lidar.sweep_s = 0.1;
     let system = actix_rt::System::new();
     let (outcome, _dir, bags) = recorded(&system, &scenario);
-    let ran = serde_json::to_value(report::compute(&outcome.record)).unwrap();
+    let ran = report::compute(&outcome.record);
+    for r in &ran.robots {
+        // Every scan but the first (no motion known yet) deskewed, and counted in the report.
+        let d = &r.deskew;
+        assert_eq!((d.deskewed, d.no_motion, d.no_times, d.refused), (r.frames - 1, 1, 0, 0), "{}: {d:?}", r.name);
+    }
+    let ran = serde_json::to_value(ran).unwrap();
     let replayed = system.block_on(replay(&scenario, &bags, None)).unwrap();
     let again = serde_json::to_value(report::compute(&replayed.run.record)).unwrap();
     assert_eq!(without_world(ran.clone()), without_world(again));
     let mut straight_off = scenario.clone();
     straight_off.fusion.deskew = false;
     let replayed = system.block_on(replay(&straight_off, &bags, None)).unwrap();
-    let skewed = serde_json::to_value(report::compute(&replayed.run.record)).unwrap();
+    let skewed = report::compute(&replayed.run.record);
+    assert!(skewed.robots.iter().all(|r| r.deskew == Default::default()), "deskew off counts nothing");
+    let skewed = serde_json::to_value(skewed).unwrap();
     assert_ne!(without_world(ran), without_world(skewed), "deskewing changed nothing");
 }
 

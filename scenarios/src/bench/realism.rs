@@ -3,13 +3,18 @@
 //! mission (`outdoor_two_robots`) is run as it is, with each effect alone, and with all of them
 //! (`legged_campus`, the same mission on the paper's robots); for each: the pairs aligned (and
 //! none more than [`super::WRONG_M`] off), the mean inter-robot error at the end of the mission
-//! and the team ATE (`Report::team_ate_rmse_m`).
+//! and the team ATE (`Report::team_ate_rmse_m`). One seed's odometry drift can move a row more
+//! than its effect does (seed 1's terrain run drifts 2° in heading against 0.7° on flat ground,
+//! and doubles bravo's ATE; seeds 2–4 show no cost), so each effect runs over `--seeds`
+//! consecutive seeds and the row gives their mean and the spread of the team ATE.
 
 use super::{aligned_right, duration_arg, load_cut, or_dash, run_report, Section};
 use serde::Serialize;
 use sgm_scenarios::report::Report;
 use sgm_scenarios::scenario::{LidarPattern, Platform, Scenario};
 use std::fmt::Write;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 /// One effect: its name, what it turns on, and how.
 struct Effect {
@@ -149,63 +154,141 @@ const EFFECTS: &[Effect] = &[
     },
 ];
 
-/// One effect's figures.
+/// One effect's figures over its seeds.
 #[derive(Clone, Debug, Serialize)]
 pub struct Row {
     pub effect: String,
     pub what: String,
+    pub seeds: Vec<u64>,
+    /// Over all seeds' runs.
     pub pairs: usize,
     pub aligned_right: usize,
-    /// Mean over aligned pairs, m and °.
+    /// Mean over the aligned pairs of all seeds' runs, m and °.
     pub inter_robot_error_m: Option<f64>,
     pub inter_robot_error_deg: Option<f64>,
+    /// Mean, least and most over the seeds' runs, m.
     pub team_ate_m: Option<f64>,
+    pub team_ate_min_m: Option<f64>,
+    pub team_ate_max_m: Option<f64>,
     pub sim_s: f64,
 }
 
-fn row(effect: &str, what: &str, r: &Report) -> Row {
-    let aligned: Vec<_> = r.alignments.iter().filter(|a| a.state == "Aligned").collect();
-    let mean = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+fn mean(v: &[f64]) -> Option<f64> {
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+fn row(effect: &str, what: &str, runs: &[(u64, Report)]) -> Row {
+    let aligned: Vec<_> = runs.iter().flat_map(|(_, r)| &r.alignments).filter(|a| a.state == "Aligned").collect();
+    let ates: Vec<f64> = runs.iter().filter_map(|(_, r)| r.team_ate_rmse_m).collect();
     Row {
         effect: effect.into(),
         what: what.into(),
-        pairs: r.alignments.len(),
-        aligned_right: r.alignments.iter().filter(|a| aligned_right(a)).count(),
-        inter_robot_error_m: mean(aligned.iter().filter_map(|a| a.translation_error_m).collect()),
-        inter_robot_error_deg: mean(aligned.iter().filter_map(|a| a.rotation_error_deg).collect()),
-        team_ate_m: r.team_ate_rmse_m,
-        sim_s: r.sim_s,
+        seeds: runs.iter().map(|(seed, _)| *seed).collect(),
+        pairs: runs.iter().map(|(_, r)| r.alignments.len()).sum(),
+        aligned_right: runs.iter().flat_map(|(_, r)| &r.alignments).filter(|a| aligned_right(a)).count(),
+        inter_robot_error_m: mean(&aligned.iter().filter_map(|a| a.translation_error_m).collect::<Vec<_>>()),
+        inter_robot_error_deg: mean(&aligned.iter().filter_map(|a| a.rotation_error_deg).collect::<Vec<_>>()),
+        team_ate_m: mean(&ates),
+        team_ate_min_m: ates.iter().copied().reduce(f64::min),
+        team_ate_max_m: ates.iter().copied().reduce(f64::max),
+        sim_s: runs.first().map_or(0.0, |(_, r)| r.sim_s),
     }
 }
 
-/// Runs every effect (each mission cut to `duration` s when given); `only`: the effects whose
-/// names contain it.
-pub fn run_bench(duration: Option<f64>, only: Option<&str>) -> anyhow::Result<Section> {
-    let mut rows = Vec::new();
+/// One mission to run: a row's index, the seed, the scenario.
+struct Job {
+    row: usize,
+    seed: u64,
+    scenario: Scenario,
+    label: String,
+}
+
+/// Runs the jobs on every core (each run is its own deterministic actix system, so the figures
+/// do not depend on the thread count), in the jobs' order.
+fn run_all(jobs: Vec<Job>) -> anyhow::Result<Vec<(usize, u64, Report)>> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(jobs.len().max(1));
+    let next = AtomicUsize::new(0);
+    let results: Vec<Mutex<Option<anyhow::Result<Report>>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..threads {
+            scope.spawn(|| loop {
+                let k = next.fetch_add(1, Ordering::Relaxed);
+                let Some(job) = jobs.get(k) else { break };
+                let outcome = run_report(&job.scenario, &job.label);
+                if let Ok(mut slot) = results[k].lock() {
+                    *slot = Some(outcome);
+                }
+            });
+        }
+    });
+    jobs.iter()
+        .zip(results)
+        .map(|(job, slot)| {
+            let outcome = slot.into_inner().ok().flatten();
+            let report = outcome.unwrap_or_else(|| Err(anyhow::anyhow!("{}: the run's thread died", job.label)))?;
+            Ok((job.row, job.seed, report))
+        })
+        .collect()
+}
+
+/// What `sgm bench realism` runs.
+pub struct Options<'a> {
+    /// Each mission cut to this many simulated seconds.
+    pub duration: Option<f64>,
+    /// Only the effects whose names contain this.
+    pub only: Option<&'a str>,
+    /// Each effect runs with the scenario's seed and the `seeds − 1` after it.
+    pub seeds: u64,
+}
+
+/// Runs every effect over its seeds, on every core.
+pub fn run_bench(options: &Options) -> anyhow::Result<Section> {
+    let Options { duration, only, seeds } = *options;
+    anyhow::ensure!(seeds >= 1, "--seeds must be at least 1, not {seeds}");
+    let mut rows: Vec<(&str, &str)> = Vec::new();
+    let mut jobs = Vec::new();
+    let mut add = |rows: &mut Vec<(&'static str, &'static str)>, name, what, base: Scenario| {
+        for k in 0..seeds {
+            let mut scenario = base.clone();
+            scenario.scenario.seed = base.scenario.seed + k;
+            let label = format!("realism: {name}, seed {}", scenario.scenario.seed);
+            jobs.push(Job { row: rows.len(), seed: scenario.scenario.seed, scenario, label });
+        }
+        rows.push((name, what));
+    };
     for effect in EFFECTS.iter().filter(|e| only.is_none_or(|o| e.name.contains(o))) {
         let mut s = load_cut("outdoor_two_robots", duration)?;
         (effect.apply)(&mut s);
-        rows.push(row(effect.name, effect.what, &run_report(&s, &format!("realism: {}", effect.name))?));
+        add(&mut rows, effect.name, effect.what, s);
     }
     if only.is_none_or(|o| "all (legged_campus)".contains(o)) {
-        let s = load_cut("legged_campus", duration)?;
-        rows.push(row("all (legged_campus)", "every effect above together", &run_report(&s, "realism: all")?));
+        add(&mut rows, "all (legged_campus)", "every effect above together", load_cut("legged_campus", duration)?);
     }
+    let mut runs: Vec<Vec<(u64, Report)>> = rows.iter().map(|_| Vec::new()).collect();
+    for (k, seed, report) in run_all(jobs)? {
+        runs[k].push((seed, report));
+    }
+    let rows: Vec<Row> = rows.iter().zip(&runs).map(|((name, what), runs)| row(name, what, runs)).collect();
     let only_arg = only.map(|o| format!(" --only '{o}'")).unwrap_or_default();
-    let command = format!("sgm bench realism{}{only_arg}", duration_arg(duration));
+    let seeds_arg = if seeds > 1 { format!(" --seeds {seeds}") } else { String::new() };
+    let command = format!("sgm bench realism{}{seeds_arg}{only_arg}", duration_arg(duration));
     let mut md = format!("### The unkind world, one effect at a time\n\n`{command}`\n\n");
-    md.push_str("| Effect | What | Pairs aligned | Inter-robot error | Team ATE |\n|---|---|---|---|---|\n");
+    md.push_str(
+        "| Effect | What | Pairs aligned | Inter-robot error | Team ATE (least–most) |\n|---|---|---|---|---|\n",
+    );
     for r in &rows {
         let _ = writeln!(
             md,
-            "| {} | {} | {}/{} | {} m / {}° | {} m |",
+            "| {} | {} | {}/{} | {} m / {}° | {} m ({}–{}) |",
             r.effect,
             r.what,
             r.aligned_right,
             r.pairs,
             or_dash(r.inter_robot_error_m, 2),
             or_dash(r.inter_robot_error_deg, 2),
-            or_dash(r.team_ate_m, 2)
+            or_dash(r.team_ate_m, 2),
+            or_dash(r.team_ate_min_m, 2),
+            or_dash(r.team_ate_max_m, 2)
         );
     }
     Ok(Section { markdown: md, json: serde_json::json!({ "command": command, "rows": rows }) })

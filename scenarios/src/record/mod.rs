@@ -19,6 +19,7 @@ use crate::sim::world::World;
 use serde::Serialize;
 use sgm_actors::optimiser::OptimiserStatus;
 use sgm_model::geometry::Pose3;
+use sgm_model::perception::deskew::DeskewCounts;
 use sgm_model::scene_graph::{KeyframeId, SceneGraph, Stamp};
 use std::collections::BTreeSet;
 
@@ -61,6 +62,8 @@ pub struct RunRecord {
     pub false_factors: Vec<InjectedFactor>,
     /// Each robot's pose graph at the end (`None`: not running).
     pub optimisers: Vec<Option<OptimiserStatus>>,
+    /// Each robot's scans deskewed and used as they came (`None`: not running).
+    pub deskew: Vec<Option<DeskewCounts>>,
 }
 
 /// A finished run: everything the report is made of.

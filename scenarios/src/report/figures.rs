@@ -40,6 +40,9 @@ pub struct RobotReport {
     pub frames: u64,
     /// The map's cloud store at the end (`tracker.cloud_store`).
     pub clouds: sgm_model::scene_graph::CloudStoreStats,
+    /// Scans deskewed from their per-point times, and those used as they came with the reason
+    /// (`fusion.deskew`; since Fusion last started).
+    pub deskew: sgm_model::perception::deskew::DeskewCounts,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -298,6 +301,7 @@ pub fn compute(record: &RunRecord) -> Report {
                 distance_m,
                 frames: truth.frames,
                 clouds: map.map(|m| m.clouds).unwrap_or_default(),
+                deskew: record.deskew.get(k).copied().flatten().unwrap_or_default(),
             }
         })
         .collect();

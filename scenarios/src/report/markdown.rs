@@ -92,6 +92,30 @@ fn memory(s: &mut String, report: &Report, timing: &Timing) {
     let _ = writeln!(s, "\n");
 }
 
+/// Per robot: how many scans were deskewed, and why the others were used as they came.
+fn deskew(s: &mut String, report: &Report) {
+    let _ = write!(s, "Deskew:");
+    for (k, r) in report.robots.iter().enumerate() {
+        let d = &r.deskew;
+        let scans = d.deskewed + d.no_times + d.no_motion + d.refused;
+        let _ = write!(s, "{} {}: ", if k == 0 { "" } else { ";" }, r.name);
+        if scans == 0 {
+            let _ = write!(s, "off (fusion.deskew = false) or no scan");
+            continue;
+        }
+        let _ = write!(s, "{} of {scans} scans deskewed", d.deskewed);
+        if d.with_imu > 0 {
+            let _ = write!(s, " ({} with the gyro, {} with the odometry's twist)", d.with_imu, d.deskewed - d.with_imu);
+        }
+        let not = [(d.no_times, "without per-point time"), (d.no_motion, "before any motion"), (d.refused, "whose times did not fit")];
+        let not: Vec<String> = not.iter().filter(|(n, _)| *n > 0).map(|(n, why)| format!("{n} {why}")).collect();
+        if !not.is_empty() {
+            let _ = write!(s, "; not deskewed: {}", not.join(", "));
+        }
+    }
+    let _ = writeln!(s, ".\n");
+}
+
 pub fn render(report: &Report, timing: &Timing) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Run report: {}\n", report.scenario);
@@ -172,6 +196,7 @@ pub fn render(report: &Report, timing: &Timing) -> String {
     }
     let _ = writeln!(s, "\n");
     memory(&mut s, report, timing);
+    deskew(&mut s, report);
     accounting(&mut s, &report.ledger);
     let _ = writeln!(
         s,
