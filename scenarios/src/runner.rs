@@ -19,6 +19,7 @@ use crate::sim::camera::{camera_model, mislabels, noisy_labels, render, segmente
 use crate::sim::false_factors::FalseFactors;
 use crate::sim::imu::Imu;
 use crate::sim::lidar::Lidar;
+use crate::sim::mount::LidarMount;
 use crate::sim::odometry::Odometry;
 use crate::sim::people::People;
 use crate::sim::platform::Motion;
@@ -46,6 +47,7 @@ struct SimRobot {
     route: Route,
     odometry: Odometry,
     lidar: Lidar,
+    lidar_mount: LidarMount,
     camera: CameraMount,
     /// `[imu]`: the IMU and its own noise stream (the other sensors' draws do not depend on it).
     imu: Option<(Imu, ChaCha8Rng)>,
@@ -144,6 +146,7 @@ pub async fn run_with(
             route,
             odometry: Odometry::new(&scenario.odometry),
             lidar: Lidar::new(&scenario.lidar),
+            lidar_mount: LidarMount::new(&scenario.lidar, seed, k),
             camera: CameraMount::new(&scenario.camera, seed, k),
             imu: scenario.imu.enabled.then(|| {
                 (
@@ -207,7 +210,17 @@ pub async fn run_with(
                 Some((imu, rng)) => imu.samples_until(t + scenario.lidar.sweep_s, &|s| route.pose_at(s), rng),
                 None => Vec::new(),
             };
-            let mut frame = robot.lidar.sweep(&world, &|tau| route.pose_at(t + tau).unwrap_or(truth), &mut robot.rng);
+            let mount = robot.lidar_mount;
+            let mut frame = if mount.at_body() {
+                robot.lidar.sweep(&world, &|tau| route.pose_at(t + tau).unwrap_or(truth), &mut robot.rng)
+            } else {
+                let body_from_lidar = mount.body_from_lidar;
+                let world_from_lidar = |tau| route.pose_at(t + tau).unwrap_or(truth) * body_from_lidar;
+                let mut frame = robot.lidar.sweep(&world, &world_from_lidar, &mut robot.rng);
+                // The returns in the body frame (through the true mount), float32 as a driver's.
+                frame.points.iter_mut().for_each(|p| *p = (body_from_lidar * *p).map(|v| f64::from(v as f32)));
+                frame
+            };
             if let Some(errors) = &segmenter_errors {
                 errors.apply(&mut frame, &truth, &mut robot.segmenter_rng);
             }
@@ -230,6 +243,8 @@ pub async fn run_with(
                 let per_point = labels.iter().map(|&l| (l != NO_LABEL).then_some(LabelId(l))).collect();
                 (FrameLabels::PerPoint(per_point), Some(labels))
             };
+            // What the robot's driver hands on: the returns through the mount it is told.
+            let told = mount.as_told(&frame.points);
             robot.frames += 1;
             let raw = frame.points.len() as u64 * RAW_BYTES_PER_POINT;
             robot.raw_bytes += raw;
@@ -248,7 +263,7 @@ pub async fn run_with(
                     t,
                     odometry: &odometry,
                     truth: &truth,
-                    points: &frame.points,
+                    points: told.as_deref().unwrap_or(&frame.points),
                     labels: recorded_labels.as_deref(),
                     image,
                     times: (!frame.times.is_empty()).then_some(&frame.times[..]),
@@ -260,7 +275,7 @@ pub async fn run_with(
             let sensor_frame = SensorFrame {
                 stamp: t,
                 odom_from_body: odometry,
-                points_in_body: frame.points,
+                points_in_body: told.unwrap_or(frame.points),
                 point_times,
                 labels,
                 imu: imu_samples,

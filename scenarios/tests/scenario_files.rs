@@ -102,6 +102,11 @@ fn impossible_terrain_platforms_and_imus_are_refused_with_their_key() {
         "camera.mount_xyz_m = [0.0, 9.0, 0.0]: allowed each −5 ≤ x ≤ 5 m",
     );
     refused("[camera]\nmount_error_deg = 45.0", "camera.mount_error_deg = 45: allowed 0 ≤ x ≤ 10°");
+    refused(
+        "[lidar]\nmount_rpy_deg = [0.0, 200.0, 0.0]",
+        "lidar.mount_rpy_deg = [0.0, 200.0, 0.0]: allowed each −180 ≤ x ≤ 180°",
+    );
+    refused("[lidar]\nmount_error_m = -0.1", "lidar.mount_error_m = -0.1: allowed 0 ≤ x ≤ 0.5 m");
     refused("[camera]\nclock_offset_s = -1.0", "camera.clock_offset_s = -1: allowed −0.5 ≤ x ≤ 0.5 s");
     let e =
         parse("[[robots]]\nplatform = \"hovercraft\"\nwaypoints = [[0.0, 0.0], [1.0, 0.0]]\n").unwrap_err().to_string();

@@ -47,6 +47,13 @@ fn sweep(s: &mut Scenario) {
     s.lidar.sweep_s = 0.1;
 }
 
+fn lidar_mount(s: &mut Scenario) {
+    s.lidar.mount_xyz_m = [0.2, 0.0, 0.1];
+    s.lidar.mount_rpy_deg = [0.0, 5.0, 0.0];
+    s.lidar.mount_error_deg = 0.5;
+    s.lidar.mount_error_m = 0.01;
+}
+
 fn camera_mount(s: &mut Scenario) {
     s.camera.mount_xyz_m = [0.25, 0.0, -0.08];
     s.camera.mount_rpy_deg = [0.0, 10.0, 0.0];
@@ -104,6 +111,11 @@ const EFFECTS: &[Effect] = &[
             sweep(s);
             s.imu.enabled = true;
         },
+    },
+    Effect {
+        name: "lidar mount",
+        what: "LiDAR 0.2 m ahead and 0.1 m up, pitched 5°, told 0.5° and 1 cm off",
+        apply: lidar_mount,
     },
     Effect {
         name: "camera mount",

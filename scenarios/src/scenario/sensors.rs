@@ -37,6 +37,17 @@ pub struct LidarSpec {
     /// time and carries it (0: every return at the frame's stamp, an undistorted scan). A real
     /// 10 Hz LiDAR sweeps for 0.1 s. Default 0.
     pub sweep_s: f64,
+    /// Where the LiDAR sits on the body (the point the trajectory follows), m, x forward, z up.
+    /// Default [0, 0, 0].
+    pub mount_xyz_m: [f64; 3],
+    /// The LiDAR's roll, pitch and yaw on the body, degrees. Default [0, 0, 0].
+    pub mount_rpy_deg: [f64; 3],
+    /// The mount the robot is told (with which its driver brings the returns into the body
+    /// frame) is off from the true one by a rotation of this angle about a random axis, degrees.
+    /// Default 0.
+    pub mount_error_deg: f64,
+    /// … and by a translation of this length, m. Default 0.
+    pub mount_error_m: f64,
 }
 
 impl Default for LidarSpec {
@@ -50,6 +61,10 @@ impl Default for LidarSpec {
             max_range_m: 60.0,
             range_noise_m: 0.02,
             sweep_s: 0.0,
+            mount_xyz_m: [0.0; 3],
+            mount_rpy_deg: [0.0; 3],
+            mount_error_deg: 0.0,
+            mount_error_m: 0.0,
         }
     }
 }

@@ -17,6 +17,15 @@ fn within(v: f64, lo: f64, hi: f64) -> bool {
     v.is_finite() && v >= lo && v <= hi
 }
 
+/// `[section] mount_xyz_m, mount_rpy_deg, mount_error_deg, mount_error_m`.
+fn check_mount(section: &str, xyz: [f64; 3], rpy: [f64; 3], error_deg: f64, error_m: f64) -> Result<(), Failure> {
+    let all = |v: [f64; 3], lo, hi| v.iter().all(|v| within(*v, lo, hi));
+    check(all(xyz, -5.0, 5.0), format!("{section}.mount_xyz_m"), format!("{xyz:?}"), "each −5 ≤ x ≤ 5 m")?;
+    check(all(rpy, -180.0, 180.0), format!("{section}.mount_rpy_deg"), format!("{rpy:?}"), "each −180 ≤ x ≤ 180°")?;
+    check(within(error_deg, 0.0, 10.0), format!("{section}.mount_error_deg"), error_deg, "0 ≤ x ≤ 10°")?;
+    check(within(error_m, 0.0, 0.5), format!("{section}.mount_error_m"), error_m, "0 ≤ x ≤ 0.5 m")
+}
+
 impl Scenario {
     pub(super) fn validate(&self) -> Result<(), Failure> {
         self.ros.validate().map_err(|e| ("ros".to_string(), "(section)".to_string(), e.to_string()))?;
@@ -131,6 +140,7 @@ impl Scenario {
             l.sweep_s,
             "0 ≤ x ≤ min(scenario.frame_interval_s, 0.5 s)",
         )?;
+        check_mount("lidar", l.mount_xyz_m, l.mount_rpy_deg, l.mount_error_deg, l.mount_error_m)?;
 
         let c = &self.camera;
         check((16..=4096).contains(&c.width), "camera.width", c.width, "16 ≤ x ≤ 4096 px")?;
@@ -148,20 +158,7 @@ impl Scenario {
             c.boundary_noise_px,
             "0 ≤ x ≤ 50 px",
         )?;
-        check(
-            c.mount_xyz_m.iter().all(|v| within(*v, -5.0, 5.0)),
-            "camera.mount_xyz_m",
-            format!("{:?}", c.mount_xyz_m),
-            "each −5 ≤ x ≤ 5 m",
-        )?;
-        check(
-            c.mount_rpy_deg.iter().all(|v| within(*v, -180.0, 180.0)),
-            "camera.mount_rpy_deg",
-            format!("{:?}", c.mount_rpy_deg),
-            "each −180 ≤ x ≤ 180°",
-        )?;
-        check(within(c.mount_error_deg, 0.0, 10.0), "camera.mount_error_deg", c.mount_error_deg, "0 ≤ x ≤ 10°")?;
-        check(within(c.mount_error_m, 0.0, 0.5), "camera.mount_error_m", c.mount_error_m, "0 ≤ x ≤ 0.5 m")?;
+        check_mount("camera", c.mount_xyz_m, c.mount_rpy_deg, c.mount_error_deg, c.mount_error_m)?;
         let dt = s.frame_interval_s;
         check(
             within(c.exposure_offset_s, -dt, dt),

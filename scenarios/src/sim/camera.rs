@@ -17,12 +17,12 @@
 
 use crate::scenario::CameraSpec;
 use crate::sim::lidar::LidarFrame;
+use crate::sim::mount::{body_from_mount, calibration_error};
 use crate::sim::world::NO_LABEL;
-use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal, StandardNormal};
-use sgm_model::geometry::{pose_from_rpy_translation, Pose3};
+use nalgebra::Point3;
+use rand::Rng;
+use rand_distr::{Distribution, Normal};
+use sgm_model::geometry::Pose3;
 use sgm_model::perception::label_map::{LabelMap, LabelMapSpec};
 use sgm_model::perception::projection::{optical_from_forward_body, CameraModel, LabelImage};
 use sgm_model::scene_graph::LabelId;
@@ -33,6 +33,8 @@ use std::collections::BTreeMap;
 pub fn camera_from_body() -> Pose3 {
     optical_from_forward_body()
 }
+
+const CAMERA_SALT: u64 = 0xCA3E_8A00;
 
 /// A robot's camera mount: the true one, and the one its configuration says.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,28 +49,16 @@ impl CameraMount {
     /// Robot `robot`'s mount under `spec`; its calibration error is drawn from `seed` and the
     /// robot's index (each robot has its own).
     pub fn new(spec: &CameraSpec, seed: u64, robot: usize) -> Self {
-        let [x, y, z] = spec.mount_xyz_m;
-        let [roll, pitch, yaw] = spec.mount_rpy_deg.map(f64::to_radians);
         let camera_from_body = if spec.mount_xyz_m == [0.0; 3] && spec.mount_rpy_deg == [0.0; 3] {
             camera_from_body()
         } else {
-            camera_from_body() * pose_from_rpy_translation(roll, pitch, yaw, Vector3::new(x, y, z)).inverse()
+            camera_from_body() * body_from_mount(spec.mount_xyz_m, spec.mount_rpy_deg).inverse()
         };
-        if spec.mount_error_deg == 0.0 && spec.mount_error_m == 0.0 {
-            return Self { camera_from_body, configured_camera_from_body: camera_from_body };
+        match calibration_error(spec.mount_error_deg, spec.mount_error_m, seed, CAMERA_SALT, robot) {
+            // body_from_told = body_from_true · E, so told_from_body = E⁻¹ · camera_from_body.
+            Some(error) => Self { camera_from_body, configured_camera_from_body: error.inverse() * camera_from_body },
+            None => Self { camera_from_body, configured_camera_from_body: camera_from_body },
         }
-        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xCA3E_8A00 ^ ((robot as u64 + 1) << 32));
-        let mut unit = || {
-            let v = Vector3::from_fn(|_, _| StandardNormal.sample(&mut rng));
-            v.try_normalize(1e-9).unwrap_or_else(Vector3::x)
-        };
-        let axis = nalgebra::Unit::new_normalize(unit());
-        let error = Pose3::from_parts(
-            Translation3::from(unit() * spec.mount_error_m),
-            UnitQuaternion::from_axis_angle(&axis, spec.mount_error_deg.to_radians()),
-        );
-        // The error is a motion of the camera in the body: body_from_told = body_from_true · error.
-        Self { camera_from_body, configured_camera_from_body: error.inverse() * camera_from_body }
     }
 }
 
@@ -173,6 +163,7 @@ pub fn render(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector3;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
     use sgm_model::perception::projection::label_points;

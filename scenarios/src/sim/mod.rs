@@ -5,6 +5,7 @@ pub mod camera;
 pub mod false_factors;
 pub mod imu;
 pub mod lidar;
+pub mod mount;
 pub mod odometry;
 pub mod people;
 pub mod platform;
