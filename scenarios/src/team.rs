@@ -11,9 +11,8 @@ use crate::observation::Observation;
 use crate::record::Restart;
 use sgm_actors::clock::Clock;
 use sgm_actors::comms::GetCommsStatus;
-use sgm_actors::fusion::GetFusionStatus;
-use sgm_model::perception::deskew::DeskewCounts;
 use sgm_actors::config::{PersistenceConfig, RobotConfig};
+use sgm_actors::fusion::GetFusionStatus;
 use sgm_actors::matcher::GetNeighbours;
 use sgm_actors::messages::{InterRobotConstraints, SensorFrame, Tick};
 use sgm_actors::optimiser::{GetOptimiserStatus, OptimiserStatus};
@@ -22,6 +21,7 @@ use sgm_actors::snapshot::SnapshotStore;
 use sgm_actors::supervisor::{start_robot_restored, RobotHandle};
 use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
 use sgm_actors::transport::InProcessRadio;
+use sgm_model::perception::deskew::DeskewCounts;
 use sgm_model::scene_graph::{SceneGraph, Stamp};
 use std::path::Path;
 

@@ -107,7 +107,11 @@ fn deskew(s: &mut String, report: &Report) {
         if d.with_imu > 0 {
             let _ = write!(s, " ({} with the gyro, {} with the odometry's twist)", d.with_imu, d.deskewed - d.with_imu);
         }
-        let not = [(d.no_times, "without per-point time"), (d.no_motion, "before any motion"), (d.refused, "whose times did not fit")];
+        let not = [
+            (d.no_times, "without per-point time"),
+            (d.no_motion, "before any motion"),
+            (d.refused, "whose times did not fit"),
+        ];
         let not: Vec<String> = not.iter().filter(|(n, _)| *n > 0).map(|(n, why)| format!("{n} {why}")).collect();
         if !not.is_empty() {
             let _ = write!(s, "; not deskewed: {}", not.join(", "));
