@@ -119,6 +119,8 @@ impl TrackerSection {
         )?;
         check(positive(t.search_radius_m), "tracker.tracking.search_radius_m", t.search_radius_m, "> 0")?;
         check(t.confirm_after >= 1, "tracker.tracking.confirm_after", t.confirm_after, "≥ 1")?;
+        check(non_negative(t.moving_m), "tracker.tracking.moving_m", t.moving_m, "finite and ≥ 0 (0: off)")?;
+        check(positive(t.moving_window_s), "tracker.tracking.moving_window_s", t.moving_window_s, "> 0")?;
         let l = &self.loop_closure;
         check(positive(l.search_radius_m), "tracker.loop_closure.search_radius_m", l.search_radius_m, "> 0")?;
         check(non_negative(l.time_gap_s), "tracker.loop_closure.time_gap_s", l.time_gap_s, "finite and ≥ 0")?;
