@@ -171,6 +171,18 @@ impl MatcherSection {
         ] {
             check(v.is_finite() && (0.0..=10.0).contains(&v), key, v, "0 ≤ x ≤ 10 m")?;
         }
+        check(
+            sc.ground_cell_m.is_finite() && sc.ground_cell_m > 0.0 && sc.ground_cell_m <= 10.0,
+            "matcher.structure_check.ground_cell_m",
+            sc.ground_cell_m,
+            "0 < x ≤ 10 m",
+        )?;
+        check(
+            (0.0..=60.0).contains(&sc.max_ground_slope_deg),
+            "matcher.structure_check.max_ground_slope_deg",
+            sc.max_ground_slope_deg,
+            "0 ≤ x ≤ 60°",
+        )?;
         Ok(())
     }
 }

@@ -7,6 +7,7 @@ pub mod classes;
 pub mod clustering;
 pub mod colour_ids;
 pub mod deskew;
+pub mod ground;
 pub mod icp;
 pub mod imu;
 pub mod keyframes;

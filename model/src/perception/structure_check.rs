@@ -1,18 +1,26 @@
 //! Does a registration bring the *structure* of two scans together? Outdoors the ground plane
 //! dominates a LiDAR scan, so an ICP fitness stays high even when the scans are metres apart in
 //! the plane: the ground slides onto the ground. This check leaves the ground out — in each
-//! scan's upright body frame, points less than `ground_clearance_m` above the scan's low
-//! percentile — and measures the fraction of the source's remaining points (objects, walls,
-//! trunks) that land within `inlier_m` of the target's:
+//! scan's body frame, points less than `ground_clearance_m` above the local ground
+//! ([`crate::perception::ground`]: a plane per `ground_cell_m` column through the low points
+//! around it, the ground no steeper than `max_ground_slope_deg`), so that hills, kerbs and
+//! ramps are ground and the objects on their low side are not — and measures the fraction of the
+//! source's remaining points (objects, walls, trunks) that land within `inlier_m` of the
+//! target's:
 //!
 //! ```text
+//! structure(S) = { p ∈ S : z_p − g(p) > ground_clearance_m },  g: the local ground under p
 //! agreement = |{ p ∈ S_structure : min_q ‖T·p − q‖ ≤ inlier_m, q ∈ T_structure }| / |S_structure|
 //! ```
+//!
+//! A point with no ground found near it (no low point within two columns that the slope bound
+//! accepts) is measured against the scan's 5th-percentile height instead.
 //!
 //! A true registration of overlapping scans scores high; a wrong inter-robot transform, which
 //! the ground alone cannot reveal, scores low.
 
 use crate::geometry::Pose3;
+use crate::perception::ground::{heights_above_ground, GroundParams};
 use crate::spatial::point_tree::PointTree;
 use crate::spatial::voxel::downsample;
 use nalgebra::Point3;
@@ -23,28 +31,44 @@ use serde::{Deserialize, Serialize};
 pub struct StructureCheck {
     /// Both scans are voxel-downsampled first, m. Default 0.2.
     pub voxel_m: f64,
-    /// Points this far above the scan's 5th-percentile height are structure, m. Default 0.3.
+    /// Points this far above the local ground are structure, m. Default 0.3.
     pub ground_clearance_m: f64,
     /// A structure point agrees when the other scan has one this close, m. Default 0.3.
     pub inlier_m: f64,
+    /// Side of the columns whose low points make the local ground, m. Default 1.0.
+    pub ground_cell_m: f64,
+    /// The steepest ground (relative to the body's x-y plane): a low point standing higher
+    /// above its neighbours' is not ground, degrees. Default 20.
+    pub max_ground_slope_deg: f64,
 }
 
 impl Default for StructureCheck {
     fn default() -> Self {
-        Self { voxel_m: 0.2, ground_clearance_m: 0.3, inlier_m: 0.3 }
+        Self { voxel_m: 0.2, ground_clearance_m: 0.3, inlier_m: 0.3, ground_cell_m: 1.0, max_ground_slope_deg: 20.0 }
     }
 }
 
-/// The points of `scan` (body frame, z up) above its ground.
+/// The points of `scan` (body frame, z up) above its local ground.
 fn structure(scan: &[Point3<f64>], check: &StructureCheck) -> Vec<Point3<f64>> {
-    let points = if check.voxel_m > 0.0 { downsample(scan, check.voxel_m) } else { scan.to_vec() };
-    let mut heights: Vec<f64> = points.iter().map(|p| p.z).filter(|z| z.is_finite()).collect();
-    if heights.is_empty() {
-        return Vec::new();
-    }
+    let points: Vec<Point3<f64>> = if check.voxel_m > 0.0 { downsample(scan, check.voxel_m) } else { scan.to_vec() }
+        .into_iter()
+        .filter(|p| p.coords.iter().all(|v| v.is_finite()))
+        .collect();
+    let mut heights: Vec<f64> = points.iter().map(|p| p.z).collect();
     heights.sort_unstable_by(f64::total_cmp);
-    let ground = heights[heights.len() / 20];
-    points.into_iter().filter(|p| p.z > ground + check.ground_clearance_m).collect()
+    let Some(&low) = heights.get(heights.len() / 20) else { return Vec::new() };
+    let params = GroundParams {
+        cell_m: check.ground_cell_m,
+        max_slope_deg: check.max_ground_slope_deg,
+        tolerance_m: check.ground_clearance_m,
+    };
+    let above = heights_above_ground(&points, &params);
+    points
+        .into_iter()
+        .zip(above)
+        .filter(|(p, h)| h.unwrap_or(p.z - low) > check.ground_clearance_m)
+        .map(|(p, _)| p)
+        .collect()
 }
 
 /// The agreement of `target_from_source` (source and target in their body frames); `None`
@@ -108,6 +132,140 @@ mod tests {
         let wrong = structure_agreement(&sb, &sa, &slid, &check).unwrap();
         assert!(right > 0.9, "{right}");
         assert!(wrong < 0.2, "{wrong}");
+    }
+
+    /// A world of sloped ground `height(x, y)` with boxes (0.8 m × 0.8 m × 1.5 m) standing on
+    /// it, scanned from `world_from_body`: the points in the body frame and their true heights
+    /// above the ground.
+    struct SlopedWorld<F: Fn(f64, f64) -> f64> {
+        height: F,
+        boxes: Vec<(f64, f64)>,
+    }
+
+    impl<F: Fn(f64, f64) -> f64> SlopedWorld<F> {
+        fn scan(&self, world_from_body: &Pose3, rng: &mut ChaCha8Rng) -> Vec<Point3<f64>> {
+            let centre = world_from_body.translation.vector;
+            let mut world = Vec::new();
+            for _ in 0..6000 {
+                // Denser near the sensor, as a LiDAR's rings are.
+                let (r, a) = (20.0 * rng.random::<f64>().powf(0.7), rng.random_range(0.0..std::f64::consts::TAU));
+                let (x, y) = (centre.x + r * a.cos(), centre.y + r * a.sin());
+                world.push(Point3::new(x, y, (self.height)(x, y) + rng.random_range(-0.02..0.02)));
+            }
+            for &(bx, by) in &self.boxes {
+                for _ in 0..300 {
+                    let (x, y) = (bx + rng.random_range(-0.4..0.4), by + rng.random_range(-0.4..0.4));
+                    world.push(Point3::new(x, y, (self.height)(x, y) + rng.random_range(0.0..1.5)));
+                }
+            }
+            let body_from_world = world_from_body.inverse();
+            world.iter().map(|p| body_from_world * p).collect()
+        }
+
+        /// The true height above the ground of `p_in_body`.
+        fn above_ground(&self, world_from_body: &Pose3, p_in_body: &Point3<f64>) -> f64 {
+            let p = world_from_body * p_in_body;
+            p.z - (self.height)(p.x, p.y)
+        }
+    }
+
+    /// Of the downsampled scan: the fraction of points truly below `clearance − 0.15` that are
+    /// taken for structure, and of those truly above `clearance + 0.15` that are not.
+    fn errors<F: Fn(f64, f64) -> f64>(
+        world: &SlopedWorld<F>,
+        world_from_body: &Pose3,
+        scan: &[Point3<f64>],
+        kept: &[Point3<f64>],
+        check: &StructureCheck,
+    ) -> (f64, f64) {
+        let all = downsample(scan, check.voxel_m);
+        let h = |p: &Point3<f64>| world.above_ground(world_from_body, p);
+        let c = check.ground_clearance_m;
+        let ground = all.iter().filter(|p| h(p) < c - 0.15).count().max(1);
+        let high = all.iter().filter(|p| h(p) > c + 0.15).count().max(1);
+        let ground_kept = kept.iter().filter(|p| h(p) < c - 0.15).count();
+        let high_kept = kept.iter().filter(|p| h(p) > c + 0.15).count();
+        (ground_kept as f64 / ground as f64, 1.0 - high_kept as f64 / high as f64)
+    }
+
+    /// The boxes of the sloped worlds: uphill, downhill and across.
+    fn boxes() -> Vec<(f64, f64)> {
+        vec![(6.0, 1.0), (-7.0, -2.0), (2.0, 9.0), (-3.0, -12.0), (14.0, -5.0), (-15.0, 6.0)]
+    }
+
+    #[test]
+    fn on_a_12_degree_slope_the_boxes_are_structure_and_the_ground_is_not() {
+        let tan = 12f64.to_radians().tan();
+        let world = SlopedWorld { height: |x: f64, y: f64| tan * (0.8 * x + 0.6 * y), boxes: boxes() };
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        // A level (gravity-aligned) body 0.5 m above the ground: the old global rule kept the
+        // uphill ground, 4 m "high" at 20 m, and removed the boxes on the low side.
+        let world_from_body = pose_from_yaw_translation(0.3, Vector3::new(0.0, 0.0, 0.5));
+        let scan = world.scan(&world_from_body, &mut rng);
+        let check = StructureCheck::default();
+        let kept = structure(&scan, &check);
+        let (ground_kept, high_lost) = errors(&world, &world_from_body, &scan, &kept, &check);
+        assert!(ground_kept < 0.01, "ground taken for structure: {ground_kept}");
+        assert!(high_lost < 0.05, "box points lost: {high_lost}");
+    }
+
+    #[test]
+    fn on_level_ground_the_structure_is_the_old_rule_s_up_to_the_threshold() {
+        let world = SlopedWorld { height: |_: f64, _: f64| 0.0, boxes: boxes() };
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let world_from_body = pose_from_yaw_translation(0.0, Vector3::new(0.0, 0.0, 0.5));
+        let scan = world.scan(&world_from_body, &mut rng);
+        let check = StructureCheck::default();
+        let kept = structure(&scan, &check);
+        // The old rule: above the scan's 5th-percentile height by the clearance.
+        let all = downsample(&scan, check.voxel_m);
+        let mut z: Vec<f64> = all.iter().map(|p| p.z).collect();
+        z.sort_unstable_by(f64::total_cmp);
+        let old: Vec<Point3<f64>> =
+            all.iter().filter(|p| p.z > z[z.len() / 20] + check.ground_clearance_m).copied().collect();
+        let differs = |a: &[Point3<f64>], b: &[Point3<f64>]| {
+            a.iter().filter(|p| !b.contains(p)).map(|p| world.above_ground(&world_from_body, p)).collect::<Vec<_>>()
+        };
+        for h in differs(&kept, &old).into_iter().chain(differs(&old, &kept)) {
+            assert!((h - check.ground_clearance_m).abs() < 0.1, "a point {h} m high changed sides");
+        }
+        assert!(kept.len() as f64 > 0.9 * old.len() as f64, "{} of {}", kept.len(), old.len());
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+        /// Hills up to 15° in any direction, a 15 cm kerb, the body level or tilted with the
+        /// slope under it: the ground is left out and the boxes are kept.
+        #[test]
+        fn slopes_kerbs_and_tilted_bodies(
+            slope_deg in 0.0..15.0f64,
+            azimuth in 0.0..std::f64::consts::TAU,
+            kerb_at in -10.0..10.0f64,
+            tilted: bool,
+            seed: u64,
+        ) {
+            let tan = slope_deg.to_radians().tan();
+            let (c, s) = (azimuth.cos(), azimuth.sin());
+            let world = SlopedWorld {
+                height: move |x: f64, y: f64| tan * (c * x + s * y) + if s * x - c * y > kerb_at { 0.15 } else { 0.0 },
+                boxes: boxes(),
+            };
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let at = Vector3::new(0.0, 0.0, (world.height)(0.0, 0.0) + 0.5);
+            // Tilted: the body lies on the slope (its z along the ground's normal).
+            let tilt = if tilted {
+                nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(Vector3::new(-s, c, 0.0)), -slope_deg.to_radians())
+            } else {
+                nalgebra::UnitQuaternion::identity()
+            };
+            let world_from_body = Pose3::from_parts(at.into(), tilt * nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7));
+            let scan = world.scan(&world_from_body, &mut rng);
+            let check = StructureCheck::default();
+            let kept = structure(&scan, &check);
+            let (ground_kept, high_lost) = errors(&world, &world_from_body, &scan, &kept, &check);
+            proptest::prop_assert!(ground_kept < 0.02, "ground taken for structure: {}", ground_kept);
+            proptest::prop_assert!(high_lost < 0.08, "box points lost: {}", high_lost);
+        }
     }
 
     #[test]

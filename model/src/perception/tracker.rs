@@ -194,7 +194,7 @@ impl ObjectTracker {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::pose_from_yaw_translation;
+    use crate::geometry::{pose_from_yaw_translation, Pose3};
     use crate::scene_graph::{Keyframe, LabelId};
     use nalgebra::{Point3, Vector3};
 
@@ -251,6 +251,58 @@ mod tests {
         // The object is anchored to the latest keyframe that saw it.
         assert_eq!(graph.object(first[0]).unwrap().anchor, KeyframeId(3));
         assert_eq!(graph.keyframes_observing(first[0]).count(), 3);
+    }
+
+    /// Trunks (0.3 m in radius, 3 m tall) on a 12° hill, passed by a body that walks up, across
+    /// and down it tilted with the ground under it and turning: each keyframe sees the half of
+    /// each trunk that faces it, above the ground, so its centroid moves with the viewpoint.
+    /// Association is in 3-D world coordinates, so the slope costs nothing: one id per trunk.
+    #[test]
+    fn objects_on_a_slope_keep_their_ids_from_every_viewpoint() {
+        let tan = 12f64.to_radians().tan();
+        let ground = |x: f64, y: f64| tan * (0.6 * x + 0.8 * y);
+        let trunks = [(4.0, 3.0), (9.0, -2.0), (5.5, 3.2 + 1.6), (-3.0, 6.0)];
+        let route =
+            [(0.0, 0.0, 0.3), (3.0, -2.0, 1.2), (7.0, 1.0, 2.0), (8.0, 6.0, 2.9), (2.0, 8.0, -2.0), (-1.0, 3.0, -0.9)];
+        let mut graph = SceneGraph::new();
+        let mut tracker = ObjectTracker::default();
+        let config = TrackerConfig::default();
+        let mut ids: Vec<Vec<ObjectId>> = Vec::new();
+        for (k, &(x, y, yaw)) in route.iter().enumerate() {
+            // The body 0.5 m above the ground, its z along the ground's normal.
+            let normal = Vector3::new(-0.6 * tan, -0.8 * tan, 1.0).normalize();
+            let tilt = nalgebra::UnitQuaternion::rotation_between(&Vector3::z(), &normal).unwrap();
+            let yawed = nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
+            let world_from_body = Pose3::from_parts(Vector3::new(x, y, ground(x, y) + 0.5).into(), tilt * yawed);
+            let kf = KeyframeId(k as u32);
+            graph.add_keyframe(Keyframe { id: kf, stamp: k as f64, world_from_body }).unwrap();
+            let seen: Vec<ObjectCandidate> = trunks
+                .iter()
+                .map(|&(tx, ty)| {
+                    // The visible half: surface points facing the sensor, from the ground up.
+                    let facing = (Vector3::new(x - tx, y - ty, 0.0)).normalize();
+                    let mut sum = Vector3::zeros();
+                    let n = 200;
+                    for j in 0..n {
+                        let a = std::f64::consts::PI * (j as f64 / n as f64 - 0.5);
+                        let (c, s) = (a.cos(), a.sin());
+                        let radial = Vector3::new(facing.x * c - facing.y * s, facing.x * s + facing.y * c, 0.0);
+                        let (px, py) = (tx + 0.3 * radial.x, ty + 0.3 * radial.y);
+                        sum += Vector3::new(px, py, ground(px, py) + 3.0 * (j % 10) as f64 / 9.0);
+                    }
+                    let in_body = world_from_body.inverse() * Point3::from(sum / n as f64);
+                    ObjectCandidate {
+                        label: LabelId(1),
+                        centroid: in_body,
+                        size: Vector3::new(0.6, 0.6, 3.0),
+                        points: n,
+                    }
+                })
+                .collect();
+            ids.push(tracker.update(&mut graph, kf, &seen, &config).unwrap().objects);
+        }
+        assert_eq!(graph.object_count(), trunks.len(), "no duplicates on the slope");
+        assert!(ids.iter().all(|kf| *kf == ids[0]), "{ids:?}");
     }
 
     #[test]
