@@ -5,31 +5,11 @@
 //! one cluster are linked by a chain of steps shorter than 2√3 · tolerance; points farther than
 //! 2 · tolerance from every other voxel's points are never joined. Clusters are kept when their
 //! point count and extent are plausible for the class.
-//!
-//! A cluster that lies flat — labels that bled onto the ground behind an object — is refused
-//! when its thickness is below `min_height_m`. On a slope (or under a tilted body) such a patch
-//! rises along z with the ground, 2 m of it 0.35 m on a 10° hill, so its thickness is measured
-//! along its own normal too: the eigenvector n of the smallest eigenvalue of the cluster's
-//! covariance, when n is within [`MAX_GROUND_TILT_DEG`] of z (the patch lies like ground, not
-//! stands like a wall):
-//!
-//! ```text
-//! C = 1/N Σ (p − p̄)(p − p̄)ᵀ,   C n = λ_min n
-//! thickness = min( extent_z,  max_p n·p − min_p n·p )   if |n_z| ≥ cos(MAX_GROUND_TILT_DEG)
-//!           = extent_z                                   otherwise
-//! ```
-//!
-//! On level ground a flat patch's normal is z and an upright object's thinnest side is either
-//! its height (the same extent) or horizontal, so level scenes cluster as with extent_z alone.
 
 use crate::scene_graph::LabelId;
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-
-/// A flat cluster whose normal is within this angle of z lies like the ground (a hill, a ramp
-/// or the body's tilt), degrees: its thickness is measured along the normal.
-pub const MAX_GROUND_TILT_DEG: f64 = 45.0;
 
 /// Plausibility limits of one class's clusters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -57,9 +37,8 @@ pub struct ClusterConfig {
     pub default_limits: ClassLimits,
     /// Per-class limits, by class id.
     pub classes: BTreeMap<u16, ClassLimits>,
-    /// Clusters thinner than this are refused (labels bleeding onto the ground behind an
-    /// object): thickness along z, or along the cluster's normal when it lies like sloped
-    /// ground (module documentation), m. Default 0: off.
+    /// Clusters flatter than this along z are refused (labels bleeding onto the ground behind
+    /// an object, in the sensor's upright frame), m. Default 0: off.
     pub min_height_m: f64,
 }
 
@@ -165,9 +144,6 @@ pub fn cluster(points: &[Point3<f64>], labels: &[Option<LabelId>], config: &Clus
             if extent.max() > limits.max_extent_m || extent.z < config.min_height_m {
                 continue;
             }
-            if config.min_height_m > 0.0 && thickness_along_normal(points, &cluster_points) < config.min_height_m {
-                continue;
-            }
             out.push(ObjectCandidate {
                 label,
                 centroid: Point3::from(sum / cluster_points.len() as f64),
@@ -177,29 +153,6 @@ pub fn cluster(points: &[Point3<f64>], labels: &[Option<LabelId>], config: &Clus
         }
     }
     out
-}
-
-/// The cluster's extent along its normal (the eigenvector of its covariance's smallest
-/// eigenvalue) when that normal is within [`MAX_GROUND_TILT_DEG`] of z; infinite otherwise (the
-/// cluster stands rather than lies) or when the normal is undefined.
-fn thickness_along_normal(points: &[Point3<f64>], members: &[usize]) -> f64 {
-    let n = members.len() as f64;
-    let mean = members.iter().map(|&k| points[k].coords).sum::<Vector3<f64>>() / n;
-    let covariance = members.iter().fold(nalgebra::Matrix3::zeros(), |c, &k| {
-        let d = points[k].coords - mean;
-        c + d * d.transpose() / n
-    });
-    let eigen = covariance.symmetric_eigen();
-    let smallest = eigen.eigenvalues.imin();
-    let normal = eigen.eigenvectors.column(smallest).into_owned();
-    if !normal.iter().all(|v| v.is_finite()) || normal.z.abs() < MAX_GROUND_TILT_DEG.to_radians().cos() {
-        return f64::INFINITY;
-    }
-    let (lo, hi) = members.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &k| {
-        let d = normal.dot(&points[k].coords);
-        (lo.min(d), hi.max(d))
-    });
-    hi - lo
 }
 
 #[cfg(test)]
@@ -233,69 +186,6 @@ mod tests {
         let upright = cluster(&points, &labels, &ClusterConfig { min_height_m: 0.2, ..ClusterConfig::default() });
         assert_eq!(upright.len(), 1);
         assert!((upright[0].centroid.x - 10.0).abs() < 0.1);
-    }
-
-    /// A patch of `side` × `side` m of ground labels on ground rising at `slope` along
-    /// `azimuth` (2 cm of noise), and a 0.6 m box standing on that ground 8 m away.
-    fn sloped_scene(rng: &mut ChaCha8Rng, slope: f64, azimuth: f64, side: f64) -> Vec<Point3<f64>> {
-        let (c, s, tan) = (azimuth.cos(), azimuth.sin(), slope.tan());
-        let ground = |x: f64, y: f64| -0.8 + tan * (c * x + s * y);
-        let half = side / 2.0;
-        let mut points: Vec<Point3<f64>> = (0..300)
-            .map(|_| {
-                let (x, y) = (rng.random_range(-half..half), rng.random_range(-half..half));
-                Point3::new(x, y, ground(x, y) + rng.random_range(-0.02..0.02))
-            })
-            .collect();
-        let (bx, by) = (8.0 * c, 8.0 * s);
-        points.extend(boxed(rng, [bx, by, ground(bx, by) + 0.3], 0.3, 200));
-        points
-    }
-
-    #[test]
-    fn a_label_patch_on_a_10_degree_slope_is_refused_and_the_box_on_it_kept() {
-        let mut rng = ChaCha8Rng::seed_from_u64(5);
-        // 2.5 m of a 10° slope rises 0.44 m along z: the old z-extent test took it for an object.
-        let points = sloped_scene(&mut rng, 10f64.to_radians(), 0.4, 2.5);
-        let labels = vec![Some(LabelId(3)); points.len()];
-        let config = ClusterConfig { min_height_m: 0.2, ..ClusterConfig::default() };
-        let kept = cluster(&points, &labels, &config);
-        assert_eq!(kept.len(), 1, "{kept:?}");
-        assert!((kept[0].centroid.x - 8.0 * 0.4f64.cos()).abs() < 0.1);
-    }
-
-    #[test]
-    fn a_thin_standing_object_is_not_taken_for_ground() {
-        // A sign: 1 m wide, 1.2 m tall, 3 cm thick; its thinnest side is horizontal.
-        let mut rng = ChaCha8Rng::seed_from_u64(6);
-        let points: Vec<Point3<f64>> = (0..300)
-            .map(|_| Point3::new(rng.random_range(0.0..0.03), rng.random_range(-0.5..0.5), rng.random_range(0.0..1.2)))
-            .collect();
-        let labels = vec![Some(LabelId(3)); points.len()];
-        let config = ClusterConfig { min_height_m: 0.2, ..ClusterConfig::default() };
-        assert_eq!(cluster(&points, &labels, &config).len(), 1);
-    }
-
-    proptest::proptest! {
-        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
-        /// Ground up to 25° steep relative to the sensor (a 15° hill under a body tilted the
-        /// other way), in any direction, patches of 1 to 3 m: the patch is refused, the box kept.
-        #[test]
-        fn label_patches_on_slopes_are_refused(
-            slope_deg in 0.0..25.0f64,
-            azimuth in 0.0..std::f64::consts::TAU,
-            side in 1.0..3.0f64,
-            seed: u64,
-        ) {
-            let mut rng = ChaCha8Rng::seed_from_u64(seed);
-            let points = sloped_scene(&mut rng, slope_deg.to_radians(), azimuth, side);
-            let labels = vec![Some(LabelId(3)); points.len()];
-            let config = ClusterConfig { min_height_m: 0.2, ..ClusterConfig::default() };
-            let kept = cluster(&points, &labels, &config);
-            proptest::prop_assert_eq!(kept.len(), 1);
-            let box_at = Point3::new(8.0 * azimuth.cos(), 8.0 * azimuth.sin(), 0.0);
-            proptest::prop_assert!((kept[0].centroid.xy() - box_at.xy()).norm() < 0.1);
-        }
     }
 
     #[test]
