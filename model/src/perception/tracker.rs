@@ -69,9 +69,9 @@ pub struct ObjectTracker {
     sightings: BTreeMap<ObjectId, u32>,
     /// Each object's sightings within `moving_window_s`: the keyframe and the centroid in its
     /// body frame, oldest first.
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    #[serde(default)]
     recent: BTreeMap<ObjectId, VecDeque<(KeyframeId, Point3<f64>)>>,
-    #[serde(default, skip_serializing_if = "BTreeSet::is_empty")]
+    #[serde(default)]
     moving: BTreeSet<ObjectId>,
 }
 
@@ -395,5 +395,24 @@ mod tests {
             tracker.update(&mut graph, KeyframeId(k), &seen, &config).unwrap();
         }
         assert_eq!(tracker.moving_count(), 0, "4.5 m over 150 s, but never more than 0.9 m within 10 s");
+    }
+
+    /// The tracker's state goes into snapshots (postcard, which is not self-describing): a
+    /// tracker with and without moving objects and recent sightings reads back equal.
+    #[test]
+    fn the_state_survives_the_snapshot_encoding() {
+        let mut graph = SceneGraph::new();
+        let mut tracker = ObjectTracker::default();
+        let config = TrackerConfig::default();
+        keyframes(&mut graph, 6, |_| 0.0);
+        for k in 0..6 {
+            let seen = [candidate(1, 3.0 + 0.9 * f64::from(k), 2.0), candidate(2, -4.0, 1.0)];
+            tracker.update(&mut graph, KeyframeId(k), &seen, &config).unwrap();
+        }
+        assert_eq!(tracker.moving_count(), 1);
+        for state in [ObjectTracker::default(), tracker] {
+            let bytes = postcard::to_allocvec(&state).unwrap();
+            assert_eq!(postcard::from_bytes::<ObjectTracker>(&bytes).unwrap(), state);
+        }
     }
 }
