@@ -109,7 +109,15 @@ pub struct NeighbourKeyframe {
     pub world_from_body: Pose3,
     pub covariance: Matrix6<f64>,
     pub points_in_body: Vec<Point3<f64>>,
+    /// Bytes of its compressed cloud on the radio (what a closure budget counts).
+    pub cloud_bytes: u64,
 }
+
+/// Optimiser → Matcher: each aligned neighbour's local_from_remote as the last solve of the
+/// pose graph estimates it (its anchor), from every inter-robot factor so far.
+#[derive(Message, Clone, Debug, PartialEq)]
+#[rtype(result = "()")]
+pub struct NeighbourTransforms(pub Vec<(RobotId, Pose3)>);
 
 /// Comms → Matcher: requested keyframes that will not come (unknown to the neighbour, or given
 /// up after every retry).

@@ -3,7 +3,8 @@
 //! keyframes as variables with priors from their marginal covariances (expressed in our world
 //! through `local_from_remote`), and inter-robot factors from ICP — solved by
 //! Levenberg–Marquardt on faer. Publishes optimised poses and marginal covariances to the
-//! Tracker, which applies them to the map (the Matcher sees them in the next map snapshot).
+//! Tracker, which applies them to the map (the Matcher sees them in the next map snapshot), and
+//! each neighbour's transform as the graph now estimates it (its anchor) to the Matcher.
 //!
 //! A wrong loop closure or inter-robot factor (a false match that passed every check) would
 //! bend the whole trajectory toward it. With `reject_outliers`, each solve is GNC-TLS over those
@@ -23,6 +24,8 @@ use sgm_model::scene_graph::RobotId;
 #[derive(Clone)]
 pub struct OptimiserLinks {
     pub tracker: Recipient<PosesOptimised>,
+    /// Each solve's estimate of every aligned neighbour's transform.
+    pub matcher: Recipient<NeighbourTransforms>,
 }
 
 /// Most keyframes whose marginal covariance is computed after each optimisation (the latest).
@@ -82,6 +85,9 @@ impl Optimiser {
         }
         if let Some(links) = &self.links {
             links.tracker.do_send(PosesOptimised { poses: solved.poses, covariances: solved.covariances });
+            if !solved.anchors.is_empty() {
+                links.matcher.do_send(NeighbourTransforms(solved.anchors));
+            }
         }
     }
 }

@@ -13,6 +13,11 @@
 //! [`Protocol`] holds any state for storage in an actor; it changes only through these
 //! transitions. Waiting states carry a [`Wait`] (deadline, attempts) for timeouts, retries with
 //! exponential back-off, and giving up back to `ObjectsReceived`.
+//!
+//! Once aligned, a neighbour stays `Aligned` for good (only a silent link sends it back to
+//! `Discovered`): its later encounters are *closure rounds* inside that state ([`Closure`]:
+//! object clouds, then keyframes), each adding inter-robot factors; one that fails or times out
+//! ends without touching the alignment.
 
 use sgm_model::geometry::Pose3;
 use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, Stamp};
@@ -107,8 +112,28 @@ pub struct KeyframesRequested {
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Aligned {
     pub revision: u32,
+    /// The current estimate: the first round's, then the pose graph's (its anchor).
     pub local_from_remote: Pose3,
     pub pairs: Vec<(ObjectId, ObjectId)>,
+    /// The closure round in progress, if any.
+    pub closure: Option<Closure>,
+}
+
+/// A closure round of an aligned neighbour: the object pairs it was started from (matched
+/// through the current transform), and where it stands.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Closure {
+    pub pairs: Vec<(ObjectId, ObjectId)>,
+    pub stage: ClosureStage,
+}
+
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum ClosureStage {
+    /// The object clouds of the pairs were asked for.
+    Clouds { wait: Wait },
+    /// The keyframes in `awaiting` were asked for; `guess` is the round's transform after
+    /// object-cloud ICP.
+    Keyframes { guess: Pose3, awaiting: BTreeSet<KeyframeId>, wait: Wait },
 }
 
 impl<S> Neighbour<S> {
@@ -175,7 +200,7 @@ impl Neighbour<KeyframesRequested> {
     /// Registration of the received keyframes succeeded.
     pub fn aligned(self, local_from_remote: Pose3, now: Stamp) -> Neighbour<Aligned> {
         let KeyframesRequested { revision, pairs, .. } = self.state.clone();
-        self.to(now, Aligned { revision, local_from_remote, pairs })
+        self.to(now, Aligned { revision, local_from_remote, pairs, closure: None })
     }
 
     pub fn gave_up(self, now: Stamp) -> Neighbour<ObjectsReceived> {
@@ -197,10 +222,36 @@ impl Neighbour<Aligned> {
         self
     }
 
-    /// A fresh match (more objects in common) asks for more keyframes to refine the alignment.
-    pub fn rematched(self, pairs: Vec<(ObjectId, ObjectId)>, now: Stamp, retry: &RetryConfig) -> Neighbour<Matched> {
-        let Aligned { revision, local_from_remote, .. } = self.state.clone();
-        self.to(now, Matched { revision, local_from_remote, pairs, wait: Wait::new(now, retry) })
+    /// A closure round starts: the object clouds of `pairs` were asked for.
+    pub fn closure_started(mut self, pairs: Vec<(ObjectId, ObjectId)>, now: Stamp, retry: &RetryConfig) -> Self {
+        self.state.closure = Some(Closure { pairs, stage: ClosureStage::Clouds { wait: Wait::new(now, retry) } });
+        self
+    }
+
+    /// The round's object clouds arrived; the keyframes in `awaiting` were asked for.
+    pub fn closure_keyframes(
+        mut self,
+        guess: Pose3,
+        awaiting: BTreeSet<KeyframeId>,
+        now: Stamp,
+        retry: &RetryConfig,
+    ) -> Self {
+        if let Some(closure) = &mut self.state.closure {
+            closure.stage = ClosureStage::Keyframes { guess, awaiting, wait: Wait::new(now, retry) };
+        }
+        self
+    }
+
+    /// The round is over, whatever it gave; the alignment stands.
+    pub fn closure_ended(mut self) -> Self {
+        self.state.closure = None;
+        self
+    }
+
+    /// The pose graph's estimate of the transform.
+    pub fn reestimated(mut self, local_from_remote: Pose3) -> Self {
+        self.state.local_from_remote = local_from_remote;
+        self
     }
 }
 
@@ -284,6 +335,7 @@ impl Protocol {
         match self {
             Protocol::Matched(n) => n.gave_up(now).into(),
             Protocol::KeyframesRequested(n) => n.gave_up(now).into(),
+            Protocol::Aligned(n) => n.closure_ended().into(),
             other => other,
         }
     }
@@ -322,7 +374,8 @@ mod tests {
                 state: Aligned {
                     revision: 9,
                     local_from_remote: Pose3::identity(),
-                    pairs: vec![(ObjectId(1), ObjectId(7))]
+                    pairs: vec![(ObjectId(1), ObjectId(7))],
+                    closure: None,
                 }
             })
         );
@@ -333,6 +386,29 @@ mod tests {
             &retry,
         );
         assert_eq!(again.gave_up(9.0).state.revision, 1);
+    }
+
+    #[test]
+    fn closure_rounds_never_leave_aligned() {
+        let retry = RetryConfig::default();
+        let a = Neighbour::discovered(RobotId(2), 0.0)
+            .objects_received(1, 0.0)
+            .matched(Pose3::identity(), vec![], 0.0, &retry)
+            .keyframes_requested(Pose3::identity(), BTreeSet::new(), 0.0, &retry)
+            .aligned(Pose3::identity(), 1.0);
+        let started = a.closure_started(vec![(ObjectId(3), ObjectId(4))], 5.0, &retry);
+        assert!(matches!(started.state.closure, Some(Closure { stage: ClosureStage::Clouds { .. }, .. })));
+        let moved = Pose3::translation(0.1, 0.0, 0.0);
+        let asked = started.closure_keyframes(moved, [KeyframeId(9)].into(), 6.0, &retry).reestimated(moved);
+        let Some(Closure { stage: ClosureStage::Keyframes { awaiting, .. }, .. }) = &asked.state.closure else {
+            panic!("keyframes stage expected")
+        };
+        assert_eq!(awaiting.len(), 1);
+        // A thaw drops a round in flight and keeps the alignment.
+        let p: Protocol = asked.into();
+        let Protocol::Aligned(settled) = p.settled(7.0) else { panic!("still aligned") };
+        assert_eq!((settled.state.closure, settled.state.local_from_remote), (None, moved));
+        assert_eq!(settled.since, 1.0);
     }
 
     #[test]

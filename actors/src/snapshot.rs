@@ -215,6 +215,8 @@ mod tests {
                 pending: 0,
                 candidates: Vec::new(),
                 rejected: Vec::new(),
+                anchors: Vec::new(),
+                realigned: Vec::new(),
             },
             comms: CommsState { sequence: 99, ..CommsState::default() },
         }

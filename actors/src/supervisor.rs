@@ -199,7 +199,10 @@ pub fn start_robot_restored(
         share_descriptors: comms.clone().recipient(),
         optimiser: optimiser.clone().recipient(),
     }));
-    optimiser.do_send(Connect(OptimiserLinks { tracker: tracker.clone().recipient() }));
+    optimiser.do_send(Connect(OptimiserLinks {
+        tracker: tracker.clone().recipient(),
+        matcher: matcher.clone().recipient(),
+    }));
     attach(robot, comms.clone());
     if restored {
         tracker.do_send(Republish);
@@ -331,6 +334,7 @@ mod tests {
             world_from_body: sgm_model::geometry::Pose3::identity(),
             covariance: nalgebra::Matrix6::identity(),
             points_in_body: Vec::new(),
+            cloud_bytes: 0,
         };
         let matcher = MatcherState {
             neighbours: vec![NeighbourMemory {
@@ -340,6 +344,7 @@ mod tests {
                 keyframes: vec![keyframe(1), keyframe(2)],
                 first_aligned: None,
                 refuted: Vec::new(),
+                closures: Default::default(),
             }],
         };
         let mut comms = CommsState::default();

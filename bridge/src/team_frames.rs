@@ -101,6 +101,7 @@ mod tests {
             state: Some(sgm_actors::protocol::ProtocolStage::Aligned),
             local_from_remote: Some(Pose3::translation(x, 0.0, 0.0)),
             first_aligned: Some(1.0),
+            closures: Default::default(),
             keyframes_held: 0,
             objects_revision: None,
         }

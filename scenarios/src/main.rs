@@ -265,6 +265,19 @@ enum BenchCommand {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Wrong inter-robot closures, 0–90 % of them, gross and subtle: team ATE against the clean
+    /// run, and how many the back end (PCM, then GNC-TLS) rejected.
+    Outliers {
+        /// The library scenario (or scenario file) to run.
+        #[arg(long, default_value = "faults/clean")]
+        scenario: String,
+        /// Cut each mission to this many simulated seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Also write the table as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// Every bench above but realism in one report (report.md, report.json and plots) in --out.
     All {
         #[arg(long, default_value = "bench-report")]
@@ -400,6 +413,9 @@ fn main() -> ExitCode {
         Command::Bench { which: BenchCommand::Sweeps { duration, json, plots } } => {
             let options = bench::sweeps::Options { duration, plots };
             emit("sweeps", bench::sweeps::run_bench(&options), json.as_deref())
+        }
+        Command::Bench { which: BenchCommand::Outliers { scenario, duration, json } } => {
+            emit("outliers", bench::outliers::run_bench(&scenario, duration), json.as_deref())
         }
         Command::Bench { which: BenchCommand::Realism { duration, only, seeds, json } } => {
             let options = bench::realism::Options { duration, only: only.as_deref(), seeds };

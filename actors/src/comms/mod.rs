@@ -304,6 +304,7 @@ impl Comms {
                             world_from_body,
                             covariance,
                             points_in_body,
+                            cloud_bytes: r.cloud.len() as u64,
                         })
                     }
                     _ => {

@@ -3,6 +3,7 @@
 
 use super::error::{check, positive, ConfigError};
 use serde::{Deserialize, Serialize};
+use sgm_model::matching::closure::ClosurePlan;
 use sgm_model::matching::place_candidates::ScanContextSection;
 use sgm_model::matching::MatcherConfig;
 use sgm_model::perception::icp::IcpConfig;
@@ -59,6 +60,12 @@ pub struct MatcherSection {
     /// A keyframe registration counts when this fraction of its structure points agree.
     /// Default 0.3.
     pub min_structure_agreement: f64,
+    /// Least standard deviation of an inter-robot factor's rotation, degrees: added to ICP's
+    /// own covariance, which counts every point as an independent measurement and so claims
+    /// sub-millimetre precision (`model::matching::alignment::with_floor`). Default 0.5.
+    pub factor_sigma_floor_deg: f64,
+    /// ... and of its translation, m. Default 0.05.
+    pub factor_sigma_floor_m: f64,
     /// Registrations that must count before an alignment is accepted; fewer refute the object
     /// match (the neighbour goes back to waiting for object data). Default 2.
     pub min_keyframe_factors: usize,
@@ -67,6 +74,83 @@ pub struct MatcherSection {
     /// round go first, and all go once the neighbour is aligned. Default 16 (two rounds; a
     /// keyframe is about 370 KB as held, and a pair refuted again and again fills its cap).
     pub max_held_keyframes: usize,
+    /// Inter-robot closures after the first alignment (`[matcher.closures]`).
+    pub closures: ClosureSection,
+}
+
+/// `[matcher.closures]`: once a neighbour is aligned, its objects are associated with ours
+/// through the current transform and keyframes around them are registered, over ground no
+/// earlier round covered, within a budget of bytes and time (`model::matching::closure`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClosureSection {
+    /// Whether closure rounds run at all. Default true.
+    pub enabled: bool,
+    /// Least time between two rounds with one neighbour (bounds CPU), s. Default 10.
+    pub interval_s: f64,
+    /// Neighbour keyframes asked for per round, at most. Default 2 (rounds spread over more
+    /// ground for the same bytes).
+    pub max_keyframes_per_round: usize,
+    /// Keyframe-cloud bytes received from one neighbour for closures, at most (a round starts
+    /// only while under it). Default 131072 (128 KiB, about four keyframes of a campus).
+    pub max_bytes_per_neighbour: u64,
+    /// A local and a neighbour object this close through the current transform are one, m.
+    /// Default 1.0.
+    pub gate_m: f64,
+    /// A round takes the object pairs within this distance of its seed, m. Default 15.
+    pub radius_m: f64,
+    /// A round's seed is at least this far from every earlier round's, m. Default 10.
+    pub spacing_m: f64,
+    /// Object pairs a round needs. Default 3.
+    pub min_pairs: usize,
+}
+
+impl Default for ClosureSection {
+    fn default() -> Self {
+        let plan = ClosurePlan::default();
+        Self {
+            enabled: true,
+            interval_s: 10.0,
+            max_keyframes_per_round: 2,
+            max_bytes_per_neighbour: 128 * 1024,
+            gate_m: plan.gate_m,
+            radius_m: plan.radius_m,
+            spacing_m: plan.spacing_m,
+            min_pairs: plan.min_pairs,
+        }
+    }
+}
+
+impl ClosureSection {
+    pub fn plan(&self) -> ClosurePlan {
+        ClosurePlan {
+            gate_m: self.gate_m,
+            radius_m: self.radius_m,
+            spacing_m: self.spacing_m,
+            min_pairs: self.min_pairs,
+        }
+    }
+
+    fn validate(&self) -> Result<(), ConfigError> {
+        let c = self;
+        let in_range = |v: f64, lo: f64, hi: f64| v.is_finite() && v >= lo && v <= hi;
+        check(in_range(c.interval_s, 0.0, 3600.0), "matcher.closures.interval_s", c.interval_s, "0 ≤ x ≤ 3600 s")?;
+        check(
+            (1..=64).contains(&c.max_keyframes_per_round),
+            "matcher.closures.max_keyframes_per_round",
+            c.max_keyframes_per_round,
+            "1–64",
+        )?;
+        check(c.gate_m > 0.0 && in_range(c.gate_m, 0.0, 10.0), "matcher.closures.gate_m", c.gate_m, "0 < x ≤ 10 m")?;
+        check(
+            c.radius_m > 0.0 && in_range(c.radius_m, 0.0, 200.0),
+            "matcher.closures.radius_m",
+            c.radius_m,
+            "0 < x ≤ 200 m",
+        )?;
+        check(in_range(c.spacing_m, 0.0, 1000.0), "matcher.closures.spacing_m", c.spacing_m, "0 ≤ x ≤ 1000 m")?;
+        check(c.min_pairs >= 3, "matcher.closures.min_pairs", c.min_pairs, "≥ 3")
+    }
 }
 
 impl Default for MatcherSection {
@@ -84,13 +168,21 @@ impl Default for MatcherSection {
             keyframe_max_iterations: 20,
             structure_check: StructureCheck::default(),
             min_structure_agreement: 0.3,
+            factor_sigma_floor_deg: 0.5,
+            factor_sigma_floor_m: 0.05,
             min_keyframe_factors: 2,
             max_held_keyframes: 16,
+            closures: ClosureSection::default(),
         }
     }
 }
 
 impl MatcherSection {
+    /// (σ_r rad, σ_t m) of `factor_sigma_floor_*`.
+    pub fn factor_sigma_floor(&self) -> (f64, f64) {
+        (self.factor_sigma_floor_deg.to_radians(), self.factor_sigma_floor_m)
+    }
+
     /// Checks the object-graph matching keys (`matcher.*` of `model::matching::MatcherConfig`).
     pub fn validate_matching(&self) -> Result<(), ConfigError> {
         self.matching.validate().map_err(|e| ConfigError::Invalid {
@@ -150,6 +242,9 @@ impl MatcherSection {
             m.keyframe_max_iterations,
             "1 ≤ x ≤ 1000",
         )?;
+        let (deg, m_) = (m.factor_sigma_floor_deg, m.factor_sigma_floor_m);
+        check(deg.is_finite() && (0.0..=45.0).contains(&deg), "matcher.factor_sigma_floor_deg", deg, "0 ≤ x ≤ 45°")?;
+        check(m_.is_finite() && (0.0..=10.0).contains(&m_), "matcher.factor_sigma_floor_m", m_, "0 ≤ x ≤ 10 m")?;
         check(m.min_keyframe_factors >= 1, "matcher.min_keyframe_factors", m.min_keyframe_factors, "≥ 1")?;
         check(
             m.max_keyframes_per_alignment >= m.min_keyframe_factors,
@@ -183,6 +278,32 @@ impl MatcherSection {
             sc.max_ground_slope_deg,
             "0 ≤ x ≤ 60°",
         )?;
-        Ok(())
+        m.closures.validate()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn impossible_closure_and_factor_keys_are_refused_with_their_key() {
+        let refused = |change: fn(&mut MatcherSection), expected: &str| {
+            let mut m = MatcherSection::default();
+            change(&mut m);
+            let e = m.validate().unwrap_err().to_string();
+            assert!(e.starts_with(expected), "{e}");
+        };
+        MatcherSection::default().validate().unwrap();
+        refused(|m| m.closures.interval_s = -1.0, "matcher.closures.interval_s = -1");
+        refused(|m| m.closures.max_keyframes_per_round = 0, "matcher.closures.max_keyframes_per_round = 0");
+        refused(|m| m.closures.gate_m = 0.0, "matcher.closures.gate_m = 0");
+        refused(|m| m.closures.radius_m = f64::NAN, "matcher.closures.radius_m = NaN");
+        refused(|m| m.closures.spacing_m = -5.0, "matcher.closures.spacing_m = -5");
+        refused(|m| m.closures.min_pairs = 2, "matcher.closures.min_pairs = 2");
+        refused(|m| m.factor_sigma_floor_deg = -0.1, "matcher.factor_sigma_floor_deg = -0.1");
+        refused(|m| m.factor_sigma_floor_m = f64::INFINITY, "matcher.factor_sigma_floor_m = inf");
+        let plan = MatcherSection::default().closures.plan();
+        assert_eq!((plan.gate_m, plan.radius_m, plan.spacing_m, plan.min_pairs), (1.0, 15.0, 10.0, 3));
     }
 }

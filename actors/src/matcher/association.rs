@@ -5,6 +5,19 @@
 
 use super::*;
 
+/// A neighbour's object data as graph objects (its world).
+pub(super) fn graph_objects(data: &ObjectData) -> Vec<GraphObject> {
+    data.objects
+        .iter()
+        .map(|o| GraphObject {
+            id: o.id,
+            label: o.label,
+            centroid: o.centroid_m(data.resolution_mm),
+            size: Some(o.size_m()),
+        })
+        .collect()
+}
+
 impl Matcher {
     /// Matches the neighbour's latest object data against ours; asks for object clouds on success.
     pub(super) fn try_match(&mut self, robot: RobotId) {
@@ -17,16 +30,7 @@ impl Matcher {
         if !waiting || !due || !entry.link_up || self.config.association != Association::Objects {
             return;
         }
-        let remote_objects: Vec<GraphObject> = data
-            .objects
-            .iter()
-            .map(|o| GraphObject {
-                id: o.id,
-                label: o.label,
-                centroid: o.centroid_m(data.resolution_mm),
-                size: Some(o.size_m()),
-            })
-            .collect();
+        let remote_objects = graph_objects(data);
         let (Ok(local), Ok(remote)) = (
             ObjectGraph::new(self.map.objects.objects.clone(), usize::MAX),
             ObjectGraph::new(remote_objects, usize::MAX),
@@ -126,6 +130,7 @@ impl Matcher {
             neighbourhood([c.local], k).into_iter().filter(|id| self.map.keyframes.contains_key(id)).collect();
         let wanted: BTreeSet<KeyframeId> =
             round.iter().filter(|id| !entry.keyframes.contains_key(id)).copied().collect();
+        entry.closures.requested.extend(wanted.iter().copied());
         let retry = self.retry.clone();
         if let Some(Protocol::ObjectsReceived(n)) = entry.protocol.take() {
             let matched = n.matched(guess, Vec::new(), now, &retry);

@@ -13,17 +13,18 @@
 //! to fine, and the rest is as above with the local keyframes around k_l as targets.
 
 mod association;
+mod closures;
 mod neighbour;
 mod rounds;
 
-pub use neighbour::{GetNeighbours, MatcherState, NeighbourMemory, NeighbourStatus};
+pub use neighbour::{ClosureCounts, ClosureMemory, GetNeighbours, MatcherState, NeighbourMemory, NeighbourStatus};
 
 use crate::clock::Clock;
 use crate::config::{Association, MatcherSection};
 use crate::containment::contained;
 use crate::map_view::{MapView, ViewKeyframe};
 use crate::messages::*;
-use crate::protocol::{Matched, Neighbour, Protocol, ProtocolStage, RetryConfig, Wait};
+use crate::protocol::{Closure, ClosureStage, Matched, Neighbour, Protocol, ProtocolStage, RetryConfig, Wait};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
 use nalgebra::Point3;
 use sgm_model::geometry::Pose3;
@@ -38,7 +39,7 @@ use sgm_model::perception::icp::{register, IcpConfig};
 use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS};
 use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
-use sgm_model::wire::messages::{KeyframeRefusalReason, ObjectData};
+use sgm_model::wire::messages::{KeyframeRefusalReason, ObjectCloud, ObjectData};
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
@@ -101,6 +102,7 @@ impl Matcher {
                 keyframes: e.keyframes.values().cloned().collect(),
                 first_aligned: e.first_aligned,
                 refuted: e.refuted.clone(),
+                closures: e.closures.clone(),
             })
             .collect();
         MatcherState { neighbours }
@@ -115,6 +117,7 @@ impl Matcher {
             entry.keyframes = memory.keyframes.into_iter().map(|k| (k.id, k)).collect();
             entry.first_aligned = memory.first_aligned;
             entry.refuted = memory.refuted;
+            entry.closures = memory.closures;
             entry.match_again = true;
         }
         self
@@ -136,6 +139,7 @@ impl Matcher {
             link_up: true,
             round_incomplete: false,
             match_again: false,
+            closures: ClosureMemory::default(),
         })
     }
 
@@ -276,6 +280,9 @@ impl Handler<NeighbourKeyframe> for Matcher {
                 self.release(robot, vec![id]);
                 return;
             }
+            if matches!(entry.protocol, Some(Protocol::Aligned(_))) {
+                entry.closures.counts.bytes += msg.cloud_bytes;
+            }
             entry.keyframes.insert(id, msg);
             let released = hold_at_most(&mut entry.keyframes, &entry.round, cap);
             self.release(robot, released);
@@ -306,7 +313,7 @@ impl Handler<Tick> for Matcher {
         contained(ctx, "matcher", || {
             // Object clouds that never came: ask again with back-off, then start over.
             let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
-            for robot in robots {
+            for robot in robots.clone() {
                 let Some(entry) = self.neighbours.get_mut(&robot) else { continue };
                 let Some(Protocol::Matched(mut n)) = entry.protocol.clone() else { continue };
                 if !entry.link_up || !n.state.wait.expired(msg.now) {
@@ -331,6 +338,11 @@ impl Handler<Tick> for Matcher {
             let again: Vec<RobotId> = self.neighbours.iter().filter(|(_, e)| e.match_again).map(|(r, _)| *r).collect();
             for robot in again {
                 self.try_associate(robot);
+            }
+            // Aligned neighbours: overdue closure rounds, and new ones.
+            for robot in robots {
+                self.closure_timeouts(robot, msg.now);
+                self.try_close(robot);
             }
         });
     }
@@ -371,6 +383,7 @@ impl Handler<GetNeighbours> for Matcher {
                     state: e.protocol.as_ref().map(Protocol::stage),
                     local_from_remote: e.protocol.as_ref().and_then(|p| p.local_from_remote().copied()),
                     first_aligned: e.first_aligned,
+                    closures: e.closures.counts,
                     keyframes_held: e.keyframes.len(),
                     objects_revision: e.objects.as_ref().map(|d| d.revision),
                 })

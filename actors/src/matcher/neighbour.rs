@@ -16,6 +16,8 @@ pub struct NeighbourStatus {
     pub local_from_remote: Option<Pose3>,
     /// When it first reached `Aligned`.
     pub first_aligned: Option<f64>,
+    /// Closure rounds since: how many, what they gave.
+    pub closures: ClosureCounts,
     pub keyframes_held: usize,
     /// Revision of the neighbour's object data held (`None`: none received).
     pub objects_revision: Option<u32>,
@@ -49,6 +51,31 @@ pub(super) struct NeighbourEntry {
     /// The last round was cut short by losses, not refuted: match again once
     /// `match_interval_s` has passed, even if no new object data comes.
     pub(super) match_again: bool,
+    /// What closure rounds have done with this neighbour.
+    pub(super) closures: ClosureMemory,
+}
+
+/// Closure rounds with one aligned neighbour so far (`matcher.closures`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct ClosureCounts {
+    /// Rounds started.
+    pub rounds: u32,
+    /// Inter-robot factors they added (the Optimiser's status says how many it keeps).
+    pub factors: u32,
+    /// Keyframe-cloud bytes received for them.
+    pub bytes: u64,
+}
+
+/// What a robot remembers of its closure rounds with a neighbour (kept in snapshots).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ClosureMemory {
+    pub counts: ClosureCounts,
+    /// Every neighbour keyframe ever asked for: never asked for twice.
+    pub requested: BTreeSet<KeyframeId>,
+    /// Each round's seed (local world): later rounds keep `spacing_m` from them.
+    pub seeds: Vec<Point3<f64>>,
+    /// When the last round was considered.
+    pub last_considered: Option<Stamp>,
 }
 
 /// What of the Matcher a snapshot keeps, per neighbour: its protocol state (a request in flight
@@ -68,6 +95,7 @@ pub struct NeighbourMemory {
     pub keyframes: Vec<NeighbourKeyframe>,
     pub first_aligned: Option<f64>,
     pub refuted: Vec<(Pose3, Stamp)>,
+    pub closures: ClosureMemory,
 }
 
 /// Drops held neighbour keyframes outside `round`, lowest ids first, until at most `cap` are
@@ -98,6 +126,7 @@ mod tests {
             world_from_body: Pose3::identity(),
             covariance: Matrix6::identity(),
             points_in_body: Vec::new(),
+            cloud_bytes: 0,
         };
         let mut held: BTreeMap<KeyframeId, NeighbourKeyframe> = (0..10).map(|k| (KeyframeId(k), keyframe(k))).collect();
         let round: BTreeSet<KeyframeId> = [KeyframeId(1), KeyframeId(2)].into();

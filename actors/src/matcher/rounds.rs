@@ -32,16 +32,19 @@ impl Matcher {
         object_cloud(scans, object.label, &object.centroid, &object.size.unwrap_or_default(), 0.3, 0.1)
     }
 
-    pub(super) fn on_object_clouds(&mut self, msg: NeighbourObjectClouds) {
-        let now = self.clock.now();
-        let Some(Protocol::Matched(matched)) = self.neighbours.get(&msg.robot).and_then(|e| e.protocol.clone()) else {
-            return;
-        };
-        // Object-cloud ICP: remote object points (remote world) onto ours (local world).
-        let remote_of: BTreeMap<ObjectId, ObjectId> = matched.state.pairs.iter().map(|(l, r)| (*r, *l)).collect();
+    /// Object-cloud ICP of the matched pairs (remote object points, remote world, onto ours,
+    /// local world) from `initial`: the refined transform (`initial` when ICP does not
+    /// converge), and the neighbour keyframes that observed each matched remote object.
+    pub(super) fn object_cloud_icp(
+        &self,
+        pairs: &[(ObjectId, ObjectId)],
+        clouds: &[ObjectCloud],
+        initial: &Pose3,
+    ) -> (Pose3, BTreeMap<ObjectId, Vec<KeyframeId>>) {
+        let remote_of: BTreeMap<ObjectId, ObjectId> = pairs.iter().map(|(l, r)| (*r, *l)).collect();
         let (mut source, mut target) = (Vec::new(), Vec::new());
         let mut observed_in = BTreeMap::new();
-        for cloud in &msg.clouds {
+        for cloud in clouds {
             let Some(local_id) = remote_of.get(&cloud.id) else { continue };
             observed_in.insert(cloud.id, cloud.keyframes.clone());
             // The envelope held the clouds' declared points within `comms.limits.max_cloud_points`.
@@ -52,12 +55,22 @@ impl Matcher {
                 target.extend(self.local_object_cloud(object));
             }
         }
-        let mut local_from_remote = matched.state.local_from_remote;
-        if let Ok(result) = register(&source, &target, &local_from_remote, &self.config.icp) {
-            if result.converged {
-                local_from_remote = result.target_from_source;
-            }
-        }
+        let refined = match register(&source, &target, initial, &self.config.icp) {
+            Ok(result) if result.converged => result.target_from_source,
+            _ => *initial,
+        };
+        (refined, observed_in)
+    }
+
+    pub(super) fn on_object_clouds(&mut self, msg: NeighbourObjectClouds) {
+        let now = self.clock.now();
+        let matched = match self.neighbours.get(&msg.robot).and_then(|e| e.protocol.clone()) {
+            Some(Protocol::Matched(matched)) => matched,
+            Some(Protocol::Aligned(aligned)) => return self.on_closure_clouds(msg, aligned),
+            _ => return,
+        };
+        let (local_from_remote, observed_in) =
+            self.object_cloud_icp(&matched.state.pairs, &msg.clouds, &matched.state.local_from_remote);
         // Neighbour keyframes that observed the matched objects, ± the neighbourhood.
         let around = neighbourhood(observed_in.values().flatten().copied(), self.config.keyframe_neighbourhood as u32);
         let round = evenly(around, self.config.max_keyframes_per_alignment);
@@ -66,6 +79,7 @@ impl Matcher {
         entry.observed_in = observed_in;
         let wanted: BTreeSet<KeyframeId> =
             round.iter().filter(|id| !entry.keyframes.contains_key(id)).copied().collect();
+        entry.closures.requested.extend(wanted.iter().copied());
         entry.round = round;
         entry.round_incomplete = false;
         entry.protocol = Some(matched.keyframes_requested(local_from_remote, wanted.clone(), now, &retry).into());
@@ -81,11 +95,22 @@ impl Matcher {
 
     pub(super) fn on_keyframe_resolved(&mut self, robot: RobotId, id: KeyframeId) {
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
-        if let Some(Protocol::KeyframesRequested(n)) = &mut entry.protocol {
-            n.state.awaiting.remove(&id);
-            if n.state.awaiting.is_empty() {
-                self.finish_alignment(robot);
+        match &mut entry.protocol {
+            Some(Protocol::KeyframesRequested(n)) => {
+                n.state.awaiting.remove(&id);
+                if n.state.awaiting.is_empty() {
+                    self.finish_alignment(robot);
+                }
             }
+            Some(Protocol::Aligned(n)) => {
+                if let Some(Closure { stage: ClosureStage::Keyframes { awaiting, .. }, .. }) = &mut n.state.closure {
+                    awaiting.remove(&id);
+                    if awaiting.is_empty() {
+                        self.finish_closure(robot);
+                    }
+                }
+            }
+            _ => {}
         }
     }
 
@@ -130,6 +155,7 @@ impl Matcher {
             icp: &keyframe_icp,
             structure: &self.config.structure_check,
             min_structure_agreement: self.config.min_structure_agreement,
+            sigma_floor: self.config.factor_sigma_floor(),
         };
         let registered = register_round(&targets, round, &local_from_remote, &config);
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
@@ -155,7 +181,19 @@ impl Matcher {
                     entry.protocol = Some(n.aligned(local_from_remote, now).into());
                     entry.first_aligned.get_or_insert(now);
                 }
-                // Aligned is final: no later round reads the neighbour's clouds.
+                // The first round's ground counts as covered for closure rounds.
+                let at: Vec<Point3<f64>> = n
+                    .state
+                    .pairs
+                    .iter()
+                    .filter_map(|(l, _)| self.map.objects.objects.iter().find(|o| o.id == *l))
+                    .map(|o| o.centroid)
+                    .collect();
+                if !at.is_empty() {
+                    let mean = at.iter().fold(nalgebra::Vector3::zeros(), |s, p| s + p.coords) / at.len() as f64;
+                    entry.closures.seeds.push(Point3::from(mean));
+                }
+                // Aligned: the factors hold what registration learnt; the clouds are let go.
                 let released: Vec<KeyframeId> = std::mem::take(&mut entry.keyframes).into_keys().collect();
                 entry.round.clear();
                 self.release(robot, released);

@@ -89,6 +89,8 @@ pub struct RoundConfig<'a> {
     pub icp: &'a IcpConfig,
     pub structure: &'a StructureCheck,
     pub min_structure_agreement: f64,
+    /// Least standard deviations of a factor, (rotation rad, translation m): see [`with_floor`].
+    pub sigma_floor: (f64, f64),
 }
 
 /// What a round's registrations gave.
@@ -134,10 +136,31 @@ pub fn register_round<'a>(
             continue;
         }
         out.neighbour_keyframes.push((remote.id, *remote.world_from_body, *remote.covariance));
-        out.factors.push((*local_id, remote.id, result.target_from_source, result.information));
+        let information = with_floor(&result.information, config.sigma_floor);
+        out.factors.push((*local_id, remote.id, result.target_from_source, information));
         out.implied.push(local.world_from_body * result.target_from_source * remote.world_from_body.inverse());
     }
     out
+}
+
+/// ICP's information Σ JᵀJ / RMSE² treats every point's residual as independent, so it claims
+/// sub-millimetre precision from thousands of points, while a registration's real error is
+/// systematic (the scans' own distortion, a surface seen from two sides). A factor's covariance
+/// is ICP's plus a floor per axis:
+///
+/// ```text
+/// Σ = H⁻¹ + diag(σ_r², σ_r², σ_r², σ_t², σ_t², σ_t²),   Ω = Σ⁻¹
+/// ```
+///
+/// `sigma_floor` = (σ_r rad, σ_t m); (0, 0) keeps ICP's information.
+pub fn with_floor(information: &Matrix6<f64>, sigma_floor: (f64, f64)) -> Matrix6<f64> {
+    let (r, t) = sigma_floor;
+    if r == 0.0 && t == 0.0 {
+        return *information;
+    }
+    let Some(covariance) = information.try_inverse() else { return *information };
+    let floor = Matrix6::from_diagonal(&nalgebra::Vector6::new(r * r, r * r, r * r, t * t, t * t, t * t));
+    (covariance + floor).try_inverse().unwrap_or(*information)
 }
 
 /// What a finished round means.
@@ -286,7 +309,8 @@ mod tests {
         let estimate = local_from_remote * pose(0.4, 0.0, 3f64.to_radians());
         let icp = IcpConfig { max_correspondence_distance_m: 1.0, ..IcpConfig::default() };
         let structure = StructureCheck::default();
-        let config = RoundConfig { icp: &icp, structure: &structure, min_structure_agreement: 0.5 };
+        let config =
+            RoundConfig { icp: &icp, structure: &structure, min_structure_agreement: 0.5, sigma_floor: (0.0, 0.0) };
         let registered = register_round(&targets, round, &estimate, &config);
         assert_eq!(registered.factors.len(), 2, "{registered:?}");
         assert_eq!(registered.factors[0].0, KeyframeId(4));

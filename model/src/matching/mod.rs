@@ -8,6 +8,7 @@
 mod affinity;
 pub mod alignment;
 mod candidates;
+pub mod closure;
 mod config;
 mod graph;
 mod labels;

@@ -4,21 +4,39 @@
 //! inter-robot factors — solved by Levenberg–Marquardt ([`super::solver`]). The Optimiser actor
 //! owns one and publishes what [`KeyframeGraph::solve`] returns.
 //!
-//! A neighbour keyframe j with pose T_r(j) in the neighbour's world and covariance Σ_j enters
-//! at T = local_from_remote · T_r(j) with the prior N(T, Σ_j): with right perturbations,
-//! T · Exp(δ), the covariance is unchanged by the left product.
+//! Each neighbour's world is placed in ours by an *anchor* variable A_r = local_from_remote
+//! (Kim et al., "Multiple relative pose graphs for robust cooperative mapping", ICRA 2010). A
+//! neighbour keyframe j with pose T_r(j) in the neighbour's world and covariance Σ_j is a
+//! variable X_j tied to the anchor by a between factor
 //!
-//! With outlier rejection each solve is GNC-TLS over the loop and inter-robot factors
+//! ```text
+//! e_j = Log(T_r(j)⁻¹ · A_r⁻¹ · X_j),   Ω_j = Σ_j⁻¹
+//! ```
+//!
+//! (with right perturbations X_j · Exp(δ) the covariance is unchanged by the left product A_r),
+//! and to local keyframes by the inter-robot factors from ICP. The anchor is thus re-estimated
+//! from every inter-robot factor at each solve: the more closures over the overlap, the better
+//! it is known. A weak prior (σ = 1 km, 100 rad) at its first value keeps it determined while
+//! no factor reaches it; against keyframe covariances of centimetres and milliradians it moves
+//! the estimate by less than a micrometre.
+//!
+//! With outlier rejection, each neighbour's inter-robot factors first go through pairwise
+//! consistency maximisation ([`super::consistency`]): those outside the largest mutually
+//! consistent set are rejected before the solve, and when that set implies a transform far from
+//! the anchor's (evidence against the first alignment) the anchor and the neighbour's keyframes
+//! are moved to it. Then each solve is GNC-TLS over the loop and inter-robot factors
 //! ([`super::robust::optimize_gnc_incremental_with`]): the previous decision is kept while it
 //! still holds, and made again from scratch when it does not. Rejected factors stay in the
 //! graph with weight 0 and add no information to the marginals.
 
+use super::consistency::{largest_consistent_set, Consistency, ImpliedClosure};
 use super::factors::{Between, Prior};
 use super::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
 use super::marginals::marginal_covariances_with;
 use super::robust::{optimize_gnc_incremental_with, rejection_weights, weighted};
 use super::solver::{least_squares, optimize_with, LmParams, SolveError, Structure};
-use crate::geometry::Pose3;
+use crate::geometry::{pose_error, Pose3};
+use crate::matching::alignment::medoid;
 use crate::scene_graph::{Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, RobotId};
 use nalgebra::Matrix6;
 use std::collections::BTreeMap;
@@ -32,6 +50,9 @@ pub struct KeyframeGraphState {
     pub pending: usize,
     pub candidates: Vec<bool>,
     pub rejected: Vec<usize>,
+    /// Each neighbour's anchor variable (its local_from_remote).
+    pub anchors: Vec<(RobotId, usize)>,
+    pub realigned: Vec<(RobotId, u32)>,
 }
 
 /// What a solve gives: every local keyframe's pose, the newest ones' marginal covariances, and
@@ -41,6 +62,8 @@ pub struct Solved {
     pub poses: Vec<(KeyframeId, Pose3)>,
     pub covariances: Vec<(KeyframeId, Matrix6<f64>)>,
     pub rejection_changed: bool,
+    /// Each neighbour's local_from_remote as this solve estimates it.
+    pub anchors: Vec<(RobotId, Pose3)>,
 }
 
 /// The pose graph at a glance.
@@ -54,6 +77,19 @@ pub struct KeyframeGraphStatus {
     pub rejected_factors: usize,
     /// Rejected inter-robot factors: (neighbour, local keyframe, neighbour keyframe).
     pub rejected_inter_robot: Vec<(RobotId, KeyframeId, KeyframeId)>,
+    /// Per neighbour: inter-robot factors held, and those outside the largest mutually
+    /// consistent set (rejected by PCM before the solve).
+    pub inter_robot: Vec<InterRobotCounts>,
+}
+
+/// One neighbour's inter-robot factors in the pose graph.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct InterRobotCounts {
+    pub robot: RobotId,
+    pub factors: usize,
+    pub inconsistent: usize,
+    /// Times the consistent set's transform was far from the anchor's and the anchor moved.
+    pub realigned: u32,
 }
 
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -65,7 +101,16 @@ pub struct KeyframeGraph {
     candidates: Vec<bool>,
     /// The between factors the last solve rejected.
     rejected: Vec<usize>,
+    /// Each neighbour's anchor variable.
+    anchors: BTreeMap<RobotId, usize>,
+    /// PCM's decision at the last solve: per neighbour, the factors outside the consistent set.
+    inconsistent: BTreeMap<RobotId, Vec<usize>>,
+    /// Per neighbour, how often PCM moved the anchor.
+    realigned: BTreeMap<RobotId, u32>,
 }
+
+/// Standard deviations of the anchor's weak prior (rotation rad, translation m).
+const ANCHOR_PRIOR_SIGMAS: [f64; 6] = [100.0, 100.0, 100.0, 1000.0, 1000.0, 1000.0];
 
 /// S with Sᵀ S = Ω, or `None` unless Ω is symmetric positive definite.
 fn sqrt_information(information: &Matrix6<f64>) -> Option<Matrix6<f64>> {
@@ -79,6 +124,11 @@ fn key_of(r: &KeyframeRef) -> u64 {
     }
 }
 
+/// The anchor's key: above every keyframe id of its robot (ids are u32).
+fn anchor_key(robot: RobotId) -> u64 {
+    ((u64::from(robot.0) + 1) << 40) | ((1 << 40) - 1)
+}
+
 impl KeyframeGraph {
     pub fn freeze(&self) -> KeyframeGraphState {
         KeyframeGraphState {
@@ -87,6 +137,8 @@ impl KeyframeGraph {
             pending: self.pending,
             candidates: self.candidates.clone(),
             rejected: self.rejected.clone(),
+            anchors: self.anchors.iter().map(|(r, i)| (*r, *i)).collect(),
+            realigned: self.realigned.iter().map(|(r, n)| (*r, *n)).collect(),
         }
     }
 
@@ -99,13 +151,17 @@ impl KeyframeGraph {
             && state.graph.betweens.iter().all(|b| b.from < n && b.to < n)
             && state.graph.priors.iter().all(|p| p.variable < n)
             && state.candidates.len() == state.graph.betweens.len()
-            && state.rejected.iter().all(|k| *k < state.candidates.len());
+            && state.rejected.iter().all(|k| *k < state.candidates.len())
+            && state.anchors.iter().all(|(_, i)| *i < n);
         consistent.then(|| Self {
             graph: state.graph,
             index: state.index.into_iter().collect(),
             pending: state.pending,
             candidates: state.candidates,
             rejected: state.rejected,
+            anchors: state.anchors.into_iter().collect(),
+            inconsistent: BTreeMap::new(),
+            realigned: state.realigned.into_iter().collect(),
         })
     }
 
@@ -158,8 +214,10 @@ impl KeyframeGraph {
     }
 
     /// Adds `robot`'s keyframes (pose in its world, marginal covariance; a keyframe already
-    /// held keeps its variable and prior) and the inter-robot factors (local keyframe, its
-    /// keyframe, measured local_from_neighbour-keyframe pose, information).
+    /// held keeps its variable and factor) and the inter-robot factors (local keyframe, its
+    /// keyframe, measured local_from_neighbour-keyframe pose, information). `local_from_remote`
+    /// places the neighbour's anchor when it is new; afterwards the anchor is what the solves
+    /// make of it.
     pub fn add_neighbour(
         &mut self,
         robot: RobotId,
@@ -167,15 +225,29 @@ impl KeyframeGraph {
         keyframes: &[(KeyframeId, Pose3, Matrix6<f64>)],
         factors: &[(KeyframeId, KeyframeId, Pose3, Matrix6<f64>)],
     ) {
+        let anchor = match self.anchors.get(&robot) {
+            Some(&a) => a,
+            None => {
+                let a = self.graph.values.len();
+                self.graph.keys.push(anchor_key(robot));
+                self.graph.values.push(*local_from_remote);
+                self.graph.fixed.push(false);
+                self.graph.add_prior_at_current(a, ANCHOR_PRIOR_SIGMAS);
+                self.anchors.insert(robot, a);
+                a
+            }
+        };
+        let anchor_value = self.graph.values[anchor];
         for (keyframe, pose_in_remote, covariance) in keyframes {
             let r = KeyframeRef::Remote { robot, keyframe: *keyframe };
-            let fresh = !self.index.contains_key(&r);
-            let mean = local_from_remote * pose_in_remote;
-            let i = self.variable(r, mean);
-            if fresh {
-                if let Some(prior) = Prior::from_covariance(i, mean, covariance) {
-                    self.graph.priors.push(prior);
-                }
+            if self.index.contains_key(&r) {
+                continue;
+            }
+            let i = self.variable(r, anchor_value * pose_in_remote);
+            if let Some(tie) = Prior::from_covariance(i, *pose_in_remote, covariance) {
+                let sqrt_information = tie.sqrt_information;
+                self.graph.betweens.push(Between { from: anchor, to: i, measured: *pose_in_remote, sqrt_information });
+                self.candidates.push(false);
             }
         }
         for (local, remote, measured, information) in factors {
@@ -198,8 +270,24 @@ impl KeyframeGraph {
         let structure = Structure::new(&self.graph)?;
         let params = LmParams::default();
         let rejected = if reject_outliers {
-            optimize_gnc_incremental_with(&mut self.graph, &params, &structure, &self.candidates, &self.rejected)
-                .map(|(_, r)| r)?
+            self.inconsistent = self.check_consistency(&Consistency::default());
+            // PCM's outliers weigh nothing in this solve (zero information, same structure),
+            // then count as rejected.
+            let excluded: Vec<usize> = self.inconsistent.values().flatten().copied().collect();
+            let saved: Vec<(usize, Matrix6<f64>)> = excluded
+                .iter()
+                .map(|k| (*k, std::mem::replace(&mut self.graph.betweens[*k].sqrt_information, Matrix6::zeros())))
+                .collect();
+            let solved =
+                optimize_gnc_incremental_with(&mut self.graph, &params, &structure, &self.candidates, &self.rejected);
+            for (k, s) in saved {
+                self.graph.betweens[k].sqrt_information = s;
+            }
+            let mut rejected = solved?.1;
+            rejected.extend(excluded);
+            rejected.sort_unstable();
+            rejected.dedup();
+            rejected
         } else {
             optimize_with(&mut self.graph, &params, &structure, &least_squares).map(|_| Vec::new())?
         };
@@ -217,7 +305,54 @@ impl KeyframeGraph {
         let covariances = marginal_covariances_with(&self.graph, &structure, &variables, &weighted(&weights))
             .map(|c| latest.iter().map(|(k, _)| *k).zip(c).collect())
             .unwrap_or_default();
-        Ok(Solved { poses, covariances, rejection_changed })
+        let anchors = self.anchors.iter().map(|(r, i)| (*r, self.graph.values[*i])).collect();
+        Ok(Solved { poses, covariances, rejection_changed, anchors })
+    }
+
+    /// PCM over each neighbour's inter-robot factors at the current values: the factors
+    /// outside the largest consistent set, per neighbour. When that set's transform (the medoid
+    /// of what its factors imply) is farther from the anchor than the consistency tolerance,
+    /// the anchor and the neighbour's keyframes are moved to it before the solve.
+    fn check_consistency(&mut self, consistency: &Consistency) -> BTreeMap<RobotId, Vec<usize>> {
+        let robot_of_anchor: BTreeMap<usize, RobotId> = self.anchors.iter().map(|(r, i)| (*i, *r)).collect();
+        // Neighbour keyframe variable → (its robot, its pose in the neighbour's world).
+        let mut remote: BTreeMap<usize, (RobotId, Pose3)> = BTreeMap::new();
+        for b in &self.graph.betweens {
+            if let Some(robot) = robot_of_anchor.get(&b.from) {
+                remote.insert(b.to, (*robot, b.measured));
+            }
+        }
+        let mut closures: BTreeMap<RobotId, Vec<(usize, ImpliedClosure)>> = BTreeMap::new();
+        for (k, b) in self.graph.betweens.iter().enumerate() {
+            let Some((robot, remote_pose)) = remote.get(&b.to) else { continue };
+            if !self.candidates.get(k).copied().unwrap_or(false) || robot_of_anchor.contains_key(&b.from) {
+                continue;
+            }
+            let implied = ImpliedClosure::new(&self.graph.values[b.from], &b.measured, remote_pose);
+            closures.entry(*robot).or_default().push((k, implied));
+        }
+        let mut out = BTreeMap::new();
+        for (robot, list) in closures {
+            let implied: Vec<ImpliedClosure> = list.iter().map(|(_, c)| *c).collect();
+            let kept = largest_consistent_set(&implied, consistency);
+            let outliers: Vec<usize> =
+                (0..list.len()).filter(|i| kept.binary_search(i).is_err()).map(|i| list[i].0).collect();
+            let poses: Vec<Pose3> = kept.iter().map(|i| implied[*i].local_from_remote).collect();
+            if let (Some(consensus), Some(&anchor)) = (medoid(&poses), self.anchors.get(&robot)) {
+                let e = pose_error(&consensus, &self.graph.values[anchor]);
+                if e.translation_m > consistency.tolerance_m || e.max_axis_rotation_deg() > consistency.tolerance_deg {
+                    self.graph.values[anchor] = consensus;
+                    for (variable, (owner, pose)) in &remote {
+                        if *owner == robot {
+                            self.graph.values[*variable] = consensus * pose;
+                        }
+                    }
+                    *self.realigned.entry(robot).or_default() += 1;
+                }
+            }
+            out.insert(robot, outliers);
+        }
+        out
     }
 
     pub fn status(&self) -> KeyframeGraphStatus {
@@ -231,7 +366,27 @@ impl KeyframeGraph {
                 _ => None,
             })
             .collect();
+        let robot_of_anchor: BTreeMap<usize, RobotId> = self.anchors.iter().map(|(r, i)| (*i, *r)).collect();
+        let mut inter_robot: BTreeMap<RobotId, InterRobotCounts> = BTreeMap::new();
+        let fresh = |robot: RobotId| InterRobotCounts { robot, factors: 0, inconsistent: 0, realigned: 0 };
+        for (k, b) in self.graph.betweens.iter().enumerate() {
+            let (Some(KeyframeRef::Local(_)), Some(KeyframeRef::Remote { robot, .. })) =
+                (keyframe_of.get(&b.from), keyframe_of.get(&b.to))
+            else {
+                continue;
+            };
+            if self.candidates.get(k).copied().unwrap_or(false) && !robot_of_anchor.contains_key(&b.from) {
+                inter_robot.entry(*robot).or_insert_with(|| fresh(*robot)).factors += 1;
+            }
+        }
+        for (robot, outliers) in &self.inconsistent {
+            inter_robot.entry(*robot).or_insert_with(|| fresh(*robot)).inconsistent = outliers.len();
+        }
+        for (robot, n) in &self.realigned {
+            inter_robot.entry(*robot).or_insert_with(|| fresh(*robot)).realigned = *n;
+        }
         KeyframeGraphStatus {
+            inter_robot: inter_robot.into_values().collect(),
             variables: self.graph.values.len(),
             between_factors: self.graph.betweens.len(),
             candidate_factors: self.candidates.iter().filter(|c| **c).count(),
@@ -314,5 +469,102 @@ mod tests {
         let mut broken = state;
         broken.index.push((KeyframeRef::Local(KeyframeId(9)), 99));
         assert_eq!(KeyframeGraph::thaw(broken), None);
+    }
+
+    #[test]
+    fn the_anchor_is_reestimated_from_every_inter_robot_factor() {
+        // A straight local chain of 10 keyframes, 2 m apart; the neighbour's world is turned
+        // by 30° and 40 m away. Its keyframes each sit 3 m to the left of one of ours.
+        let mut graph = KeyframeGraph::default();
+        let step = pose_from_yaw_translation(0.0, Vector3::new(2.0, 0.0, 0.0));
+        let mut truth = Vec::new();
+        for k in 0..10u32 {
+            let pose = (0..k).fold(Pose3::identity(), |p, _| p * step);
+            truth.push(pose);
+            let edges: Vec<KeyframeEdge> = (k > 0).then(|| odometry(k - 1, k, &step)).into_iter().collect();
+            graph.add_keyframe(
+                &Keyframe { id: KeyframeId(k), stamp: f64::from(k), world_from_body: pose },
+                &edges,
+                100,
+            );
+        }
+        let true_local_from_remote = pose_from_yaw_translation(0.5, Vector3::new(40.0, -5.0, 0.3));
+        let measured = pose_from_yaw_translation(0.2, Vector3::new(0.0, 3.0, 0.0));
+        let keyframe_in_remote = |k: usize| true_local_from_remote.inverse() * truth[k] * measured;
+        let cov = Matrix6::identity() * 0.01;
+        // The first estimate is off by 1.5 m and 3°; each round brings two closures.
+        let first = pose_from_yaw_translation(0.5 + 0.052, Vector3::new(41.0, -6.0, 0.5));
+        for (round, ks) in [[1usize, 2], [5, 6], [8, 9]].iter().enumerate() {
+            let keyframes: Vec<_> =
+                ks.iter().map(|&k| (KeyframeId(100 + k as u32), keyframe_in_remote(k), cov)).collect();
+            let factors: Vec<_> = ks
+                .iter()
+                .map(|&k| (KeyframeId(k as u32), KeyframeId(100 + k as u32), measured, information()))
+                .collect();
+            graph.add_neighbour(RobotId(3), &first, &keyframes, &factors);
+            let solved = graph.solve(false, 0).expect("solves");
+            assert_eq!(solved.anchors.len(), 1);
+            let (robot, anchor) = solved.anchors[0];
+            assert_eq!(robot, RobotId(3));
+            // Exact factors: the anchor is the truth from the first round on (the local chain
+            // stays where odometry and its first prior put it).
+            let e = crate::geometry::pose_error(&anchor, &true_local_from_remote);
+            assert!(e.translation_m < 1e-4 && e.max_axis_rotation_deg() < 1e-4, "round {round}: {e:?}");
+        }
+        // Frozen and thawed, the anchor is kept.
+        let thawed = KeyframeGraph::thaw(graph.freeze()).expect("consistent");
+        assert_eq!(thawed, graph);
+    }
+
+    #[test]
+    fn a_wrong_first_alignment_is_outvoted_by_later_consistent_closures() {
+        let mut graph = KeyframeGraph::default();
+        let step = pose_from_yaw_translation(0.0, Vector3::new(2.0, 0.0, 0.0));
+        let mut truth = Vec::new();
+        for k in 0..12u32 {
+            let pose = (0..k).fold(Pose3::identity(), |p, _| p * step);
+            truth.push(pose);
+            let edges: Vec<KeyframeEdge> = (k > 0).then(|| odometry(k - 1, k, &step)).into_iter().collect();
+            graph.add_keyframe(
+                &Keyframe { id: KeyframeId(k), stamp: f64::from(k), world_from_body: pose },
+                &edges,
+                100,
+            );
+        }
+        let true_local_from_remote = pose_from_yaw_translation(0.3, Vector3::new(20.0, 4.0, 0.0));
+        // The first round: three registrations that agree with each other and with a wrong
+        // match 4 m and 8° off.
+        let wrong = pose_from_yaw_translation(0.3 + 0.14, Vector3::new(23.0, 7.0, 0.0));
+        let cov = Matrix6::identity() * 0.01;
+        let measured = pose_from_yaw_translation(0.0, Vector3::new(0.0, 2.0, 0.0));
+        let remote_pose = |l: &Pose3, k: usize| l.inverse() * truth[k] * measured;
+        let round = |l: &Pose3, ks: &[usize], base: u32| {
+            let keyframes: Vec<_> = ks.iter().map(|&k| (KeyframeId(base + k as u32), remote_pose(l, k), cov)).collect();
+            let factors: Vec<_> = ks
+                .iter()
+                .map(|&k| (KeyframeId(k as u32), KeyframeId(base + k as u32), measured, information()))
+                .collect();
+            (keyframes, factors)
+        };
+        let (keyframes, factors) = round(&wrong, &[0, 1, 2], 100);
+        graph.add_neighbour(RobotId(2), &wrong, &keyframes, &factors);
+        let first = graph.solve(true, 0).expect("solves");
+        assert!(crate::geometry::pose_error(&first.anchors[0].1, &wrong).translation_m < 1e-3);
+        // Five honest closures over the rest of the chain.
+        let (keyframes, factors) = round(&true_local_from_remote, &[4, 6, 8, 10, 11], 200);
+        graph.add_neighbour(RobotId(2), &wrong, &keyframes, &factors);
+        let solved = graph.solve(true, 0).expect("solves");
+        let e = crate::geometry::pose_error(&solved.anchors[0].1, &true_local_from_remote);
+        assert!(e.translation_m < 1e-3 && e.max_axis_rotation_deg() < 1e-3, "{e:?}");
+        let status = graph.status();
+        assert_eq!(
+            status.inter_robot,
+            vec![InterRobotCounts { robot: RobotId(2), factors: 8, inconsistent: 3, realigned: 1 }]
+        );
+        assert_eq!(status.rejected_inter_robot.len(), 3);
+        // The local chain kept its odometry: the lie bent nothing.
+        for (k, pose) in &solved.poses {
+            assert!((pose.translation.vector - truth[k.0 as usize].translation.vector).norm() < 1e-3);
+        }
     }
 }

@@ -1,6 +1,7 @@
 //! Pose-graph optimisation (paper §III, eq. 1): the local step, where every robot optimises its
 //! keyframes together with the neighbour keyframes tied to them.
 
+pub mod consistency;
 pub mod factors;
 pub mod g2o;
 pub mod graph;

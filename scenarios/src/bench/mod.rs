@@ -6,6 +6,7 @@ pub mod all;
 pub mod baselines;
 pub mod matching;
 pub mod messages;
+pub mod outliers;
 pub mod realism;
 pub mod sweeps;
 
@@ -55,6 +56,44 @@ pub fn run_report(scenario: &Scenario, label: &str) -> anyhow::Result<Report> {
     let r = report::compute(&outcome.record);
     eprintln!("{label}: {:.0} s simulated in {:.1} s", r.sim_s, outcome.timing.wall_s);
     Ok(r)
+}
+
+/// One mission to run: a row's index, the seed, the scenario.
+pub struct Job {
+    pub row: usize,
+    pub seed: u64,
+    pub scenario: Scenario,
+    pub label: String,
+}
+
+/// Runs the jobs on every core (each run is its own deterministic actix system, so the figures
+/// do not depend on the thread count), in the jobs' order.
+pub fn run_all(jobs: Vec<Job>) -> anyhow::Result<Vec<(usize, u64, Report)>> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(jobs.len().max(1));
+    let next = AtomicUsize::new(0);
+    let results: Vec<Mutex<Option<anyhow::Result<Report>>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..threads {
+            scope.spawn(|| loop {
+                let k = next.fetch_add(1, Ordering::Relaxed);
+                let Some(job) = jobs.get(k) else { break };
+                let outcome = run_report(&job.scenario, &job.label);
+                if let Ok(mut slot) = results[k].lock() {
+                    *slot = Some(outcome);
+                }
+            });
+        }
+    });
+    jobs.iter()
+        .zip(results)
+        .map(|(job, slot)| {
+            let outcome = slot.into_inner().ok().flatten();
+            let report = outcome.unwrap_or_else(|| Err(anyhow::anyhow!("{}: the run's thread died", job.label)))?;
+            Ok((job.row, job.seed, report))
+        })
+        .collect()
 }
 
 /// An alignment farther than this from the truth counts as wrong, m.

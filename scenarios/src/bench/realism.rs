@@ -8,13 +8,11 @@
 //! and doubles bravo's ATE; seeds 2–4 show no cost), so each effect runs over `--seeds`
 //! consecutive seeds and the row gives their mean and the spread of the team ATE.
 
-use super::{aligned_right, duration_arg, load_cut, or_dash, run_report, Section};
+use super::{aligned_right, duration_arg, load_cut, or_dash, run_all, Job, Section};
 use serde::Serialize;
 use sgm_scenarios::report::Report;
 use sgm_scenarios::scenario::{LidarPattern, Platform, Scenario};
 use std::fmt::Write;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 
 /// One effect: its name, what it turns on, and how.
 struct Effect {
@@ -205,42 +203,6 @@ fn row(effect: &str, what: &str, runs: &[(u64, Report)]) -> Row {
         team_ate_max_m: ates.iter().copied().reduce(f64::max),
         sim_s: runs.first().map_or(0.0, |(_, r)| r.sim_s),
     }
-}
-
-/// One mission to run: a row's index, the seed, the scenario.
-struct Job {
-    row: usize,
-    seed: u64,
-    scenario: Scenario,
-    label: String,
-}
-
-/// Runs the jobs on every core (each run is its own deterministic actix system, so the figures
-/// do not depend on the thread count), in the jobs' order.
-fn run_all(jobs: Vec<Job>) -> anyhow::Result<Vec<(usize, u64, Report)>> {
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(jobs.len().max(1));
-    let next = AtomicUsize::new(0);
-    let results: Vec<Mutex<Option<anyhow::Result<Report>>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
-    std::thread::scope(|scope| {
-        for _ in 0..threads {
-            scope.spawn(|| loop {
-                let k = next.fetch_add(1, Ordering::Relaxed);
-                let Some(job) = jobs.get(k) else { break };
-                let outcome = run_report(&job.scenario, &job.label);
-                if let Ok(mut slot) = results[k].lock() {
-                    *slot = Some(outcome);
-                }
-            });
-        }
-    });
-    jobs.iter()
-        .zip(results)
-        .map(|(job, slot)| {
-            let outcome = slot.into_inner().ok().flatten();
-            let report = outcome.unwrap_or_else(|| Err(anyhow::anyhow!("{}: the run's thread died", job.label)))?;
-            Ok((job.row, job.seed, report))
-        })
-        .collect()
 }
 
 /// What `sgm bench realism` runs.

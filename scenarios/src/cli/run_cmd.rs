@@ -106,13 +106,21 @@ pub fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
     for a in &report.alignments {
         let _ = writeln!(
             s,
-            "  {} ← {}: {}{}",
+            "  {} ← {}: {}{}{}",
             a.local,
             a.remote,
             a.state,
             match (a.first_aligned_s, a.translation_error_m, a.rotation_error_deg) {
                 (Some(t), Some(e), Some(r)) => format!(" at {t:.0} s, error {e:.2} m / {r:.2}°"),
                 _ => String::new(),
+            },
+            match (a.inter_robot_factors, a.inconsistent_factors) {
+                (0, _) => String::new(),
+                (n, 0) => format!(
+                    ", {n} inter-robot factors ({} from {} closure rounds)",
+                    a.closures.factors, a.closures.rounds
+                ),
+                (n, bad) => format!(", {n} inter-robot factors, {bad} INCONSISTENT (not used)"),
             }
         );
     }

@@ -59,6 +59,17 @@ pub struct AlignmentReport {
     /// to where they met, m.
     pub start_frame_translation_error_m: Option<f64>,
     pub rotation_error_deg: Option<f64>,
+    /// Closure rounds after the first alignment (`matcher.closures`): rounds, factors they
+    /// added, keyframe-cloud bytes they cost.
+    pub closures: sgm_actors::matcher::ClosureCounts,
+    /// Inter-robot factors with this neighbour in the local pose graph (first round and
+    /// closures, injected false ones included).
+    pub inter_robot_factors: usize,
+    /// Of those, outside the largest mutually consistent set (PCM) at the last solve: a
+    /// neighbour whose factors disagree with each other shows here.
+    pub inconsistent_factors: usize,
+    /// Times the consistent set's transform moved the alignment.
+    pub realigned: u32,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
@@ -309,7 +320,9 @@ pub fn compute(record: &RunRecord) -> Report {
     let mut alignments = Vec::new();
     for (k, local) in record.robots.iter().enumerate() {
         let Some(Some((_, neighbours, _))) = last.maps.get(k) else { continue };
+        let graph = record.optimisers.get(k).and_then(|s| s.as_ref());
         for n in neighbours {
+            let held = graph.and_then(|g| g.inter_robot.iter().find(|c| c.robot == n.robot));
             let Some(r) = n.robot.index() else { continue };
             let Some(remote) = record.robots.get(r) else { continue };
             let truth = true_local_from_remote(&fits, &record.robots, k, r);
@@ -331,6 +344,10 @@ pub fn compute(record: &RunRecord) -> Report {
                 translation_error_xyz_m: xyz,
                 start_frame_translation_error_m: start_error,
                 rotation_error_deg: error.map(|e| e.max_axis_rotation_deg()),
+                closures: n.closures,
+                inter_robot_factors: held.map_or(0, |h| h.factors),
+                inconsistent_factors: held.map_or(0, |h| h.inconsistent),
+                realigned: held.map_or(0, |h| h.realigned),
             });
         }
     }

@@ -154,17 +154,20 @@ pub fn render(report: &Report, timing: &Timing) -> String {
             r.frames
         );
     }
-    let _ = writeln!(s, "\n## Alignments\n\n| local ← remote | state | first aligned (s) | translation error (m) | rotation error (°) |\n|---|---|---|---|---|");
+    let _ = writeln!(s, "\n## Alignments\n\n| local ← remote | state | first aligned (s) | translation error (m) | rotation error (°) | closure rounds | inter-robot factors (inconsistent) |\n|---|---|---|---|---|---|---|");
     for a in &report.alignments {
         let _ = writeln!(
             s,
-            "| {} ← {} | {} | {} | {} | {} |",
+            "| {} ← {} | {} | {} | {} | {} | {} | {} ({}) |",
             a.local,
             a.remote,
             a.state,
             a.first_aligned_s.map_or("—".into(), |t| format!("{t:.1}")),
             metres(a.translation_error_m),
-            a.rotation_error_deg.map_or("—".into(), |v| format!("{v:.2}"))
+            a.rotation_error_deg.map_or("—".into(), |v| format!("{v:.2}")),
+            a.closures.rounds,
+            a.inter_robot_factors,
+            a.inconsistent_factors
         );
     }
     let _ = writeln!(s, "\n## Messages (paper Table 4 layout; whole team)\n\n| message | count | mean (KiB) | max (KiB) | total (KiB) |\n|---|---|---|---|---|");
