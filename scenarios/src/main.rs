@@ -278,7 +278,8 @@ enum BenchCommand {
         #[arg(long)]
         json: Option<PathBuf>,
     },
-    /// Every bench above but realism in one report (report.md, report.json and plots) in --out.
+    /// Every bench above but realism in one report (report.md, report.json and plots) in --out;
+    /// the outliers bench on faults/clean.
     All {
         #[arg(long, default_value = "bench-report")]
         out: PathBuf,

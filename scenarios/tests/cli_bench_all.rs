@@ -27,6 +27,7 @@ fn bench_all_writes_every_table_with_its_rows() {
         "### Trajectory overlap, Swarm-SC (ours)",
         "### Centroid noise",
         "### Team size",
+        "## Wrong inter-robot closures",
     ] {
         assert!(md.contains(heading), "{heading} missing from\n{md}");
     }
@@ -36,6 +37,7 @@ fn bench_all_writes_every_table_with_its_rows() {
         "`sgm bench baselines --duration 20`",
         "`sgm bench messages --duration 20`",
         "`sgm bench sweeps --duration 20`",
+        "`sgm bench outliers --scenario faults/clean --duration 20`",
     ] {
         assert!(md.contains(command), "{command} missing");
     }
@@ -63,6 +65,14 @@ fn bench_all_writes_every_table_with_its_rows() {
         assert!(oracle["team_ate_m"].as_f64().unwrap() < 1.0, "{env}: {oracle}");
     }
     assert_eq!(len(&json["messages"]["environments"]), 2);
+
+    // The clean run, then gross and subtle false factors at seven fractions each.
+    let outliers = json["outliers"]["rows"].as_array().unwrap();
+    assert_eq!(outliers.len(), 15);
+    assert_eq!((outliers[0]["kind"].as_str(), outliers[0]["false_injected"].as_u64()), (Some("none"), Some(0)));
+    for r in &outliers[1..] {
+        assert!(r["false_rejected"].as_u64() <= r["false_injected"].as_u64(), "{r}");
+    }
 
     let sweeps = &json["sweeps"];
     for key in ["mislabel_rate", "overlap", "overlap_scan_context", "centroid_noise", "team_size"] {

@@ -98,20 +98,10 @@ impl Matcher {
         let current = n.state.local_from_remote;
         let local_ids: BTreeSet<KeyframeId> =
             pairs.iter().filter_map(|(l, _)| self.map.objects.observed_in.get(l)).flatten().copied().collect();
-        let keyframe_icp = IcpConfig {
-            voxel_m: self.config.keyframe_voxel_m,
-            max_iterations: self.config.keyframe_max_iterations,
-            ..self.config.icp.clone()
-        };
+        let keyframe_icp = self.keyframe_icp();
         let targets = local_ids.iter().filter_map(|id| Some((*id, local_view(self.map.keyframes.get(id)?)))).collect();
         let round = entry.keyframes.iter().filter(|(id, _)| entry.round.contains(id)).map(|(_, k)| remote_view(k));
-        let config = RoundConfig {
-            icp: &keyframe_icp,
-            structure: &self.config.structure_check,
-            min_structure_agreement: self.config.min_structure_agreement,
-            sigma_floor: self.config.factor_sigma_floor(),
-        };
-        let registered = register_round(&targets, round, guess, &config);
+        let registered = register_round(&targets, round, guess, &self.round_config(&keyframe_icp));
         let constraints = InterRobotConstraints {
             robot,
             local_from_remote: current,

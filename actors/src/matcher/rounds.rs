@@ -21,6 +21,26 @@ pub(super) fn remote_view(k: &NeighbourKeyframe) -> RemoteView<'_> {
 }
 
 impl Matcher {
+    /// Keyframe-to-keyframe ICP: the object-cloud settings at the keyframe voxel size and
+    /// iteration cap.
+    pub(super) fn keyframe_icp(&self) -> IcpConfig {
+        IcpConfig {
+            voxel_m: self.config.keyframe_voxel_m,
+            max_iterations: self.config.keyframe_max_iterations,
+            ..self.config.icp.clone()
+        }
+    }
+
+    /// How a round's keyframes are registered and checked, with `icp` from [`Self::keyframe_icp`].
+    pub(super) fn round_config<'a>(&'a self, icp: &'a IcpConfig) -> RoundConfig<'a> {
+        RoundConfig {
+            icp,
+            structure: &self.config.structure_check,
+            min_structure_agreement: self.config.min_structure_agreement,
+            sigma_floor: self.config.factor_sigma_floor(),
+        }
+    }
+
     pub(super) fn local_object_cloud(&self, object: &GraphObject) -> Vec<Point3<f64>> {
         let observed = self.map.objects.observed_in.get(&object.id).cloned().unwrap_or_default();
         let scans = observed
@@ -134,11 +154,7 @@ impl Matcher {
                 .copied()
                 .collect(),
         };
-        let keyframe_icp = IcpConfig {
-            voxel_m: self.config.keyframe_voxel_m,
-            max_iterations: self.config.keyframe_max_iterations,
-            ..self.config.icp.clone()
-        };
+        let keyframe_icp = self.keyframe_icp();
         if let Some((pair, _)) = &entry.place_round {
             let (local, remote) = (self.map.keyframes.get(&pair.local), entry.keyframes.get(&pair.remote));
             let coarse = self.config.scan_context.coarse_correspondence_m;
@@ -151,13 +167,7 @@ impl Matcher {
         }
         let targets = local_ids.iter().filter_map(|id| Some((*id, local_view(self.map.keyframes.get(id)?)))).collect();
         let round = entry.keyframes.iter().filter(|(id, _)| entry.round.contains(id)).map(|(_, k)| remote_view(k));
-        let config = RoundConfig {
-            icp: &keyframe_icp,
-            structure: &self.config.structure_check,
-            min_structure_agreement: self.config.min_structure_agreement,
-            sigma_floor: self.config.factor_sigma_floor(),
-        };
-        let registered = register_round(&targets, round, &local_from_remote, &config);
+        let registered = register_round(&targets, round, &local_from_remote, &self.round_config(&keyframe_icp));
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
         let factors = registered.factors.len();
         match judge_round(&registered, self.config.min_keyframe_factors, entry.round_incomplete, &local_from_remote) {

@@ -471,14 +471,12 @@ mod tests {
         assert_eq!(KeyframeGraph::thaw(broken), None);
     }
 
-    #[test]
-    fn the_anchor_is_reestimated_from_every_inter_robot_factor() {
-        // A straight local chain of 10 keyframes, 2 m apart; the neighbour's world is turned
-        // by 30° and 40 m away. Its keyframes each sit 3 m to the left of one of ours.
+    /// `n` local keyframes 2 m apart along x with exact odometry: the graph and their poses.
+    fn straight_chain(n: u32) -> (KeyframeGraph, Vec<Pose3>) {
         let mut graph = KeyframeGraph::default();
         let step = pose_from_yaw_translation(0.0, Vector3::new(2.0, 0.0, 0.0));
         let mut truth = Vec::new();
-        for k in 0..10u32 {
+        for k in 0..n {
             let pose = (0..k).fold(Pose3::identity(), |p, _| p * step);
             truth.push(pose);
             let edges: Vec<KeyframeEdge> = (k > 0).then(|| odometry(k - 1, k, &step)).into_iter().collect();
@@ -488,6 +486,14 @@ mod tests {
                 100,
             );
         }
+        (graph, truth)
+    }
+
+    #[test]
+    fn the_anchor_is_reestimated_from_every_inter_robot_factor() {
+        // A straight local chain of 10 keyframes, 2 m apart; the neighbour's world is turned
+        // by 30° and 40 m away. Its keyframes each sit 3 m to the left of one of ours.
+        let (mut graph, truth) = straight_chain(10);
         let true_local_from_remote = pose_from_yaw_translation(0.5, Vector3::new(40.0, -5.0, 0.3));
         let measured = pose_from_yaw_translation(0.2, Vector3::new(0.0, 3.0, 0.0));
         let keyframe_in_remote = |k: usize| true_local_from_remote.inverse() * truth[k] * measured;
@@ -518,19 +524,7 @@ mod tests {
 
     #[test]
     fn a_wrong_first_alignment_is_outvoted_by_later_consistent_closures() {
-        let mut graph = KeyframeGraph::default();
-        let step = pose_from_yaw_translation(0.0, Vector3::new(2.0, 0.0, 0.0));
-        let mut truth = Vec::new();
-        for k in 0..12u32 {
-            let pose = (0..k).fold(Pose3::identity(), |p, _| p * step);
-            truth.push(pose);
-            let edges: Vec<KeyframeEdge> = (k > 0).then(|| odometry(k - 1, k, &step)).into_iter().collect();
-            graph.add_keyframe(
-                &Keyframe { id: KeyframeId(k), stamp: f64::from(k), world_from_body: pose },
-                &edges,
-                100,
-            );
-        }
+        let (mut graph, truth) = straight_chain(12);
         let true_local_from_remote = pose_from_yaw_translation(0.3, Vector3::new(20.0, 4.0, 0.0));
         // The first round: three registrations that agree with each other and with a wrong
         // match 4 m and 8° off.

@@ -2,7 +2,7 @@
 //! figures and under the command that made it), `report.json` (the same, per bench) and the
 //! sweeps' plots, in `--out`.
 
-use super::{baselines, matching, messages, sweeps, Section};
+use super::{baselines, matching, messages, outliers, sweeps, Section};
 use anyhow::Context;
 use std::fmt::Write;
 use std::path::PathBuf;
@@ -31,6 +31,7 @@ pub fn run_bench(options: Options) -> anyhow::Result<()> {
         ("baselines", baselines::run_bench(options.duration)?),
         ("messages", messages::run_bench(options.duration)?),
         ("sweeps", sweeps::run_bench(&sweeps_options)?),
+        ("outliers", outliers::run_bench("faults/clean", options.duration)?),
     ];
     let duration = super::duration_arg(options.duration);
     let mut md = String::new();
