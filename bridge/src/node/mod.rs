@@ -243,11 +243,12 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             seq = seq.wrapping_add(1);
             let header =
                 std_msgs::Header { seq, stamp: side.ros_time(handle.clock.now()), frame_id: world_frame.clone() };
-            let (Ok(map), Ok(neighbours), Ok(comms_status), Ok(fusion_status)) = (
+            let (Ok(map), Ok(neighbours), Ok(comms_status), Ok(fusion_status), Ok(pose_graph)) = (
                 handle.tracker.send(GetMapSummary).await,
                 handle.matcher.send(GetNeighbours).await,
                 handle.comms.send(GetCommsStatus).await,
                 handle.fusion.send(GetFusionStatus).await,
+                handle.optimiser.send(sgm_actors::optimiser::GetOptimiserStatus).await,
             ) else {
                 continue;
             };
@@ -297,10 +298,12 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 "publish_failures": &failures.0,
                 "comms": comms_status,
                 "fusion": fusion_status,
+                "pose_graph": pose_graph,
                 "neighbours": neighbours.iter().map(|n| serde_json::json!({
                     "robot": n.robot.0,
                     "state": n.state,
                     "first_aligned": n.first_aligned,
+                    "closures": n.closures,
                     "local_from_remote": n.local_from_remote.map(|p| {
                         let (t, q) = (p.translation.vector, p.rotation.quaternion());
                         [t.x, t.y, t.z, q.i, q.j, q.k, q.w]
