@@ -105,7 +105,7 @@ pub fn run_bench(scenario_name: &str, duration: Option<f64>) -> anyhow::Result<S
         out.push(row(kind, fraction, &report, clean_ate));
     }
     let command = format!("sgm bench outliers --scenario {scenario_name}{}", duration_arg(duration));
-    let mut md = format!("### Wrong inter-robot closures\n\n`{command}`\n\n");
+    let mut md = format!("# Wrong inter-robot closures\n\nCommand: `{command}`.\n\n");
     md.push_str("| False factors | Wrong | Injected | Rejected | Inconsistent (PCM) | Pairs aligned | Team ATE | vs clean |\n|---|---|---|---|---|---|---|---|\n");
     for r in &out {
         let how = KINDS
