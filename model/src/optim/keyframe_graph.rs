@@ -22,9 +22,10 @@
 //!
 //! With outlier rejection, each neighbour's inter-robot factors first go through pairwise
 //! consistency maximisation ([`super::consistency`]): those outside the largest mutually
-//! consistent set are rejected before the solve, and when that set implies a transform far from
-//! the anchor's (evidence against the first alignment) the anchor and the neighbour's keyframes
-//! are moved to it. Then each solve is GNC-TLS over the loop and inter-robot factors
+//! consistent set are rejected before the solve (when at least two agree: otherwise there is no
+//! evidence to choose by), and when that set — at least three, a strict majority — implies a
+//! transform far from the anchor's (evidence against the first alignment) the anchor and the
+//! neighbour's keyframes are moved to it. Then each solve is GNC-TLS over the loop and inter-robot factors
 //! ([`super::robust::optimize_gnc_incremental_with`]): the previous decision is kept while it
 //! still holds, and made again from scratch when it does not. Rejected factors stay in the
 //! graph with weight 0 and add no information to the marginals.
@@ -335,10 +336,17 @@ impl KeyframeGraph {
         for (robot, list) in closures {
             let implied: Vec<ImpliedClosure> = list.iter().map(|(_, c)| *c).collect();
             let kept = largest_consistent_set(&implied, consistency);
+            // No two factors agree: PCM has no evidence to choose by (two disagreeing
+            // registrations are a tie, not a verdict); GNC alone decides.
+            if kept.len() < 2 {
+                continue;
+            }
             let outliers: Vec<usize> =
                 (0..list.len()).filter(|i| kept.binary_search(i).is_err()).map(|i| list[i].0).collect();
             let poses: Vec<Pose3> = kept.iter().map(|i| implied[*i].local_from_remote).collect();
-            if let (Some(consensus), Some(&anchor)) = (medoid(&poses), self.anchors.get(&robot)) {
+            // Moving the anchor takes a consistent set of at least three, and a strict majority.
+            let decisive = kept.len() >= 3 && 2 * kept.len() > list.len();
+            if let (true, Some(consensus), Some(&anchor)) = (decisive, medoid(&poses), self.anchors.get(&robot)) {
                 let e = pose_error(&consensus, &self.graph.values[anchor]);
                 if e.translation_m > consistency.tolerance_m || e.max_axis_rotation_deg() > consistency.tolerance_deg {
                     self.graph.values[anchor] = consensus;
@@ -560,5 +568,23 @@ mod tests {
         for (k, pose) in &solved.poses {
             assert!((pose.translation.vector - truth[k.0 as usize].translation.vector).norm() < 1e-3);
         }
+    }
+
+    #[test]
+    fn two_disagreeing_factors_are_a_tie_not_a_verdict() {
+        let (mut graph, truth) = straight_chain(6);
+        let near = pose_from_yaw_translation(0.2, Vector3::new(10.0, 0.0, 0.0));
+        let far = pose_from_yaw_translation(0.2, Vector3::new(13.0, 2.0, 0.0));
+        let measured = pose_from_yaw_translation(0.0, Vector3::new(0.0, 2.0, 0.0));
+        let cov = Matrix6::identity() * 0.01;
+        let keyframe = |l: &Pose3, k: usize| (KeyframeId(100 + k as u32), l.inverse() * truth[k] * measured, cov);
+        let factor = |k: usize| (KeyframeId(k as u32), KeyframeId(100 + k as u32), measured, information());
+        graph.add_neighbour(RobotId(2), &near, &[keyframe(&near, 1), keyframe(&far, 4)], &[factor(1), factor(4)]);
+        graph.solve(true, 0).expect("solves");
+        let status = graph.status();
+        assert_eq!(
+            status.inter_robot,
+            vec![InterRobotCounts { robot: RobotId(2), factors: 2, inconsistent: 0, realigned: 0 }]
+        );
     }
 }
