@@ -183,6 +183,20 @@ impl PoseError {
     }
 }
 
+/// The pose with the smallest summed distance to the others (translation in m plus rotation in
+/// rad × 10 m): a robust average of a handful of estimates.
+pub fn medoid(poses: &[Pose3]) -> Option<Pose3> {
+    let distance = |a: &Pose3, b: &Pose3| {
+        let e = a.inverse() * b;
+        e.translation.vector.norm() + 10.0 * e.rotation.angle()
+    };
+    poses
+        .iter()
+        .map(|p| (p, poses.iter().map(|q| distance(p, q)).sum::<f64>()))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(p, _)| *p)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

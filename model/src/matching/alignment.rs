@@ -16,6 +16,7 @@
 //! degenerate direction. A refuted transform is remembered for [`REFUTED_FOR_S`]: a later match
 //! landing near it is not pursued.
 
+pub use crate::geometry::medoid;
 use crate::geometry::{pose_error, Pose3};
 use crate::perception::icp::{register, IcpConfig};
 use crate::perception::structure_check::{structure_agreement, StructureCheck};
@@ -32,20 +33,6 @@ pub fn refuted_recently(refuted: &[(Pose3, Stamp)], transform: &Pose3, now: Stam
         let e = pose_error(transform, t);
         now - when < REFUTED_FOR_S && e.translation_m < 2.0 && e.max_axis_rotation_deg() < 5.0
     })
-}
-
-/// The pose with the smallest summed distance to the others (translation in m plus rotation in
-/// rad × 10 m): a robust average of a handful of estimates.
-pub fn medoid(poses: &[Pose3]) -> Option<Pose3> {
-    let distance = |a: &Pose3, b: &Pose3| {
-        let e = a.inverse() * b;
-        e.translation.vector.norm() + 10.0 * e.rotation.angle()
-    };
-    poses
-        .iter()
-        .map(|p| (p, poses.iter().map(|q| distance(p, q)).sum::<f64>()))
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|(p, _)| *p)
 }
 
 /// At most `n` of `ids`, spread evenly over them (deterministic).
