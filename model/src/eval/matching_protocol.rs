@@ -92,12 +92,13 @@ pub struct TrialPair {
     pub true_pairs: Vec<(ObjectId, ObjectId)>,
 }
 
+/// One object of a generated world: label, centroid (at half height), yaw and box size.
 #[derive(Clone, Copy, Debug)]
-struct WorldObject {
-    label: LabelId,
-    centroid: Point3<f64>,
-    yaw: f64,
-    size: Vector3<f64>,
+pub(crate) struct WorldObject {
+    pub label: LabelId,
+    pub centroid: Point3<f64>,
+    pub yaw: f64,
+    pub size: Vector3<f64>,
 }
 
 fn world(spec: &SyntheticWorld, rng: &mut ChaCha8Rng) -> Vec<WorldObject> {
@@ -127,7 +128,7 @@ fn aligned_extent(size: &Vector3<f64>, roll: f64, pitch: f64, yaw: f64) -> Vecto
 
 /// Expresses chosen world objects in a graph frame, with noise if asked. Returns the graph and,
 /// per world index used, the object id given to it.
-fn make_graph(
+pub(crate) fn make_graph(
     objects: &[WorldObject],
     chosen: &[usize],
     graph_from_world: &Pose3,

@@ -16,15 +16,17 @@ use super::affinity::{self, AffinityParams};
 use super::candidates::{candidates, Candidate};
 use super::labels::LabelSimilarity;
 use super::outcome::*;
+use super::overlap::Overlap;
 use super::significance::log10_nfa_adaptive;
 use super::spectral::principal_eigenvector;
+use super::symmetry::{self, PeriodSearch};
 use super::tilt::{self, TiltSearch};
 use super::verification::{max_displacement, Evaluation, Scorer};
 use super::vertex::VertexCompare;
 use super::{MatcherConfig, ObjectGraph};
 use crate::geometry::{fit_rigid, minor_axis_spread, Correspondence, RigidModel};
 use crate::spatial::lap::{self, CostMatrix};
-use nalgebra::Point3;
+use nalgebra::{Point3, Translation3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::HashSet;
@@ -38,8 +40,23 @@ const REFINE_ROUNDS: usize = 5;
 const MIN_RADIUS_FRACTION: f64 = 0.1;
 /// Seed of the generator that samples stage-2 hypotheses (fixed: same input, same output).
 const SAMPLING_SEED: u64 = 0x5347_4d5f_7365_6564;
-/// Number of top hypotheses examined for a runner-up.
+/// Number of distinct top hypotheses (more than 2 r from the best) examined for a runner-up.
 const RUNNER_UP_CANDIDATES: usize = 64;
+/// A runner-up counts when its −log10 NFA is within this of the best's, even below the
+/// threshold (three orders of magnitude).
+const RUNNER_UP_SIGNIFICANCE_SLACK: f64 = 3.0;
+/// Periods of a repeated layout are sought up to this many inlier distances (`symmetry`).
+const MAX_PERIOD_RADII: f64 = 5.0;
+/// ... and from this many (shorter periods are within the noise of a centroid).
+const MIN_PERIOD_RADII: f64 = 0.5;
+/// At most this many periods are tried as runner-ups.
+const MAX_PERIODS: usize = 8;
+/// Objects within this many inlier distances of the other graph's objects land on its mapped
+/// ground (`overlap`).
+const SUPPORT_RADII: f64 = 2.0;
+/// A significant runner-up whose agreement index ω comes within this of the best's makes a
+/// repeated layout: refused.
+const AGREEMENT_MARGIN: f64 = 0.1;
 
 /// Matches `remote`'s object graph against `local`'s. Never panics on any valid graphs.
 pub fn match_graphs(
@@ -160,21 +177,60 @@ pub fn match_graphs(
     // Refinement at most doubles a hypothesis' score in practice, so weaker ones cannot be
     // a runner-up within the ambiguity ratio.
     let floor = 0.5 * config.ambiguity_ratio * best.score;
-    for other in hypotheses.iter().take(RUNNER_UP_CANDIDATES).take_while(|h| h.score >= floor) {
-        let displacement = max_displacement(&best.local_from_remote, &other.local_from_remote, remote_points());
-        if displacement <= 2.0 * config.inlier_distance_m {
-            continue;
-        }
+    let overlap = Overlap::new(local, remote, SUPPORT_RADII * config.inlier_distance_m);
+    let agreement = overlap.agreement(&best);
+    let distinct = |h: &&Evaluation| {
+        max_displacement(&best.local_from_remote, &h.local_from_remote, remote_points())
+            > 2.0 * config.inlier_distance_m
+    };
+    // The best transform shifted by each period of a repeated layout around its matches, then
+    // the distinct hypotheses of the search.
+    let anchors: Vec<u32> = best.inliers.iter().map(|i| i.local).collect();
+    let search = PeriodSearch {
+        min_shift_m: MIN_PERIOD_RADII * config.inlier_distance_m,
+        max_shift_m: MAX_PERIOD_RADII * config.inlier_distance_m,
+        bin_m: config.inlier_distance_m,
+        min_votes: config.min_matches.max(anchors.len() / 4),
+        max_periods: MAX_PERIODS,
+    };
+    let shifted: Vec<Evaluation> = symmetry::periods(local, &anchors, search)
+        .into_iter()
+        .map(|shift| scorer.evaluate(&(Translation3::from(shift) * best.local_from_remote)))
+        .collect();
+    let searched = hypotheses.iter().take_while(|h| h.score >= floor).filter(distinct).take(RUNNER_UP_CANDIDATES);
+    // A runner-up must be significant — or, when the best itself barely is, nearly as
+    // significant as the best: near-equal transforms straddling the threshold are a tie.
+    let runner_up_required = required.min(significance - RUNNER_UP_SIGNIFICANCE_SLACK);
+    let best_pairs: HashSet<(u32, u32)> = best.inliers.iter().map(|i| (i.local, i.remote)).collect();
+    let candidates = shifted.iter().map(|e| (e, true)).chain(searched.map(|e| (e, false)));
+    for (other, period) in candidates {
         let (runner_up, _) = settle(other);
         let displacement = max_displacement(&best.local_from_remote, &runner_up.local_from_remote, remote_points());
-        let ratio = runner_up.score / best.score;
-        if displacement > 2.0 * config.inlier_distance_m
-            && ratio >= config.ambiguity_ratio
-            && null.significance(&runner_up, tests, remote) >= required
-        {
-            let reason = RefusalReason::Ambiguous { runner_up_displacement_m: displacement, score_ratio: ratio };
-            return MatchReport { spectral_matches, ..refuse(reason) };
+        // A period of the layout may be shorter than 2 r: its copy counts as different when it
+        // pairs the objects differently; a searched hypothesis when it moves them beyond 2 r.
+        let distinct = if period {
+            let shared = runner_up.inliers.iter().filter(|i| best_pairs.contains(&(i.local, i.remote))).count();
+            2 * shared < runner_up.inliers.len() && displacement > MIN_PERIOD_RADII * config.inlier_distance_m
+        } else {
+            displacement > 2.0 * config.inlier_distance_m
+        };
+        if !distinct {
+            continue;
         }
+        let score_ratio = runner_up.score / best.score;
+        let runner_up_agreement = overlap.agreement(&runner_up);
+        let as_good = score_ratio >= config.ambiguity_ratio;
+        if !(as_good || runner_up_agreement + AGREEMENT_MARGIN >= agreement)
+            || null.significance(&runner_up, tests, remote) < runner_up_required
+        {
+            continue;
+        }
+        let reason = if as_good && !period {
+            RefusalReason::Ambiguous { runner_up_displacement_m: displacement, score_ratio }
+        } else {
+            RefusalReason::Repeated { runner_up_displacement_m: displacement, agreement, runner_up_agreement }
+        };
+        return MatchReport { spectral_matches, ..refuse(reason) };
     }
 
     // 7: final estimate from the verified matches: least squares weighted by label similarity

@@ -30,13 +30,36 @@ pub struct Alignment {
 /// Why no transform was returned.
 #[derive(Clone, Debug, PartialEq)]
 pub enum RefusalReason {
-    TooFewObjects { local: usize, remote: usize, required: usize },
+    TooFewObjects {
+        local: usize,
+        remote: usize,
+        required: usize,
+    },
     NoCandidates,
     NoConsistentPair,
-    TooFewVerified { verified: usize, required: usize },
-    Collinear { spread_m: f64, required_m: f64 },
-    NotSignificant { significance: f64, required: f64 },
-    Ambiguous { runner_up_displacement_m: f64, score_ratio: f64 },
+    TooFewVerified {
+        verified: usize,
+        required: usize,
+    },
+    Collinear {
+        spread_m: f64,
+        required_m: f64,
+    },
+    NotSignificant {
+        significance: f64,
+        required: f64,
+    },
+    Ambiguous {
+        runner_up_displacement_m: f64,
+        score_ratio: f64,
+    },
+    /// A second transform explains the shared ground at least as consistently (`overlap`): a
+    /// repeated layout the objects cannot tell apart.
+    Repeated {
+        runner_up_displacement_m: f64,
+        agreement: f64,
+        runner_up_agreement: f64,
+    },
 }
 
 impl fmt::Display for RefusalReason {
@@ -60,6 +83,10 @@ impl fmt::Display for RefusalReason {
             Self::Ambiguous { runner_up_displacement_m, score_ratio } => write!(
                 f,
                 "ambiguous: a second transform {runner_up_displacement_m:.1} m away explains the data almost as well (score ratio {score_ratio:.2})"
+            ),
+            Self::Repeated { runner_up_displacement_m, agreement, runner_up_agreement } => write!(
+                f,
+                "repeated layout: a second transform {runner_up_displacement_m:.1} m away agrees with the shared ground as well (agreement {runner_up_agreement:.2} against {agreement:.2})"
             ),
         }
     }

@@ -16,6 +16,28 @@
 
 /// ln P[Bin(n, p) ≥ k].
 pub fn ln_binomial_tail(n: usize, k: usize, p: f64) -> f64 {
+    ln_binomial_tail_with(&LnTable::new(n), n, k, p)
+}
+
+/// ln v and ln v! for v ≤ a bound, summed in the order a direct sum would take (same bits).
+pub struct LnTable {
+    ln: Vec<f64>,
+    ln_fact: Vec<f64>,
+}
+
+impl LnTable {
+    pub fn new(max: usize) -> Self {
+        let ln: Vec<f64> = (0..=max.max(1)).map(|v| (v as f64).ln()).collect();
+        let mut ln_fact = vec![0.0; ln.len()];
+        for v in 2..ln.len() {
+            ln_fact[v] = ln_fact[v - 1] + ln[v];
+        }
+        Self { ln, ln_fact }
+    }
+}
+
+/// ln P[Bin(n, p) ≥ k] with logarithms from `table` (built for at least n).
+fn ln_binomial_tail_with(table: &LnTable, n: usize, k: usize, p: f64) -> f64 {
     if k == 0 {
         return 0.0;
     }
@@ -25,27 +47,32 @@ pub fn ln_binomial_tail(n: usize, k: usize, p: f64) -> f64 {
     if p >= 1.0 {
         return 0.0;
     }
-    let ln_fact = |m: usize| (2..=m).map(|v| (v as f64).ln()).sum::<f64>();
     let (lp, lq) = (p.ln(), (1.0 - p).ln());
-    let ln_n = ln_fact(n);
-    let mut ln_k_fact = ln_fact(k);
-    let mut ln_nk_fact = ln_fact(n - k);
+    let ln_n = table.ln_fact[n];
+    let mut ln_k_fact = table.ln_fact[k];
+    let mut ln_nk_fact = table.ln_fact[n - k];
+    let mut max = f64::NEG_INFINITY;
     let mut terms = Vec::with_capacity(n - k + 1);
     for j in k..=n {
         if j > k {
-            ln_k_fact += (j as f64).ln();
-            ln_nk_fact -= ((n - j + 1) as f64).ln();
+            ln_k_fact += table.ln[j];
+            ln_nk_fact -= table.ln[n - j + 1];
         }
-        terms.push(ln_n - ln_k_fact - ln_nk_fact + j as f64 * lp + (n - j) as f64 * lq);
+        let term = ln_n - ln_k_fact - ln_nk_fact + j as f64 * lp + (n - j) as f64 * lq;
+        max = max.max(term);
+        terms.push(term);
     }
-    let max = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     max + terms.iter().map(|t| (t - max).exp()).sum::<f64>().ln()
 }
 
 /// log10 NFA of `inliers` out of `trials` objects each matching by chance with probability `p`,
 /// over `tests` hypotheses.
 pub fn log10_nfa(tests: usize, trials: usize, inliers: usize, p: f64) -> f64 {
-    let tail = if inliers <= 2 { 0.0 } else { ln_binomial_tail(trials.saturating_sub(2), inliers - 2, p) };
+    log10_nfa_with(&LnTable::new(trials), tests, trials, inliers, p)
+}
+
+fn log10_nfa_with(table: &LnTable, tests: usize, trials: usize, inliers: usize, p: f64) -> f64 {
+    let tail = if inliers <= 2 { 0.0 } else { ln_binomial_tail_with(table, trials.saturating_sub(2), inliers - 2, p) };
     (tests.max(1) as f64).log10() + tail / std::f64::consts::LN_10
 }
 
@@ -55,8 +82,9 @@ pub fn log10_nfa_adaptive(tests: usize, trials: usize, residuals: &mut [f64], p_
     residuals.sort_by(f64::total_cmp);
     let choices = (trials.saturating_sub(2).max(1) as f64).log10();
     let mut best = (tests.max(1) as f64).log10();
+    let table = LnTable::new(trials);
     for j in 3..=residuals.len() {
-        best = best.min(log10_nfa(tests, trials, j, p_at(residuals[j - 1])) + choices);
+        best = best.min(log10_nfa_with(&table, tests, trials, j, p_at(residuals[j - 1])) + choices);
     }
     best
 }

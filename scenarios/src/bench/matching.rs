@@ -2,7 +2,8 @@
 //! dense paper formulation re-implemented and run on the same pairs, and false claims on
 //! non-overlapping pairs. Success: translation error < 2 m and every axis rotation error < 20°.
 //! A last family repeats the 35 / 32 pairs (shared and not) with the remote frame tilted by
-//! `TILT_DEG` (odometry roll/pitch drift without IMU): the same pairs, tilted.
+//! `TILT_DEG` (odometry roll/pitch drift without IMU): the same pairs, tilted. Then the hard
+//! families (`matching_hard`): repeated layouts and hundreds of objects.
 
 use super::Section;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -58,6 +59,8 @@ struct Report {
     tilt_deg: f64,
     /// 35 / 32 with 17 shared, then with none: the pairs of `table1` and `false_claims`, tilted.
     tilted: Vec<Row>,
+    /// Repeated layouts and hundreds of objects (`matching_hard`).
+    hard: super::matching_hard::HardFamilies,
 }
 
 struct Accumulator {
@@ -169,7 +172,7 @@ pub fn run(options: Options) -> anyhow::Result<Section> {
     ];
     let false_claim_specs = [(8, 8), (15, 15), (35, 32)];
     let cells = (table1_specs.len() * 2 + table2_specs.len() * 2 + false_claim_specs.len() * 2 + 4) as u64;
-    let progress = ProgressBar::new(cells * reps as u64);
+    let progress = ProgressBar::new(cells * reps as u64 + super::matching_hard::trials(reps));
     progress.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} trials ({eta})")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -223,6 +226,7 @@ pub fn run(options: Options) -> anyhow::Result<Section> {
             }
         })
         .collect();
+    let hard = super::matching_hard::run(reps, seed, &config, &progress);
     progress.finish_and_clear();
 
     let config_arg = config_path.map(|p| format!(" --config {}", p.display())).unwrap_or_default();
@@ -234,7 +238,8 @@ pub fn run(options: Options) -> anyhow::Result<Section> {
     let command = format!("{}sgm bench matching --reps {reps} --seed {seed}{config_arg}{skip_arg}", overrides.concat());
     let mut markdown = tables(&command, reps, &table1, &table2, &false_claims);
     markdown.push_str(&tilt_table(&table1, &false_claims, &tilted));
-    let report = Report { command, reps, seed, table1, table2, false_claims, tilt_deg: TILT_DEG, tilted };
+    markdown.push_str(&super::matching_hard::markdown(&hard));
+    let report = Report { command, reps, seed, table1, table2, false_claims, tilt_deg: TILT_DEG, tilted, hard };
     Ok(Section { markdown, json: serde_json::to_value(report)? })
 }
 

@@ -5,6 +5,7 @@
 pub mod all;
 pub mod baselines;
 pub mod matching;
+pub mod matching_hard;
 pub mod messages;
 pub mod outliers;
 pub mod realism;

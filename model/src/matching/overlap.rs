@@ -1,0 +1,156 @@
+//! Negative evidence (beyond the paper): how consistently a transform explains the ground the two
+//! graphs share, not only how many objects it explains.
+//!
+//! Inlier counts reward a transform for what it explains and never charge it for what it
+//! contradicts. In a repeated layout (lamp posts on a grid, cars in rows of bays) a transform
+//! shifted by a period of the layout, or turned by 180°, can explain *more* objects than the true
+//! one, because it lays the two views over each other more widely — while it also puts many
+//! objects where the other robot saw none. Under T, with A the inliers (one-to-one pairs), an
+//! object of either graph that has no partner but lands where the other robot did map
+//! something — within `support_m` of one of its objects — is a disagreement; D counts them over
+//! both directions. The agreement index (Birk & Carpin 2006, "Merging occupancy grid maps from
+//! multiple robots", Proc. IEEE 94(7), for cells rather than objects)
+//!
+//!   ω(T) = 2A / (2A + D)
+//!
+//! is what the true transform keeps high — only missed detections and label changes lower it —
+//! and what a shifted copy of a layout cannot (every bay it lays onto an empty one).
+
+use super::object_grid::Grid;
+use super::verification::Evaluation;
+use super::ObjectGraph;
+use nalgebra::Point3;
+
+/// Agreement of transforms between two graphs.
+pub struct Overlap<'a> {
+    local: &'a ObjectGraph,
+    remote: &'a ObjectGraph,
+    local_grid: Grid,
+    remote_grid: Grid,
+    support_m: f64,
+}
+
+impl<'a> Overlap<'a> {
+    /// An object lands on mapped ground when it is within `support_m` of one of the other graph's
+    /// objects.
+    pub fn new(local: &'a ObjectGraph, remote: &'a ObjectGraph, support_m: f64) -> Self {
+        Self {
+            local,
+            remote,
+            local_grid: Grid::new(local, support_m),
+            remote_grid: Grid::new(remote, support_m),
+            support_m,
+        }
+    }
+
+    /// ω of an evaluated transform, in [0, 1]; 0 when nothing lands on shared ground.
+    pub fn agreement(&self, e: &Evaluation) -> f64 {
+        let mut matched_local = vec![false; self.local.len()];
+        let mut matched_remote = vec![false; self.remote.len()];
+        for i in &e.inliers {
+            matched_local[i.local as usize] = true;
+            matched_remote[i.remote as usize] = true;
+        }
+        let local_from_remote = e.local_from_remote;
+        let remote_from_local = local_from_remote.inverse();
+        let disagreements_remote = self
+            .remote
+            .objects()
+            .iter()
+            .zip(&matched_remote)
+            .filter(|(q, matched)| {
+                !**matched && self.near(&self.local_grid, self.local, &(local_from_remote * q.centroid))
+            })
+            .count();
+        let disagreements_local = self
+            .local
+            .objects()
+            .iter()
+            .zip(&matched_local)
+            .filter(|(p, matched)| {
+                !**matched && self.near(&self.remote_grid, self.remote, &(remote_from_local * p.centroid))
+            })
+            .count();
+        let agreements = 2.0 * e.inliers.len() as f64;
+        let total = agreements + (disagreements_remote + disagreements_local) as f64;
+        if total == 0.0 {
+            0.0
+        } else {
+            agreements / total
+        }
+    }
+
+    /// Whether some object of `graph` lies within the support radius of `point`, horizontally.
+    fn near(&self, grid: &Grid, graph: &ObjectGraph, point: &Point3<f64>) -> bool {
+        let r2 = self.support_m * self.support_m;
+        let mut found = false;
+        grid.around(point.x, point.y, |k| {
+            found |= (graph.objects()[k as usize].centroid - point).xy().norm_squared() <= r2;
+        });
+        found
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{pose_from_yaw_translation, Pose3};
+    use crate::matching::verification::Inlier;
+    use crate::matching::GraphObject;
+    use crate::scene_graph::{LabelId, ObjectId};
+    use nalgebra::Vector3;
+
+    fn graph(points: &[(f64, f64)]) -> ObjectGraph {
+        let objects = points
+            .iter()
+            .enumerate()
+            .map(|(k, &(x, y))| GraphObject {
+                id: ObjectId(k as u32),
+                label: LabelId(0),
+                centroid: Point3::new(x, y, 0.0),
+                size: None,
+            })
+            .collect();
+        ObjectGraph::new(objects, usize::MAX).unwrap()
+    }
+
+    fn evaluation(pose: Pose3, pairs: &[(u32, u32)]) -> Evaluation {
+        let inliers = pairs
+            .iter()
+            .map(|&(local, remote)| Inlier {
+                local,
+                remote,
+                weight: 1.0,
+                residual_m: 0.0,
+                residual_xy_m: 0.0,
+                same_label: true,
+            })
+            .collect();
+        Evaluation { local_from_remote: pose, inliers, score: pairs.len() as f64 }
+    }
+
+    #[test]
+    fn a_shift_that_lays_objects_on_empty_ground_is_charged_for_it() {
+        // Local and remote: three objects in a row, 6 m apart.
+        let local = graph(&[(0.0, 0.0), (6.0, 0.0), (12.0, 0.0)]);
+        let remote = graph(&[(0.0, 0.0), (6.0, 0.0), (12.0, 0.0)]);
+        let overlap = Overlap::new(&local, &remote, 4.0);
+        let truth = evaluation(Pose3::identity(), &[(0, 0), (1, 1), (2, 2)]);
+        assert_eq!(overlap.agreement(&truth), 1.0);
+        // Shifted by one occupied period: two pairs, and one object each side on mapped ground.
+        let shifted = evaluation(pose_from_yaw_translation(0.0, Vector3::new(6.0, 0.0, 0.0)), &[(1, 0), (2, 1)]);
+        // Remote 2 lands at 18 m: 6 m from local 2, beyond support. Local 0 lands at −6 m: beyond.
+        assert_eq!(overlap.agreement(&shifted), 1.0);
+        let tight = Overlap::new(&local, &remote, 7.0);
+        // With a 7 m support both unmatched objects land on mapped ground: ω = 4 / (4 + 2).
+        assert!((tight.agreement(&shifted) - 4.0 / 6.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn nothing_on_shared_ground_is_no_agreement() {
+        let local = graph(&[(0.0, 0.0)]);
+        let remote = graph(&[(100.0, 0.0)]);
+        let overlap = Overlap::new(&local, &remote, 5.0);
+        assert_eq!(overlap.agreement(&evaluation(Pose3::identity(), &[])), 0.0);
+    }
+}
