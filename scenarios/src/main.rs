@@ -213,6 +213,10 @@ enum BenchCommand {
         /// Which graphs carry the "Err" position error (the paper does not say).
         #[arg(long, value_enum, default_value_t = bench::matching::ErrorOnArg::Both)]
         error_on: bench::matching::ErrorOnArg,
+        /// Repetitions per cell of the hard families (repeated layouts, hundreds of objects:
+        /// up to 0.3 s a pair); default: --reps.
+        #[arg(long)]
+        hard_reps: Option<usize>,
     },
     /// Paper §V-C, Table 4: message sizes per type on outdoor_two_robots and
     /// indoor_three_robots, against raw point-cloud sharing.
@@ -401,8 +405,10 @@ fn main() -> ExitCode {
             })
         }
         Command::EncodeCloud { cloud, resolution } => cli::encode_cloud_cmd::run(&cloud, resolution),
-        Command::Bench { which: BenchCommand::Matching { reps, seed, json, config, skip_dense, error_on } } => {
-            let options = bench::matching::Options { reps, seed, config, skip_dense, error_on };
+        Command::Bench {
+            which: BenchCommand::Matching { reps, seed, json, config, skip_dense, error_on, hard_reps },
+        } => {
+            let options = bench::matching::Options { reps, seed, config, skip_dense, error_on, hard_reps };
             emit("matching", bench::matching::run(options), json.as_deref())
         }
         Command::Bench { which: BenchCommand::Messages { duration, json } } => {

@@ -56,7 +56,7 @@ const MAX_PERIODS: usize = 8;
 const SUPPORT_RADII: f64 = 2.0;
 /// A significant runner-up whose agreement index ω comes within this of the best's makes a
 /// repeated layout: refused.
-const AGREEMENT_MARGIN: f64 = 0.1;
+const AGREEMENT_MARGIN: f64 = 0.05;
 
 /// Matches `remote`'s object graph against `local`'s. Never panics on any valid graphs.
 pub fn match_graphs(
@@ -198,9 +198,11 @@ pub fn match_graphs(
         .map(|shift| scorer.evaluate(&(Translation3::from(shift) * best.local_from_remote)))
         .collect();
     let searched = hypotheses.iter().take_while(|h| h.score >= floor).filter(distinct).take(RUNNER_UP_CANDIDATES);
-    // A runner-up must be significant — or, when the best itself barely is, nearly as
-    // significant as the best: near-equal transforms straddling the threshold are a tie.
-    let runner_up_required = required.min(significance - RUNNER_UP_SIGNIFICANCE_SLACK);
+    // A runner-up must be significant — or, in a repeated layout (periods found around the
+    // matches) where the best itself barely is, nearly as significant as the best: near-equal
+    // transforms straddling the threshold are a tie there.
+    let runner_up_required =
+        if shifted.is_empty() { required } else { required.min(significance - RUNNER_UP_SIGNIFICANCE_SLACK) };
     let best_pairs: HashSet<(u32, u32)> = best.inliers.iter().map(|i| (i.local, i.remote)).collect();
     let candidates = shifted.iter().map(|e| (e, true)).chain(searched.map(|e| (e, false)));
     for (other, period) in candidates {
@@ -220,9 +222,13 @@ pub fn match_graphs(
         let score_ratio = runner_up.score / best.score;
         let runner_up_agreement = overlap.agreement(&runner_up);
         let as_good = score_ratio >= config.ambiguity_ratio;
-        if !(as_good || runner_up_agreement + AGREEMENT_MARGIN >= agreement)
-            || null.significance(&runner_up, tests, remote) < runner_up_required
-        {
+        let as_consistent = runner_up_agreement + AGREEMENT_MARGIN >= agreement;
+        if !(as_good || as_consistent) {
+            continue;
+        }
+        // A tie on score may straddle the threshold; consistency alone must be significant.
+        let runner_up_significance = null.significance(&runner_up, tests, remote);
+        if runner_up_significance < if as_good { runner_up_required } else { required } {
             continue;
         }
         let reason = if as_good && !period {

@@ -37,6 +37,18 @@ pub struct Eigen {
     pub converged: bool,
 }
 
+/// w ← w − Σ_k c_k v_k, each entry updated in the order k = 0, 1, … (the bits of one pass per
+/// v_k), a block of w at a time so that it stays in cache while every v_k streams past.
+fn subtract_combination(w: &mut [f64], basis: &[Vec<f64>], coefficients: &[f64]) {
+    const BLOCK: usize = 512;
+    for (b, block) in w.chunks_mut(BLOCK).enumerate() {
+        let range = b * BLOCK..b * BLOCK + block.len();
+        for (v, &c) in basis.iter().zip(coefficients) {
+            block.iter_mut().zip(&v[range.clone()]).for_each(|(wi, vi)| *wi -= c * vi);
+        }
+    }
+}
+
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
@@ -63,9 +75,7 @@ fn lanczos(u: &SparseAffinity, tolerance: f64, max_iterations: usize) -> Eigen {
             // Full re-orthogonalisation, one classical Gram–Schmidt pass (enough for the top
             // eigenpair; the residual test below catches a loss of accuracy).
             let coefficients: Vec<f64> = basis.iter().map(|v| dot(&w, v)).collect();
-            for (v, c) in basis.iter().zip(coefficients) {
-                w.iter_mut().zip(v).for_each(|(wi, vi)| *wi -= c * vi);
-            }
+            subtract_combination(&mut w, &basis, &coefficients);
             let beta = dot(&w, &w).sqrt();
             last_beta = beta;
             if !beta.is_finite() || beta <= 1e-13 * alpha.abs().max(1e-300) || j + 1 == steps {
@@ -89,9 +99,8 @@ fn lanczos(u: &SparseAffinity, tolerance: f64, max_iterations: usize) -> Eigen {
         };
         let s = eig.eigenvectors.column(top);
         let mut ritz = vec![0.0; n];
-        for (k, v) in basis.iter().take(m).enumerate() {
-            ritz.iter_mut().zip(v).for_each(|(r, vi)| *r += s[k] * vi);
-        }
+        let weights: Vec<f64> = (0..m).map(|k| -s[k]).collect();
+        subtract_combination(&mut ritz, &basis[..m], &weights);
         let norm = dot(&ritz, &ritz).sqrt();
         if !norm.is_finite() || norm <= 0.0 || !theta.is_finite() {
             return Eigen { vector: x, eigenvalue, iterations: products, converged: false };

@@ -24,6 +24,7 @@ pub fn run_bench(options: Options) -> anyhow::Result<()> {
         config: None,
         skip_dense: false,
         error_on: matching::ErrorOnArg::Both,
+        hard_reps: None,
     };
     let sweeps_options = sweeps::Options { duration: options.duration, plots: Some(out.clone()) };
     let sections: Vec<(&str, Section)> = vec![

@@ -143,10 +143,13 @@ pub struct Options {
     pub config: Option<PathBuf>,
     pub skip_dense: bool,
     pub error_on: ErrorOnArg,
+    /// Repetitions per cell of the hard families (`matching_hard`); `reps` when not given.
+    pub hard_reps: Option<usize>,
 }
 
 pub fn run(options: Options) -> anyhow::Result<Section> {
-    let Options { reps, seed, config: config_path, skip_dense, error_on } = options;
+    let Options { reps, seed, config: config_path, skip_dense, error_on, hard_reps } = options;
+    let hard_reps = hard_reps.unwrap_or(reps);
     let world = SyntheticWorld {
         error_on: match error_on {
             ErrorOnArg::Both => ErrorOn::Both,
@@ -155,6 +158,7 @@ pub fn run(options: Options) -> anyhow::Result<Section> {
         ..SyntheticWorld::default()
     };
     anyhow::ensure!(reps > 0, "--reps must be at least 1");
+    anyhow::ensure!(hard_reps > 0, "--hard-reps must be at least 1");
     let config_path = config_path.as_deref();
     let config = load_matcher_config(config_path)?;
     let overrides: Vec<String> =
@@ -172,7 +176,7 @@ pub fn run(options: Options) -> anyhow::Result<Section> {
     ];
     let false_claim_specs = [(8, 8), (15, 15), (35, 32)];
     let cells = (table1_specs.len() * 2 + table2_specs.len() * 2 + false_claim_specs.len() * 2 + 4) as u64;
-    let progress = ProgressBar::new(cells * reps as u64 + super::matching_hard::trials(reps));
+    let progress = ProgressBar::new(cells * reps as u64 + super::matching_hard::trials(hard_reps));
     progress.set_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} trials ({eta})")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -226,7 +230,7 @@ pub fn run(options: Options) -> anyhow::Result<Section> {
             }
         })
         .collect();
-    let hard = super::matching_hard::run(reps, seed, &config, &progress);
+    let hard = super::matching_hard::run(hard_reps, seed, &config, &progress);
     progress.finish_and_clear();
 
     let config_arg = config_path.map(|p| format!(" --config {}", p.display())).unwrap_or_default();
@@ -235,6 +239,7 @@ pub fn run(options: Options) -> anyhow::Result<Section> {
         ErrorOnArg::Both => skip_arg.to_string(),
         ErrorOnArg::Remote => format!("{skip_arg} --error-on remote"),
     };
+    let skip_arg = if hard_reps == reps { skip_arg } else { format!("{skip_arg} --hard-reps {hard_reps}") };
     let command = format!("{}sgm bench matching --reps {reps} --seed {seed}{config_arg}{skip_arg}", overrides.concat());
     let mut markdown = tables(&command, reps, &table1, &table2, &false_claims);
     markdown.push_str(&tilt_table(&table1, &false_claims, &tilted));

@@ -85,6 +85,7 @@ pub struct LargeRow {
 
 #[derive(Serialize)]
 pub struct HardFamilies {
+    pub reps: usize,
     pub layouts: Vec<LayoutRow>,
     pub large: Vec<LargeRow>,
 }
@@ -134,7 +135,7 @@ pub fn run(reps: usize, seed: u64, config: &MatcherConfig, progress: &ProgressBa
             }
         })
         .collect();
-    HardFamilies { layouts, large }
+    HardFamilies { reps, layouts, large }
 }
 
 /// The two tables.
@@ -142,7 +143,8 @@ pub fn markdown(families: &HardFamilies) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "\n## Repeated layouts (a transform off by 2 m or 20°, or claimed between different places, is wrong)\n"
+        "\n## Repeated layouts ({} pairs per cell; a transform off by 2 m or 20°, or claimed between different places, is wrong)\n",
+        families.reps
     );
     let _ = writeln!(
         s,
@@ -166,7 +168,11 @@ pub fn markdown(families: &HardFamilies) -> String {
             a[1].median_ms
         );
     }
-    let _ = writeln!(s, "\n## Hundreds of objects (the paper's density, half shared or none)\n");
+    let _ = writeln!(
+        s,
+        "\n## Hundreds of objects ({} pairs per cell; the paper's density, half shared or none)\n",
+        families.reps
+    );
     let _ = writeln!(
         s,
         "| objects | success NoErr % | success Err % | recall Err % | wrong NoErr % | wrong Err % | claims, nothing shared NoErr % | claims, nothing shared Err % | time ms (Err) |"
