@@ -94,6 +94,22 @@ impl ObjectGraph {
     }
 }
 
+/// A graph of one label from horizontal points at height 0, ids in order (for tests).
+#[cfg(test)]
+pub(crate) fn flat_graph(points: &[(f64, f64)]) -> ObjectGraph {
+    let objects = points
+        .iter()
+        .enumerate()
+        .map(|(k, &(x, y))| GraphObject {
+            id: ObjectId(k as u32),
+            label: LabelId(0),
+            centroid: Point3::new(x, y, 0.0),
+            size: None,
+        })
+        .collect();
+    ObjectGraph { objects }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

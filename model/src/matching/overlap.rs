@@ -52,25 +52,15 @@ impl<'a> Overlap<'a> {
             matched_remote[i.remote as usize] = true;
         }
         let local_from_remote = e.local_from_remote;
-        let remote_from_local = local_from_remote.inverse();
-        let disagreements_remote = self
-            .remote
-            .objects()
-            .iter()
-            .zip(&matched_remote)
-            .filter(|(q, matched)| {
-                !**matched && self.near(&self.local_grid, self.local, &(local_from_remote * q.centroid))
-            })
-            .count();
-        let disagreements_local = self
-            .local
-            .objects()
-            .iter()
-            .zip(&matched_local)
-            .filter(|(p, matched)| {
-                !**matched && self.near(&self.remote_grid, self.remote, &(remote_from_local * p.centroid))
-            })
-            .count();
+        let disagreements_remote =
+            self.unmatched_on_ground(self.remote, &matched_remote, &local_from_remote, &self.local_grid, self.local);
+        let disagreements_local = self.unmatched_on_ground(
+            self.local,
+            &matched_local,
+            &local_from_remote.inverse(),
+            &self.remote_grid,
+            self.remote,
+        );
         let agreements = 2.0 * e.inliers.len() as f64;
         let total = agreements + (disagreements_remote + disagreements_local) as f64;
         if total == 0.0 {
@@ -78,6 +68,23 @@ impl<'a> Overlap<'a> {
         } else {
             agreements / total
         }
+    }
+
+    /// Objects of `from` without a partner that `other_from_this` lays within the support radius
+    /// of an object of `other` (its mapped ground).
+    fn unmatched_on_ground(
+        &self,
+        from: &ObjectGraph,
+        matched: &[bool],
+        other_from_this: &crate::geometry::Pose3,
+        grid: &Grid,
+        other: &ObjectGraph,
+    ) -> usize {
+        from.objects()
+            .iter()
+            .zip(matched)
+            .filter(|(o, matched)| !**matched && self.near(grid, other, &(other_from_this * o.centroid)))
+            .count()
     }
 
     /// Whether some object of `graph` lies within the support radius of `point`, horizontally.
@@ -95,23 +102,12 @@ impl<'a> Overlap<'a> {
 mod tests {
     use super::*;
     use crate::geometry::{pose_from_yaw_translation, Pose3};
+    use crate::matching::graph::flat_graph;
     use crate::matching::verification::Inlier;
-    use crate::matching::GraphObject;
-    use crate::scene_graph::{LabelId, ObjectId};
     use nalgebra::Vector3;
 
     fn graph(points: &[(f64, f64)]) -> ObjectGraph {
-        let objects = points
-            .iter()
-            .enumerate()
-            .map(|(k, &(x, y))| GraphObject {
-                id: ObjectId(k as u32),
-                label: LabelId(0),
-                centroid: Point3::new(x, y, 0.0),
-                size: None,
-            })
-            .collect();
-        ObjectGraph::new(objects, usize::MAX).unwrap()
+        flat_graph(points)
     }
 
     fn evaluation(pose: Pose3, pairs: &[(u32, u32)]) -> Evaluation {

@@ -68,23 +68,12 @@ pub fn periods(graph: &ObjectGraph, anchors: &[u32], search: PeriodSearch) -> Ve
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::matching::GraphObject;
-    use crate::scene_graph::{LabelId, ObjectId};
-    use nalgebra::Point3;
+    use crate::matching::graph::flat_graph;
 
     fn grid(nx: usize, ny: usize, dx: f64, dy: f64) -> ObjectGraph {
-        let mut objects = Vec::new();
-        for i in 0..nx {
-            for j in 0..ny {
-                objects.push(GraphObject {
-                    id: ObjectId(objects.len() as u32),
-                    label: LabelId(0),
-                    centroid: Point3::new(dx * i as f64, dy * j as f64, 0.0),
-                    size: None,
-                });
-            }
-        }
-        ObjectGraph::new(objects, usize::MAX).unwrap()
+        let points: Vec<(f64, f64)> =
+            (0..nx).flat_map(|i| (0..ny).map(move |j| (dx * i as f64, dy * j as f64))).collect();
+        flat_graph(&points)
     }
 
     const SEARCH: PeriodSearch =
@@ -104,17 +93,7 @@ mod tests {
 
     #[test]
     fn scattered_objects_have_no_period() {
-        let objects = [(0.0, 0.0), (7.0, 1.0), (3.0, 9.0), (14.0, 5.0), (9.0, 13.0)]
-            .iter()
-            .enumerate()
-            .map(|(k, &(x, y))| GraphObject {
-                id: ObjectId(k as u32),
-                label: LabelId(0),
-                centroid: Point3::new(x, y, 0.0),
-                size: None,
-            })
-            .collect();
-        let graph = ObjectGraph::new(objects, usize::MAX).unwrap();
+        let graph = flat_graph(&[(0.0, 0.0), (7.0, 1.0), (3.0, 9.0), (14.0, 5.0), (9.0, 13.0)]);
         assert!(periods(&graph, &[0, 1, 2, 3, 4], SEARCH).is_empty());
     }
 }
