@@ -45,6 +45,9 @@ const RUNNER_UP_CANDIDATES: usize = 64;
 /// A runner-up counts when its −log10 NFA is within this of the best's, even below the
 /// threshold (three orders of magnitude).
 const RUNNER_UP_SIGNIFICANCE_SLACK: f64 = 3.0;
+/// A runner-up as consistent as the best refuses only when it scores at least this fraction of
+/// the best.
+const MIN_RUNNER_UP_SUPPORT: f64 = 0.6;
 /// Graphs with at least this many objects each are large: see `RUNNER_UP_SIGNIFICANCE_SLACK`.
 const LARGE_GRAPH: usize = 100;
 /// Periods of a repeated layout are sought up to this many inlier distances (`symmetry`).
@@ -226,7 +229,9 @@ pub fn match_graphs(
         let score_ratio = runner_up.score / best.score;
         let runner_up_agreement = overlap.agreement(&runner_up);
         let as_good = score_ratio >= config.ambiguity_ratio;
-        let as_consistent = runner_up_agreement + AGREEMENT_MARGIN >= agreement;
+        // As consistent, on comparable support: a runner-up laying a corner of one map on a
+        // corner of the other is trivially consistent (nothing lands on mapped ground).
+        let as_consistent = runner_up_agreement + AGREEMENT_MARGIN >= agreement && score_ratio >= MIN_RUNNER_UP_SUPPORT;
         if !(as_good || as_consistent) {
             continue;
         }
