@@ -157,6 +157,21 @@ pub struct ShareDescriptor {
     pub descriptor: ScanContext,
 }
 
+/// Matcher → Comms: every neighbour we are aligned with and its world in ours
+/// (`local_from_remote`), for the next `Alignments` broadcast when it changed.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct ShareAlignments(pub Vec<(RobotId, Pose3)>);
+
+/// Comms → Matcher: a neighbour's alignments (its world from each robot's it placed), valid
+/// poses only: hints, checked by our own registration before they count.
+#[derive(Message, Clone, Debug)]
+#[rtype(result = "()")]
+pub struct NeighbourAlignments {
+    pub robot: RobotId,
+    pub alignments: Vec<(RobotId, Pose3)>,
+}
+
 /// Matcher → Comms: ask a neighbour for object clouds.
 #[derive(Message, Clone, Debug)]
 #[rtype(result = "()")]

@@ -183,6 +183,7 @@ pub fn start_robot_restored(
         keyframes: matcher.clone().recipient(),
         unavailable: matcher.clone().recipient(),
         descriptors: matcher.clone().recipient(),
+        alignments: matcher.clone().recipient(),
         serve: tracker.clone().recipient(),
         link: matcher.clone().recipient(),
     }));
@@ -197,6 +198,7 @@ pub fn start_robot_restored(
         request_keyframes: comms.clone().recipient(),
         release_keyframes: comms.clone().recipient(),
         share_descriptors: comms.clone().recipient(),
+        share_alignments: comms.clone().recipient(),
         optimiser: optimiser.clone().recipient(),
     }));
     optimiser.do_send(Connect(OptimiserLinks {

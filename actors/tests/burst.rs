@@ -99,6 +99,10 @@ impl Handler<NeighbourDescriptors> for Recorder {
         self.0.lock().unwrap().descriptors.push((msg.robot, ids));
     }
 }
+impl Handler<NeighbourAlignments> for Recorder {
+    type Result = ();
+    fn handle(&mut self, _: NeighbourAlignments, _: &mut Context<Self>) {}
+}
 impl Handler<NeighbourObjectClouds> for Recorder {
     type Result = ();
     fn handle(&mut self, _: NeighbourObjectClouds, _: &mut Context<Self>) {}
@@ -178,6 +182,7 @@ fn pair(model: Box<dyn RadioModel>, config: &CommsConfig) -> Pair {
         keyframes: recorder.clone().recipient(),
         unavailable: recorder.clone().recipient(),
         descriptors: recorder.clone().recipient(),
+        alignments: recorder.clone().recipient(),
         serve,
         link: recorder.clone().recipient(),
     };
@@ -350,6 +355,7 @@ async fn descriptors_are_batched_broadcast_and_delivered() {
             keyframes: recorder.clone().recipient(),
             unavailable: recorder.clone().recipient(),
             descriptors: recorder.clone().recipient(),
+            alignments: recorder.clone().recipient(),
             serve: recorder.clone().recipient(),
             link: recorder.clone().recipient(),
         }));

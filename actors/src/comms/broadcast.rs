@@ -5,13 +5,16 @@
 //! unchanged map goes out again under its old revision, which a neighbour holding it ignores.
 //! Revisions never repeat, also after a restart without a snapshot: a new one is at least the
 //! clock in whole seconds. With the Scan Context baseline, keyframe descriptors instead, at the
-//! same pace, in envelopes of at most `limits.max_ids`.
+//! same pace, in envelopes of at most `limits.max_ids`. Our alignments (`Alignments`) when one
+//! is made or moves, when a neighbour needs them again, or after `alignments_refresh_s`, at the
+//! same pace.
 
 use crate::config::CommsConfig;
 use crate::map_view::MapView;
 use nalgebra::Point3;
-use sgm_model::scene_graph::{ObjectId, Stamp};
-use sgm_model::wire::messages::{KeyframeDescriptors, ObjectData, WireDescriptor};
+use sgm_model::geometry::Pose3;
+use sgm_model::scene_graph::{ObjectId, RobotId, Stamp};
+use sgm_model::wire::messages::{Alignments, KeyframeDescriptors, ObjectData, WireAlignment, WireDescriptor};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -104,6 +107,62 @@ impl ObjectBroadcast {
         self.repeat_pending = false;
         self.last = Some(now);
         Some(data)
+    }
+}
+
+/// An alignment moves significantly when an object this far from us would move by more than
+/// `significant_move_m`: ‖Δt‖ + LEVER_M · |Δθ|.
+const LEVER_M: f64 = 10.0;
+
+/// The alignments broadcast: the Matcher's current alignments, sent when one was made, dropped
+/// or moved significantly, when a neighbour needs them again, or after `alignments_refresh_s`
+/// without a broadcast — at most once per `object_data_interval_s`, never while we hold none.
+#[derive(Clone, Debug, Default)]
+pub struct AlignmentBroadcast {
+    latest: Vec<(RobotId, Pose3)>,
+    sent: Vec<(RobotId, Pose3)>,
+    repeat_pending: bool,
+    last: Option<Stamp>,
+}
+
+impl AlignmentBroadcast {
+    /// The Matcher's alignments now.
+    pub fn alignments(&mut self, latest: Vec<(RobotId, Pose3)>) {
+        self.latest = latest;
+    }
+
+    /// A neighbour needs our alignments again.
+    pub fn repeat(&mut self) {
+        self.repeat_pending = true;
+    }
+
+    fn moved(&self, significant_move_m: f64) -> bool {
+        self.latest.len() != self.sent.len()
+            || self.latest.iter().zip(&self.sent).any(|((ra, a), (rb, b))| {
+                let turn = a.rotation.angle_to(&b.rotation);
+                ra != rb || (a.translation.vector - b.translation.vector).norm() + LEVER_M * turn > significant_move_m
+            })
+    }
+
+    /// The Alignments to broadcast now, if any is due (see the type's documentation).
+    pub fn due(&mut self, now: Stamp, config: &CommsConfig) -> Option<Alignments> {
+        let since = self.last.map(|t| now - t);
+        let due = since.is_none_or(|s| s >= config.object_data_interval_s);
+        let stale = since.is_some_and(|s| s >= config.alignments_refresh_s);
+        let wanted = self.repeat_pending || stale || self.moved(config.significant_move_m);
+        if self.latest.is_empty() || !due || !wanted {
+            return None;
+        }
+        self.sent = self.latest.clone();
+        self.repeat_pending = false;
+        self.last = Some(now);
+        let alignments = self
+            .latest
+            .iter()
+            .take(config.limits.max_ids)
+            .map(|(robot, pose)| WireAlignment { robot: *robot, sender_from_robot: pose.into() })
+            .collect();
+        Some(Alignments { alignments })
     }
 }
 
@@ -206,5 +265,37 @@ mod tests {
         d.push(descriptor(3));
         assert!(d.due(1.0, &c).is_empty(), "rate limit");
         assert_eq!(d.due(2.0, &c).len(), 1);
+    }
+
+    /// Sent when one is made or moves by more than `significant_move_m` at 10 m (not for less),
+    /// rate-limited, again when a neighbour needs them or after `alignments_refresh_s`; never
+    /// while there is none.
+    #[test]
+    fn alignments_go_out_when_made_moved_repeated_or_stale() {
+        use nalgebra::Vector3;
+        use sgm_model::geometry::pose_from_rpy_translation;
+        let c = CommsConfig { alignments_refresh_s: 30.0, ..config() };
+        let mut b = AlignmentBroadcast::default();
+        b.repeat();
+        assert!(b.due(0.0, &c).is_none(), "nothing to send yet");
+        let at = |yaw: f64, x: f64| pose_from_rpy_translation(0.0, 0.0, yaw, Vector3::new(x, 0.0, 0.0));
+        b.alignments(vec![(RobotId(2), at(0.0, 1.0))]);
+        let first = b.due(10.0, &c).unwrap();
+        assert_eq!(first.alignments.len(), 1);
+        assert_eq!(first.alignments[0].robot, RobotId(2));
+        assert_eq!(first.alignments[0].sender_from_robot.to_pose().unwrap(), at(0.0, 1.0));
+        // 0.2 m + 10 m × 0.01 rad = 0.3 m: not significant; 0.2 m + 10 m × 0.04 rad is.
+        b.alignments(vec![(RobotId(2), at(0.01, 1.2))]);
+        assert!(b.due(13.0, &c).is_none());
+        b.alignments(vec![(RobotId(2), at(0.04, 1.2))]);
+        assert!(b.due(11.0, &c).is_none(), "rate limit");
+        assert!(b.due(13.0, &c).is_some());
+        b.alignments(vec![(RobotId(2), at(0.04, 1.2)), (RobotId(3), at(0.0, 0.0))]);
+        assert_eq!(b.due(15.0, &c).unwrap().alignments.len(), 2, "a new alignment");
+        assert!(b.due(20.0, &c).is_none());
+        b.repeat();
+        assert!(b.due(20.0, &c).is_some(), "a neighbour needs them");
+        assert!(b.due(45.0, &c).is_none());
+        assert!(b.due(50.0, &c).is_some(), "refreshed");
     }
 }

@@ -6,6 +6,7 @@
 //!   `object_data_refresh_s` of quiet, or soon after a neighbour is first heard or comes back,
 //!   so a lost broadcast or a late joiner is never left without it); with the Scan Context
 //!   baseline (`matcher.association = "scan_context"`) keyframe descriptors at the same pace;
+//!   our alignments when one is made or moves (hints for the neighbours, `matcher::relay`);
 //! - [`requests`]: keyframe requests coalesced over a window and bounded in flight (never
 //!   asking twice for a keyframe held or in flight; timeouts retried with back-off, then
 //!   reported);
@@ -31,7 +32,7 @@ use crate::journal::ReplayJournal;
 use crate::messages::*;
 use crate::transport::{Delivered, Transport};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
-use broadcast::{DescriptorBroadcast, ObjectBroadcast};
+use broadcast::{AlignmentBroadcast, DescriptorBroadcast, ObjectBroadcast};
 use door::Door;
 use link_watch::LinkWatch;
 use requests::{KeyframeRequests, RequestBook, ResponseFate};
@@ -51,6 +52,7 @@ pub struct CommsLinks {
     pub keyframes: Recipient<NeighbourKeyframe>,
     pub unavailable: Recipient<KeyframesUnavailable>,
     pub descriptors: Recipient<NeighbourDescriptors>,
+    pub alignments: Recipient<NeighbourAlignments>,
     pub serve: Recipient<Serve>,
     pub link: Recipient<LinkChanged>,
 }
@@ -67,6 +69,7 @@ pub struct Comms {
     status: CommsStatus,
     objects: ObjectBroadcast,
     descriptors: DescriptorBroadcast,
+    alignments: AlignmentBroadcast,
     /// Where grown replay reservations go (the ROS node's journal file), if anywhere.
     journal: Option<std::sync::Arc<dyn ReplayJournal>>,
     requests: RequestBook,
@@ -98,6 +101,7 @@ impl Comms {
             status: CommsStatus::default(),
             objects: ObjectBroadcast::default(),
             descriptors: DescriptorBroadcast::default(),
+            alignments: AlignmentBroadcast::default(),
             journal: None,
             requests: RequestBook::new(),
             responses: Responses::default(),
@@ -151,6 +155,9 @@ impl Comms {
             self.status.object_data_revision = self.objects.revision();
             self.send(Destination::Broadcast, WireMessage::ObjectData(data));
         }
+        if let Some(alignments) = self.alignments.due(now, &self.config) {
+            self.send(Destination::Broadcast, WireMessage::Alignments(alignments));
+        }
     }
 
     fn broadcast_descriptors(&mut self, now: Stamp) {
@@ -181,11 +188,13 @@ impl Comms {
                 self.status.neighbours.sort();
             }
             self.objects.repeat();
+            self.alignments.repeat();
         }
         if heard.back {
             tracing::info!(robot = %self.robot, neighbour = %from, "link back");
             self.status.links_down = self.watch.down();
             self.objects.repeat();
+            self.alignments.repeat();
             if let Some(q) = self.requests.get_mut(&from) {
                 q.link_back(now);
             }
@@ -267,6 +276,19 @@ impl Comms {
                 self.status.rejected.malformed += (total - descriptors.len()) as u64;
                 if !descriptors.is_empty() {
                     links.descriptors.do_send(NeighbourDescriptors { robot: from, descriptors });
+                }
+            }
+            WireMessage::Alignments(m) => {
+                let total = m.alignments.len();
+                let alignments: Vec<_> = m
+                    .alignments
+                    .into_iter()
+                    .filter(|a| a.robot != from)
+                    .filter_map(|a| Some((a.robot, a.sender_from_robot.to_pose()?)))
+                    .collect();
+                self.status.rejected.malformed += (total - alignments.len()) as u64;
+                if !alignments.is_empty() {
+                    links.alignments.do_send(NeighbourAlignments { robot: from, alignments });
                 }
             }
             WireMessage::ObjectCloudRequest(r) => {
@@ -367,6 +389,16 @@ impl Handler<ShareDescriptor> for Comms {
     fn handle(&mut self, msg: ShareDescriptor, ctx: &mut Context<Self>) {
         contained(ctx, "comms", || {
             self.descriptors.push(WireDescriptor::quantise(msg.keyframe, &msg.world_from_body, &msg.descriptor));
+        });
+    }
+}
+
+impl Handler<ShareAlignments> for Comms {
+    type Result = ();
+    fn handle(&mut self, msg: ShareAlignments, ctx: &mut Context<Self>) {
+        contained(ctx, "comms", || {
+            self.alignments.alignments(msg.0);
+            self.try_broadcast(self.clock.now());
         });
     }
 }

@@ -31,9 +31,14 @@ pub struct CommsConfig {
     /// neighbour first heard or back from silence gets it at the next `object_data_interval_s`,
     /// s. Default 10.
     pub object_data_refresh_s: f64,
-    /// Objects whose centroid moved farther than this count as a significant change, m.
-    /// Default 0.5.
+    /// Objects whose centroid moved farther than this count as a significant change, m; so does
+    /// an alignment that would move an object 10 m away from us by more. Default 0.5.
     pub significant_move_m: f64,
+    /// Our alignments (the `Alignments` message) are broadcast again, unchanged, after this long
+    /// without a broadcast, so a lost one is made good; besides, they go out when one is made or
+    /// moves and when a neighbour is first heard or back, at most once per
+    /// `object_data_interval_s`, s. Default 30.
+    pub alignments_refresh_s: f64,
     /// Centroid quantum of ObjectData, mm. Default 20.
     pub centroid_resolution_mm: u16,
     /// Keyframe requests are coalesced over this window before being sent, s. Default 0.5.
@@ -128,6 +133,7 @@ impl Default for CommsConfig {
             object_data_interval_s: 2.0,
             object_data_refresh_s: 10.0,
             significant_move_m: 0.5,
+            alignments_refresh_s: 30.0,
             centroid_resolution_mm: 20,
             request_window_s: 0.5,
             max_keyframes_in_flight: 32,
@@ -155,6 +161,12 @@ impl CommsConfig {
             "finite, ≥ comms.object_data_interval_s",
         )?;
         check(positive(c.significant_move_m), "comms.significant_move_m", c.significant_move_m, "> 0")?;
+        check(
+            c.alignments_refresh_s.is_finite() && c.alignments_refresh_s >= c.object_data_interval_s,
+            "comms.alignments_refresh_s",
+            c.alignments_refresh_s,
+            "finite, ≥ comms.object_data_interval_s",
+        )?;
         check(c.centroid_resolution_mm >= 1, "comms.centroid_resolution_mm", c.centroid_resolution_mm, "1–65535")?;
         check(
             c.request_window_s.is_finite() && c.request_window_s >= 0.0,

@@ -76,6 +76,41 @@ pub struct MatcherSection {
     pub max_held_keyframes: usize,
     /// Inter-robot closures after the first alignment (`[matcher.closures]`).
     pub closures: ClosureSection,
+    /// Alignments shared and relayed between neighbours (`[matcher.relay]`).
+    pub relay: RelaySection,
+}
+
+/// `[matcher.relay]`: our alignments are broadcast (the `Alignments` message); a neighbour's are
+/// hints for ours — inverted when it placed us, chained through our alignment with it when it
+/// placed a third robot — each checked by our own round before it counts
+/// (`model::matching::relay`). Object association only.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RelaySection {
+    /// Whether alignments are shared and hints used. Default true.
+    pub enabled: bool,
+    /// A local and a neighbour object this close through a hint are one, m (a hint chained
+    /// through two alignments carries both errors). Default 1.5.
+    pub gate_m: f64,
+    /// Our registrations a round needs when it started from the neighbour's own alignment of
+    /// us (it registered at least `min_keyframe_factors` of our keyframes onto its own: the
+    /// same evidence seen from its side); a hint chained through a third robot needs
+    /// `min_keyframe_factors`. Default 1.
+    pub min_own_factors: usize,
+}
+
+impl Default for RelaySection {
+    fn default() -> Self {
+        Self { enabled: true, gate_m: 1.5, min_own_factors: 1 }
+    }
+}
+
+impl RelaySection {
+    fn validate(&self) -> Result<(), ConfigError> {
+        let g = self.gate_m;
+        check(g.is_finite() && g > 0.0 && g <= 10.0, "matcher.relay.gate_m", g, "0 < x ≤ 10 m")?;
+        check(self.min_own_factors >= 1, "matcher.relay.min_own_factors", self.min_own_factors, "≥ 1")
+    }
 }
 
 /// `[matcher.closures]`: once a neighbour is aligned, its objects are associated with ours
@@ -173,6 +208,7 @@ impl Default for MatcherSection {
             min_keyframe_factors: 2,
             max_held_keyframes: 16,
             closures: ClosureSection::default(),
+            relay: RelaySection::default(),
         }
     }
 }
@@ -278,7 +314,8 @@ impl MatcherSection {
             sc.max_ground_slope_deg,
             "0 ≤ x ≤ 60°",
         )?;
-        m.closures.validate()
+        m.closures.validate()?;
+        m.relay.validate()
     }
 }
 
@@ -301,6 +338,9 @@ mod tests {
         refused(|m| m.closures.radius_m = f64::NAN, "matcher.closures.radius_m = NaN");
         refused(|m| m.closures.spacing_m = -5.0, "matcher.closures.spacing_m = -5");
         refused(|m| m.closures.min_pairs = 2, "matcher.closures.min_pairs = 2");
+        refused(|m| m.relay.gate_m = 0.0, "matcher.relay.gate_m = 0");
+        refused(|m| m.relay.gate_m = f64::INFINITY, "matcher.relay.gate_m = inf");
+        refused(|m| m.relay.min_own_factors = 0, "matcher.relay.min_own_factors = 0");
         refused(|m| m.factor_sigma_floor_deg = -0.1, "matcher.factor_sigma_floor_deg = -0.1");
         refused(|m| m.factor_sigma_floor_m = f64::INFINITY, "matcher.factor_sigma_floor_m = inf");
         let plan = MatcherSection::default().closures.plan();

@@ -43,27 +43,39 @@ impl Matcher {
             entry.match_again = false;
         }
         let report = match_graphs(&local, &remote, &self.labels, &self.config.matching);
-        let alignment = match report.outcome {
-            MatchOutcome::Aligned(alignment) => alignment,
+        let matched = match report.outcome {
+            MatchOutcome::Aligned(alignment) if alignment.matches.len() < min_matched => None,
+            MatchOutcome::Aligned(alignment) if refuted_recently(&refuted, &alignment.local_from_remote, now) => None,
+            MatchOutcome::Aligned(alignment) => {
+                let pairs: Vec<(ObjectId, ObjectId)> = alignment.matches.iter().map(|m| (m.local, m.remote)).collect();
+                Some((alignment.local_from_remote, pairs, None))
+            }
             MatchOutcome::Refused(refusal) => {
                 tracing::debug!(robot = %self.robot, neighbour = %robot, reason = %refusal.reason, "object graphs not matched");
-                return;
+                None
             }
         };
-        if alignment.matches.len() < min_matched {
+        // Graph matching found nothing to pursue: a neighbour's alignment may still place it.
+        let Some((local_from_remote, pairs, via)) =
+            matched.or_else(|| self.hinted(robot, local.objects(), remote.objects(), now))
+        else {
             return;
-        }
-        if refuted_recently(&refuted, &alignment.local_from_remote, now) {
-            return;
-        }
-        let pairs: Vec<(ObjectId, ObjectId)> = alignment.matches.iter().map(|m| (m.local, m.remote)).collect();
+        };
         let remote_ids: Vec<ObjectId> = pairs.iter().map(|p| p.1).collect();
         let retry = self.retry.clone();
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
         if let Some(Protocol::ObjectsReceived(n)) = entry.protocol.take() {
-            entry.protocol = Some(n.matched(alignment.local_from_remote, pairs, now, &retry).into());
+            entry.protocol = Some(n.matched(local_from_remote, pairs, now, &retry).into());
         }
-        tracing::info!(robot = %self.robot, neighbour = %robot, matches = remote_ids.len(), "object graphs matched");
+        entry.round_via = via;
+        match via {
+            None => {
+                tracing::info!(robot = %self.robot, neighbour = %robot, matches = remote_ids.len(), "object graphs matched")
+            }
+            Some(via) => {
+                tracing::info!(robot = %self.robot, neighbour = %robot, %via, pairs = remote_ids.len(), "round from a relayed alignment")
+            }
+        }
         if let Some(links) = &self.links {
             links.request_clouds.do_send(RequestObjectClouds { robot, objects: remote_ids });
         }

@@ -166,6 +166,7 @@ impl Handler<NeighbourTransforms> for Matcher {
                     other => other,
                 };
             }
+            self.share_alignments();
         });
     }
 }

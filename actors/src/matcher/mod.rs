@@ -15,6 +15,7 @@
 mod association;
 mod closures;
 mod neighbour;
+mod relay;
 mod rounds;
 
 pub use neighbour::{ClosureCounts, ClosureMemory, GetNeighbours, MatcherState, NeighbourMemory, NeighbourStatus};
@@ -30,7 +31,7 @@ use nalgebra::Point3;
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::alignment::{
     coarse_to_fine, evenly, judge_round, neighbourhood, refuted_recently, register_round, yaw_turn, LocalView,
-    RemoteView, RoundConfig, RoundVerdict,
+    RemoteView, RoundConfig, RoundVerdict, REFUTED_FOR_S,
 };
 use sgm_model::matching::place_candidates::{EvenPlaces, PlaceCandidate, PlaceCandidates};
 use sgm_model::matching::scan_context::{Place, ScanContext};
@@ -52,6 +53,7 @@ pub struct MatcherLinks {
     pub request_keyframes: Recipient<RequestKeyframes>,
     pub release_keyframes: Recipient<KeyframesReleased>,
     pub share_descriptors: Recipient<ShareDescriptor>,
+    pub share_alignments: Recipient<ShareAlignments>,
     pub optimiser: Recipient<InterRobotConstraints>,
 }
 
@@ -68,6 +70,9 @@ pub struct Matcher {
     /// `scan_context.max_places`, spread over the run.
     places: EvenPlaces,
     neighbours: BTreeMap<RobotId, NeighbourEntry>,
+    /// Each neighbour's latest alignments (`[matcher.relay]`): hints, not kept in snapshots (they
+    /// come again within `comms.alignments_refresh_s`).
+    hints: BTreeMap<RobotId, Vec<(RobotId, Pose3)>>,
 }
 
 impl Matcher {
@@ -88,6 +93,7 @@ impl Matcher {
             map: Arc::default(),
             places: EvenPlaces::default(),
             neighbours: BTreeMap::new(),
+            hints: BTreeMap::new(),
         }
     }
 
@@ -103,6 +109,7 @@ impl Matcher {
                 first_aligned: e.first_aligned,
                 refuted: e.refuted.clone(),
                 closures: e.closures.clone(),
+                aligned_via: e.aligned_via,
             })
             .collect();
         MatcherState { neighbours }
@@ -118,6 +125,7 @@ impl Matcher {
             entry.first_aligned = memory.first_aligned;
             entry.refuted = memory.refuted;
             entry.closures = memory.closures;
+            entry.aligned_via = memory.aligned_via;
             entry.match_again = true;
         }
         self
@@ -140,6 +148,9 @@ impl Matcher {
             round_incomplete: false,
             match_again: false,
             closures: ClosureMemory::default(),
+            round_via: None,
+            aligned_via: None,
+            refuted_hints: Vec::new(),
         })
     }
 
@@ -384,6 +395,7 @@ impl Handler<GetNeighbours> for Matcher {
                     local_from_remote: e.protocol.as_ref().and_then(|p| p.local_from_remote().copied()),
                     first_aligned: e.first_aligned,
                     closures: e.closures.counts,
+                    aligned_via: e.aligned_via,
                     keyframes_held: e.keyframes.len(),
                     objects_revision: e.objects.as_ref().map(|d| d.revision),
                 })

@@ -18,6 +18,8 @@ pub struct NeighbourStatus {
     pub first_aligned: Option<f64>,
     /// Closure rounds since: how many, what they gave.
     pub closures: ClosureCounts,
+    /// When the first alignment came from a relayed one (`[matcher.relay]`): whose.
+    pub aligned_via: Option<RobotId>,
     pub keyframes_held: usize,
     /// Revision of the neighbour's object data held (`None`: none received).
     pub objects_revision: Option<u32>,
@@ -53,6 +55,14 @@ pub(super) struct NeighbourEntry {
     pub(super) match_again: bool,
     /// What closure rounds have done with this neighbour.
     pub(super) closures: ClosureMemory,
+    /// The current alignment round started from a neighbour's alignment: whose.
+    pub(super) round_via: Option<RobotId>,
+    /// The first alignment came from a neighbour's: whose.
+    pub(super) aligned_via: Option<RobotId>,
+    /// Hints whose rounds were refuted, and when: not tried again within `REFUTED_FOR_S`. (A
+    /// refuted graph match does not bar a hint: a neighbour that registered the same transform
+    /// from its side is new evidence.)
+    pub(super) refuted_hints: Vec<(Pose3, Stamp)>,
 }
 
 /// Closure rounds with one aligned neighbour so far (`matcher.closures`).
@@ -96,6 +106,7 @@ pub struct NeighbourMemory {
     pub first_aligned: Option<f64>,
     pub refuted: Vec<(Pose3, Stamp)>,
     pub closures: ClosureMemory,
+    pub aligned_via: Option<RobotId>,
 }
 
 /// Drops held neighbour keyframes outside `round`, lowest ids first, until at most `cap` are

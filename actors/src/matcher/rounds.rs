@@ -168,9 +168,10 @@ impl Matcher {
         let targets = local_ids.iter().filter_map(|id| Some((*id, local_view(self.map.keyframes.get(id)?)))).collect();
         let round = entry.keyframes.iter().filter(|(id, _)| entry.round.contains(id)).map(|(_, k)| remote_view(k));
         let registered = register_round(&targets, round, &local_from_remote, &self.round_config(&keyframe_icp));
+        let min_factors = self.min_round_factors(robot);
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
         let factors = registered.factors.len();
-        match judge_round(&registered, self.config.min_keyframe_factors, entry.round_incomplete, &local_from_remote) {
+        match judge_round(&registered, min_factors, entry.round_incomplete, &local_from_remote) {
             RoundVerdict::Incomplete => {
                 // Keyframes were lost on the way: too few to judge the match, which is tried again.
                 tracing::info!(robot = %self.robot, neighbour = %robot, factors, "alignment round incomplete");
@@ -181,7 +182,13 @@ impl Matcher {
             }
             RoundVerdict::Refuted => {
                 tracing::info!(robot = %self.robot, neighbour = %robot, factors, "object match refuted");
-                entry.refuted.push((n.state.local_from_remote, now));
+                match entry.round_via {
+                    None => entry.refuted.push((n.state.local_from_remote, now)),
+                    Some(_) => {
+                        entry.refuted_hints.retain(|(_, t)| now - t < REFUTED_FOR_S);
+                        entry.refuted_hints.push((n.state.local_from_remote, now));
+                    }
+                }
                 if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
                     entry.protocol = Some(n.refuted(now).into());
                 }
@@ -189,7 +196,10 @@ impl Matcher {
             RoundVerdict::Aligned(local_from_remote) => {
                 if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
                     entry.protocol = Some(n.aligned(local_from_remote, now).into());
-                    entry.first_aligned.get_or_insert(now);
+                    if entry.first_aligned.is_none() {
+                        entry.first_aligned = Some(now);
+                        entry.aligned_via = entry.round_via;
+                    }
                 }
                 // The first round's ground counts as covered for closure rounds.
                 let at: Vec<Point3<f64>> = n
@@ -216,6 +226,7 @@ impl Matcher {
                         factors: registered.factors,
                     });
                 }
+                self.share_alignments();
             }
         }
     }

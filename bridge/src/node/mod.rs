@@ -303,6 +303,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                     "robot": n.robot.0,
                     "state": n.state,
                     "first_aligned": n.first_aligned,
+                    "aligned_via": n.aligned_via.map(|r| r.0),
                     "closures": n.closures,
                     "local_from_remote": n.local_from_remote.map(|p| {
                         let (t, q) = (p.translation.vector, p.rotation.quaternion());

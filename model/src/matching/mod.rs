@@ -18,6 +18,7 @@ mod outcome;
 mod overlap;
 pub mod paper_baseline;
 pub mod place_candidates;
+pub mod relay;
 pub mod scan_context;
 pub mod significance;
 mod spectral;

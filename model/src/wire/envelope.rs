@@ -137,6 +137,7 @@ fn check_limits(message: &Message, limits: &WireLimits) -> Result<(), WireError>
         Message::KeyframeRefusal(m) => ("keyframe ids", m.keyframes.len(), limits.max_ids),
         Message::KeyframeResponse(_) => ("responses", 1, 1),
         Message::KeyframeDescriptors(m) => ("descriptors", m.descriptors.len(), limits.max_ids),
+        Message::Alignments(m) => ("alignments", m.alignments.len(), limits.max_ids),
     };
     if count > max {
         return Err(WireError::Limit { kind, what, count, max });

@@ -7,6 +7,7 @@
 //! | `KeyframeRequest` / `Response` | for keyframes not yet held | compressed cloud, pose, covariance |
 //! | `KeyframeRefusal` | a request the sender cannot serve now | the keyframe ids and why |
 //! | `KeyframeDescriptors` | new keyframes, with `matcher.association = "scan_context"` only | Scan Context descriptors and poses (the evaluation's Swarm-SC baseline) |
+//! | `Alignments` | an alignment made or moved, rate-limited | the sender's transform to each neighbour it is aligned with (hints, checked by the receiver) |
 //!
 //! Centroids travel as integers in units of `resolution_mm` (zigzag varints under postcard: two
 //! bytes per axis within ±163 m at 2 cm), sizes as bytes in 5 cm steps: an object costs 9–13
@@ -14,7 +15,7 @@
 
 use crate::geometry::Pose3;
 use crate::matching::scan_context::ScanContext;
-use crate::scene_graph::{KeyframeId, LabelId, ObjectId};
+use crate::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId};
 use nalgebra::{Matrix6, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -28,10 +29,11 @@ pub enum MessageKind {
     KeyframeResponse,
     KeyframeRefusal,
     KeyframeDescriptors,
+    Alignments,
 }
 
 impl MessageKind {
-    pub const ALL: [MessageKind; 7] = [
+    pub const ALL: [MessageKind; 8] = [
         MessageKind::ObjectData,
         MessageKind::ObjectCloudRequest,
         MessageKind::ObjectCloudResponse,
@@ -39,6 +41,7 @@ impl MessageKind {
         MessageKind::KeyframeResponse,
         MessageKind::KeyframeRefusal,
         MessageKind::KeyframeDescriptors,
+        MessageKind::Alignments,
     ];
 
     pub fn name(self) -> &'static str {
@@ -50,6 +53,7 @@ impl MessageKind {
             MessageKind::KeyframeResponse => "KeyframeResponse",
             MessageKind::KeyframeRefusal => "KeyframeRefusal",
             MessageKind::KeyframeDescriptors => "KeyframeDescriptors",
+            MessageKind::Alignments => "Alignments",
         }
     }
 }
@@ -64,6 +68,7 @@ pub enum Message {
     KeyframeResponse(KeyframeResponse),
     KeyframeRefusal(KeyframeRefusal),
     KeyframeDescriptors(KeyframeDescriptors),
+    Alignments(Alignments),
 }
 
 impl Message {
@@ -76,6 +81,7 @@ impl Message {
             Message::KeyframeResponse(_) => MessageKind::KeyframeResponse,
             Message::KeyframeRefusal(_) => MessageKind::KeyframeRefusal,
             Message::KeyframeDescriptors(_) => MessageKind::KeyframeDescriptors,
+            Message::Alignments(_) => MessageKind::Alignments,
         }
     }
 }
@@ -234,6 +240,25 @@ impl WireDescriptor {
             cells: self.cells.iter().map(|&c| f32::from(c) * DESCRIPTOR_HEIGHT_STEP_M).collect(),
         })
     }
+}
+
+/// The sender's alignments: for each neighbour whose map it has placed in its own by its own
+/// registration, the transform from that neighbour's world into the sender's. A receiver takes
+/// them as hints only — inverted (the sender placed the receiver) or chained through its own
+/// alignment with the sender (the sender placed a third robot) — and registers before anything
+/// counts (`actors::matcher::relay`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Alignments {
+    pub alignments: Vec<WireAlignment>,
+}
+
+/// One of the sender's alignments.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireAlignment {
+    /// The neighbour placed.
+    pub robot: RobotId,
+    /// Its world in the sender's.
+    pub sender_from_robot: WirePose,
 }
 
 /// A pose as translation and unit quaternion (x, y, z, w).

@@ -52,6 +52,9 @@ pub struct AlignmentReport {
     /// Protocol state at the end.
     pub state: String,
     pub first_aligned_s: Option<f64>,
+    /// The first alignment started from this robot's alignment (`matcher.relay`), not from
+    /// object-graph matching.
+    pub aligned_via: Option<String>,
     pub translation_error_m: Option<f64>,
     /// estimate − truth of local_from_remote's translation, local world axes, m.
     pub translation_error_xyz_m: Option<[f64; 3]>,
@@ -340,6 +343,7 @@ pub fn compute(record: &RunRecord) -> Report {
                 remote: remote.name.clone(),
                 state: n.state.map_or("?".into(), |s| s.to_string()),
                 first_aligned_s: n.first_aligned,
+                aligned_via: n.aligned_via.and_then(|v| Some(record.robots.get(v.index()?)?.name.clone())),
                 translation_error_m: error.map(|e| e.translation_m),
                 translation_error_xyz_m: xyz,
                 start_frame_translation_error_m: start_error,

@@ -1,0 +1,92 @@
+//! Alignments shared and relayed (`[matcher.relay]`, `model::matching::relay`): every time an
+//! alignment is made or re-estimated, the Matcher hands all of them to Comms, which broadcasts
+//! them when they changed significantly; a neighbour's alignments are kept (the latest per
+//! neighbour) and give hints for a neighbour graph matching could not place. A hint only starts
+//! a round: the round's own registration decides, as it does for a graph match.
+
+use super::*;
+use sgm_model::matching::closure::ClosurePlan;
+use sgm_model::matching::relay::{hinted_round, hints_for};
+
+impl Matcher {
+    fn relaying(&self) -> bool {
+        self.config.relay.enabled && self.config.association == Association::Objects
+    }
+
+    /// Our alignments now (neighbour's world in ours), to Comms.
+    pub(super) fn share_alignments(&self) {
+        if !self.relaying() {
+            return;
+        }
+        if let Some(links) = &self.links {
+            links.share_alignments.do_send(ShareAlignments(self.aligned()));
+        }
+    }
+
+    fn aligned(&self) -> Vec<(RobotId, Pose3)> {
+        self.neighbours
+            .iter()
+            .filter_map(|(robot, e)| match &e.protocol {
+                Some(p @ Protocol::Aligned(_)) => Some((*robot, *p.local_from_remote()?)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Our registrations the current round with `robot` needs to align.
+    pub(super) fn min_round_factors(&self, robot: RobotId) -> usize {
+        match self.neighbours.get(&robot).and_then(|e| e.round_via) {
+            Some(via) if via == robot => self.config.relay.min_own_factors,
+            _ => self.config.min_keyframe_factors,
+        }
+    }
+
+    /// The first hint for `robot` (not near a hint refuted recently) that pairs at least
+    /// `min_matched_objects` objects on one patch: its transform, the pairs, and whose
+    /// alignment it came from.
+    pub(super) fn hinted(
+        &self,
+        robot: RobotId,
+        local: &[GraphObject],
+        remote: &[GraphObject],
+        now: Stamp,
+    ) -> Option<(Pose3, Vec<(ObjectId, ObjectId)>, Option<RobotId>)> {
+        if !self.relaying() {
+            return None;
+        }
+        let refuted = &self.neighbours.get(&robot)?.refuted_hints;
+        let ours: BTreeMap<RobotId, Pose3> = self.aligned().into_iter().collect();
+        let plan = ClosurePlan {
+            gate_m: self.config.relay.gate_m,
+            radius_m: self.config.closures.radius_m,
+            spacing_m: 0.0,
+            min_pairs: self.config.min_matched_objects.max(3),
+        };
+        hints_for(self.robot, robot, &ours, &self.hints)
+            .into_iter()
+            .filter(|hint| !refuted_recently(refuted, &hint.local_from_remote, now))
+            .find_map(|hint| {
+                let round = hinted_round(local, remote, &hint, &self.labels, &plan)?;
+                let pairs = round.iter().map(|p| (p.local, p.remote)).collect();
+                Some((hint.local_from_remote, pairs, Some(hint.via)))
+            })
+    }
+}
+
+impl Handler<NeighbourAlignments> for Matcher {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourAlignments, ctx: &mut Context<Self>) {
+        contained(ctx, "matcher", || {
+            if !self.relaying() {
+                return;
+            }
+            // The latest per neighbour: what it holds now replaces what it held (bounded by the
+            // envelope's `limits.max_ids`).
+            self.hints.insert(msg.robot, msg.alignments);
+            let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
+            for robot in robots {
+                self.try_match(robot);
+            }
+        });
+    }
+}

@@ -1,0 +1,150 @@
+//! Alignments relayed by neighbours (beyond the paper, which aligns each pair on its own). A
+//! robot s that placed robot j's world in its own tells the team T_{s←j} (the `Alignments`
+//! message). Robot r turns that into hints for its own transform to a neighbour it has not
+//! placed yet:
+//!
+//! ```text
+//! direct   (j = r):  T_{r←s} = T_{s←r}⁻¹
+//! relayed  (j ≠ r):  T_{r←j} = T_{r←s} · T_{s←j}     T_{r←s}: our own alignment with s,
+//!                                                    else s's T_{s←r}⁻¹ (a direct hint)
+//! ```
+//!
+//! A hint is never taken as it comes: it only replaces graph matching as the first estimate. The
+//! objects are associated through it ([`hinted_round`]: mutual nearest of similar label within
+//! a gate, the best-supported 15 m patch, as a closure round plans) and the rest of the round is
+//! the receiver's own: object-cloud ICP, keyframe registration, the structure check and the
+//! round's verdict (`alignment::judge_round`). A wrong hint is refuted like a wrong match.
+//!
+//! What this buys: two robots whose common objects are too few, or too alike, for graph
+//! matching to be significant still align when either of them — or a third robot that placed
+//! both — did; one good encounter spreads through the team.
+
+use super::closure::{next_round, pairs_through, ClosurePair, ClosurePlan};
+use super::{GraphObject, LabelSimilarity};
+use crate::geometry::Pose3;
+use crate::scene_graph::RobotId;
+use std::collections::BTreeMap;
+
+/// A first estimate of `local_from_remote` that a neighbour's alignment implies.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hint {
+    /// The robot whose alignment it came from.
+    pub via: RobotId,
+    pub local_from_remote: Pose3,
+}
+
+/// Every hint for our transform to `remote`, direct ones first, then relayed ones in the
+/// relaying robot's id order. `ours`: our own alignments (remote world in ours); `theirs`: each
+/// neighbour's latest alignments (another robot's world in the neighbour's).
+pub fn hints_for(
+    me: RobotId,
+    remote: RobotId,
+    ours: &BTreeMap<RobotId, Pose3>,
+    theirs: &BTreeMap<RobotId, Vec<(RobotId, Pose3)>>,
+) -> Vec<Hint> {
+    if remote == me {
+        return Vec::new();
+    }
+    let placed_by = |s: RobotId, j: RobotId| theirs.get(&s)?.iter().find(|(r, _)| *r == j).map(|(_, t)| *t);
+    let mut hints: Vec<Hint> = placed_by(remote, me)
+        .map(|remote_from_me| Hint { via: remote, local_from_remote: remote_from_me.inverse() })
+        .into_iter()
+        .collect();
+    for &sender in theirs.keys().filter(|s| **s != remote && **s != me) {
+        let Some(sender_from_remote) = placed_by(sender, remote) else { continue };
+        let me_from_sender = ours.get(&sender).copied().or_else(|| placed_by(sender, me).map(|t| t.inverse()));
+        if let Some(me_from_sender) = me_from_sender {
+            hints.push(Hint { via: sender, local_from_remote: me_from_sender * sender_from_remote });
+        }
+    }
+    hints
+}
+
+/// The object pairs a hint gives for a first round: those within `gate_m` of each other through
+/// it, the best-supported patch of them (`radius_m` around its seed), when it has `min_pairs`.
+pub fn hinted_round(
+    local: &[GraphObject],
+    remote: &[GraphObject],
+    hint: &Hint,
+    labels: &LabelSimilarity,
+    plan: &ClosurePlan,
+) -> Option<Vec<ClosurePair>> {
+    let pairs = pairs_through(local, remote, &hint.local_from_remote, labels, plan.gate_m);
+    next_round(&pairs, &[], plan).map(|(_, round)| round)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::pose_from_yaw_translation;
+    use crate::scene_graph::{LabelId, ObjectId};
+    use nalgebra::{Point3, Vector3};
+
+    fn pose(yaw: f64, x: f64, y: f64) -> Pose3 {
+        pose_from_yaw_translation(yaw, Vector3::new(x, y, 0.0))
+    }
+
+    fn close(a: &Pose3, b: &Pose3) -> bool {
+        (a.translation.vector - b.translation.vector).norm() < 1e-9 && a.rotation.angle_to(&b.rotation) < 1e-9
+    }
+
+    /// Three worlds placed in a common frame W: each transform is W_a⁻¹ · W_b, so any chain of
+    /// hints must give it back exactly.
+    #[test]
+    fn direct_and_relayed_hints_compose_to_the_true_transform() {
+        let (me, two, three) = (RobotId(1), RobotId(2), RobotId(3));
+        let world: BTreeMap<RobotId, Pose3> =
+            [(me, pose(0.3, 4.0, -2.0)), (two, pose(-1.1, 20.0, 7.0)), (three, pose(2.0, -9.0, 1.0))].into();
+        let t = |a: RobotId, b: RobotId| world[&a].inverse() * world[&b];
+        // Robot 2 placed us and robot 3; robot 3 placed robot 2.
+        let theirs: BTreeMap<RobotId, Vec<(RobotId, Pose3)>> =
+            [(two, vec![(me, t(two, me)), (three, t(two, three))]), (three, vec![(two, t(three, two))])].into();
+        let to_two = hints_for(me, two, &BTreeMap::new(), &theirs);
+        assert_eq!(to_two.len(), 1, "robot 3 has not placed us: nothing to chain through it");
+        assert_eq!(to_two[0].via, two);
+        assert!(close(&to_two[0].local_from_remote, &t(me, two)));
+        // To robot 3: through robot 2's placement of us (inverted), then of robot 3.
+        let to_three = hints_for(me, three, &BTreeMap::new(), &theirs);
+        assert_eq!(to_three.len(), 1);
+        assert_eq!(to_three[0].via, two);
+        assert!(close(&to_three[0].local_from_remote, &t(me, three)));
+        // Our own alignment with robot 2 is used before its placement of us.
+        let ours: BTreeMap<RobotId, Pose3> = [(two, pose(0.0, 1.0, 0.0) * t(me, two))].into();
+        let through_ours = hints_for(me, three, &ours, &theirs);
+        assert!(close(&through_ours[0].local_from_remote, &(ours[&two] * t(two, three))));
+        // Nobody placed robot 4, and a robot's own claims about itself are not hints.
+        assert!(hints_for(me, RobotId(4), &ours, &theirs).is_empty());
+        assert!(hints_for(two, two, &ours, &theirs).is_empty());
+    }
+
+    #[test]
+    fn a_hint_gives_a_round_only_where_enough_objects_agree_through_it() {
+        let labels = LabelSimilarity::hard(3);
+        let object = |id: u32, label: u16, x: f64, y: f64| GraphObject {
+            id: ObjectId(id),
+            label: LabelId(label),
+            centroid: Point3::new(x, y, 0.5),
+            size: None,
+        };
+        let local_from_remote = pose(0.5, 3.0, -4.0);
+        let local: Vec<GraphObject> =
+            (0..6).map(|k| object(k, (k % 3) as u16, 2.0 * k as f64, (k * k) as f64 % 7.0)).collect();
+        let remote: Vec<GraphObject> = local
+            .iter()
+            .map(|o| GraphObject {
+                id: ObjectId(o.id.0 + 100),
+                centroid: local_from_remote.inverse() * o.centroid,
+                ..o.clone()
+            })
+            .collect();
+        let plan = ClosurePlan { gate_m: 1.0, radius_m: 15.0, spacing_m: 0.0, min_pairs: 4 };
+        let right = Hint { via: RobotId(2), local_from_remote };
+        let round = hinted_round(&local, &remote, &right, &labels, &plan).unwrap();
+        assert_eq!(round.len(), 6);
+        assert!(round.iter().all(|p| p.remote.0 == p.local.0 + 100));
+        let wrong = Hint { via: RobotId(2), local_from_remote: pose(0.5, 13.0, -4.0) };
+        assert!(hinted_round(&local, &remote, &wrong, &labels, &plan).is_none());
+        let few = ClosurePlan { min_pairs: 7, ..plan };
+        assert!(hinted_round(&local, &remote, &right, &labels, &few).is_none());
+    }
+}
