@@ -153,6 +153,47 @@ async fn three_robots_align_pairwise() {
     assert_aligned(&robots, &all);
 }
 
+/// A robot whose graph matching never answers (`matching.min_matches` beyond any overlap) still
+/// aligns with both neighbours from their alignments, by its own registration, and says whose;
+/// the others align by graph matching as before. With `matcher.relay` off it stays unaligned.
+#[actix_rt::test]
+async fn a_robot_that_cannot_match_graphs_aligns_from_its_neighbours_alignments() {
+    let a = vec![Point3::new(-25.0, -10.0, 0.0), Point3::new(25.0, -10.0, 0.0)];
+    let b = vec![Point3::new(20.0, 15.0, 0.0), Point3::new(-20.0, 15.0, 0.0), Point3::new(-20.0, -15.0, 0.0)];
+    let c = vec![Point3::new(0.0, -25.0, 0.0), Point3::new(0.0, 25.0, 0.0)];
+    let paths = || {
+        vec![
+            (a.clone(), Pose3::identity()),
+            (b.clone(), pose_from_yaw_translation(0.8, Vector3::new(12.0, -7.0, 0.0))),
+            (c.clone(), pose_from_yaw_translation(-2.0, Vector3::new(-5.0, 20.0, 0.0))),
+        ]
+    };
+    let blind = |relay: bool| {
+        move |c: &mut RobotConfig| {
+            c.matcher.relay.enabled = relay;
+            if c.robot.id == 3 {
+                c.matcher.matching.min_matches = 1000;
+            }
+        }
+    };
+    let robots = run_team_with(paths(), 45, None, blind(true)).await;
+    let mut all = Vec::new();
+    for r in &robots {
+        all.push(r.handle.matcher.send(GetNeighbours).await.unwrap());
+    }
+    assert_aligned(&robots, &all);
+    for n in &all[2] {
+        assert!(n.aligned_via.is_some(), "robot 3 can only have been told: {n:?}");
+    }
+    let sent = robots[0].handle.comms.send(GetCommsStatus).await.unwrap().sent;
+    assert!(sent.get(MessageKind::Alignments).count > 0);
+    let unrelayed = run_team_with(paths(), 45, None, blind(false)).await;
+    let alone = unrelayed[2].handle.matcher.send(GetNeighbours).await.unwrap();
+    assert!(alone.iter().all(|n| n.state != Some(ProtocolStage::Aligned)), "{alone:?}");
+    let sent = unrelayed[0].handle.comms.send(GetCommsStatus).await.unwrap().sent;
+    assert_eq!(sent.get(MessageKind::Alignments).count, 0);
+}
+
 /// Once aligned, the robots keep closing over ground no round covered: closure rounds run, each
 /// neighbour keyframe is asked for once, their factors reach the pose graph and the transform
 /// the Matcher reports is the pose graph's. With closures off, the first round's factors are

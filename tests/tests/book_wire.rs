@@ -14,8 +14,9 @@ use sgm_actors::protocol::RetryConfig;
 use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId};
 use sgm_model::wire::cloud_codec::{self, CodecError};
 use sgm_model::wire::messages::{
-    KeyframeDescriptors, KeyframeRefusal, KeyframeRefusalReason, KeyframeRequest, KeyframeResponse, ObjectCloudRequest,
-    ObjectCloudResponse, ObjectData, WireDescriptor, WireObject, WirePose, DESCRIPTOR_HEIGHT_STEP_M, SIZE_STEP_M,
+    Alignments, KeyframeDescriptors, KeyframeRefusal, KeyframeRefusalReason, KeyframeRequest, KeyframeResponse,
+    ObjectCloudRequest, ObjectCloudResponse, ObjectData, WireAlignment, WireDescriptor, WireObject, WirePose,
+    DESCRIPTOR_HEIGHT_STEP_M, SIZE_STEP_M,
 };
 use sgm_model::wire::team_key::{KDF_LANES, KDF_MEMORY_KIB, KDF_PASSES};
 use sgm_model::wire::{
@@ -153,6 +154,7 @@ fn sample(kind: MessageKind) -> Message {
             Message::KeyframeRefusal(KeyframeRefusal { keyframes: vec![], reason: KeyframeRefusalReason::Unknown })
         }
         MessageKind::KeyframeDescriptors => Message::KeyframeDescriptors(KeyframeDescriptors { descriptors: vec![] }),
+        MessageKind::Alignments => Message::Alignments(Alignments { alignments: vec![] }),
     }
 }
 
@@ -181,6 +183,15 @@ fn largest(kind: MessageKind, limits: &WireLimits) -> Option<Envelope> {
         MessageKind::KeyframeRefusal => Message::KeyframeRefusal(KeyframeRefusal {
             keyframes: ids(limits.max_ids),
             reason: KeyframeRefusalReason::Busy,
+        }),
+        MessageKind::Alignments => Message::Alignments(Alignments {
+            alignments: vec![
+                WireAlignment {
+                    robot: RobotId(u16::MAX),
+                    sender_from_robot: WirePose { translation: [1.0; 3], rotation: [0.0, 0.0, 0.0, 1.0] }
+                };
+                limits.max_ids
+            ],
         }),
         MessageKind::ObjectCloudResponse | MessageKind::KeyframeResponse | MessageKind::KeyframeDescriptors => {
             return None
