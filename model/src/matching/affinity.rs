@@ -85,7 +85,7 @@ pub fn build(
         params.max_neighbours,
     );
     // Each remote object's neighbours split by label bit, each part by distance: a window only
-    // visits the labels its local neighbour may be.
+    // visits the labels its local neighbour may be (found through `group_of`, in group order).
     let remote_neighbours: Vec<LabelGroups> =
         neighbour_lists(remote, params.max_edge_length_m + params.edge_tolerance_m, None, |n| candidate_remote[n])
             .into_iter()
@@ -101,6 +101,12 @@ pub fn build(
                 groups
             })
             .collect();
+
+    // Per remote object, its groups' label bits and bit → group index.
+    let group_bits: Vec<u64> =
+        remote_neighbours.iter().map(|groups| groups.iter().fold(0u64, |m, g| m | (1u64 << g.0))).collect();
+    let mut group_of = [0u8; 64];
+    let mut visit: Vec<usize> = Vec::new();
 
     // Per candidate a and local neighbour j, the remote edges (j, n) in the window are kept up
     // to the K-th smallest gap |w_ij − w_mn| (all of them when there are at most K)...
@@ -119,6 +125,9 @@ pub fn build(
         out.values.push(a.label_similarity * a.label_similarity);
         gaps.push(0.0);
         let groups = &remote_neighbours[a.remote as usize];
+        for (g, (bit, _)) in groups.iter().enumerate() {
+            group_of[*bit as usize] = g as u8;
+        }
         // Local neighbours come by increasing w_ij, so each window start only moves forward.
         starts.clear();
         starts.resize(groups.len(), 0);
@@ -126,10 +135,15 @@ pub fn build(
             let row = &index[j as usize * nr..(j as usize + 1) * nr];
             let mask = local_masks[j as usize];
             window.clear();
-            for ((bit, sorted), lo) in groups.iter().zip(starts.iter_mut()) {
-                if mask & (1u64 << bit) == 0 {
-                    continue;
-                }
+            visit.clear();
+            let mut wanted = mask & group_bits[a.remote as usize];
+            while wanted != 0 {
+                visit.push(usize::from(group_of[wanted.trailing_zeros() as usize]));
+                wanted &= wanted - 1;
+            }
+            visit.sort_unstable();
+            for &g in &visit {
+                let (sorted, lo) = (&groups[g].1, &mut starts[g]);
                 while *lo < sorted.len() && sorted[*lo].0 < w_ij - params.edge_tolerance_m {
                     *lo += 1;
                 }
