@@ -347,6 +347,7 @@ mod tests {
                 first_aligned: None,
                 refuted: Vec::new(),
                 closures: Default::default(),
+                aligned_via: None,
             }],
         };
         let mut comms = CommsState::default();

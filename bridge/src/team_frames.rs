@@ -102,6 +102,7 @@ mod tests {
             local_from_remote: Some(Pose3::translation(x, 0.0, 0.0)),
             first_aligned: Some(1.0),
             closures: Default::default(),
+            aligned_via: None,
             keyframes_held: 0,
             objects_revision: None,
         }
