@@ -54,6 +54,9 @@ pub struct MapSummary {
     pub objects: Vec<MapObject>,
     /// What the map's cloud store holds (`tracker.cloud_store`).
     pub clouds: CloudStoreStats,
+    /// Objects found moving (`tracker.tracking.moving_m`): never confirmed, so neither shared
+    /// nor matched.
+    pub moving_objects: usize,
 }
 
 /// One object of the map, in the world frame.
@@ -168,8 +171,14 @@ impl Tracker {
             labels: &scan.labels,
             candidates: &scan.candidates,
         };
+        let moving_before = self.map.objects.moving_count();
         let added = self.map.add_keyframe(input, &self.classes, &self.config)?;
         let id = added.keyframe.id;
+        let moving = self.map.objects.moving_count();
+        if moving > moving_before {
+            tracing::info!(robot = %self.robot, keyframe = id.0, moving,
+                "object found moving: kept out of the shared map (tracker.tracking.moving_m)");
+        }
         if let Some(e) = &added.refused_loop {
             tracing::warn!(robot = %self.robot, keyframe = id.0, "loop closure not added: {e}");
         }
@@ -347,6 +356,7 @@ impl Handler<GetMapSummary> for Tracker {
             keyframes: graph.keyframes().cloned().collect(),
             objects,
             clouds: graph.cloud_stats(),
+            moving_objects: self.map.objects.moving_count(),
         })
     }
 }

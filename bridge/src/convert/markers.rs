@@ -121,6 +121,7 @@ mod tests {
                 confirmed: true,
             }],
             clouds: Default::default(),
+            moving_objects: 0,
         };
         let header = std_msgs::Header { frame_id: "alpha/odom".into(), ..Default::default() };
         let array = map_markers(&header, &map, &classes);

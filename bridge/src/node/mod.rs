@@ -286,6 +286,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 "stamp": handle.clock.now(),
                 "keyframes": map.keyframes.len(),
                 "objects": map.objects.len(),
+                "moving_objects": map.moving_objects,
                 "accepted": InputCounts::snapshot(&side.counts.accepted),
                 "refused": InputCounts::snapshot(&side.counts.refused),
                 "sync": sync_counts,

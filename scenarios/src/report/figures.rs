@@ -26,6 +26,8 @@ pub struct RobotReport {
     /// Objects in the map (confirmed or not).
     pub objects: usize,
     pub confirmed_objects: usize,
+    /// Objects found moving (`tracker.tracking.moving_m`): kept out of the shared map.
+    pub moving_objects: usize,
     /// Confirmed objects whose class has a world object within 2 m (the robot's start frame
     /// placed on the truth), counted once per world object. None when the world is unknown
     /// (a replay).
@@ -315,6 +317,7 @@ pub fn compute(record: &RunRecord) -> Report {
                 distance_m,
                 frames: truth.frames,
                 clouds: map.map(|m| m.clouds).unwrap_or_default(),
+                moving_objects: map.map_or(0, |m| m.moving_objects),
                 deskew: record.deskew.get(k).copied().flatten().unwrap_or_default(),
             }
         })
