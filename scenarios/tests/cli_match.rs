@@ -62,6 +62,26 @@ fn good_input_prints_transform_and_matches() {
     assert!(v["time_ms"].as_f64().unwrap() >= 0.0);
 }
 
+/// A reader that closes the pipe before the answer is written (`sgm match a b | head -c 0`):
+/// the rest is dropped quietly, with success, not a panic.
+#[test]
+fn a_closed_pipe_is_not_a_crash() {
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = good_pair(dir.path());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sgm"))
+        .args(["match", a.to_str().unwrap(), b.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+}
+
 #[test]
 fn weak_evidence_is_refused_with_a_reason() {
     let dir = tempfile::tempdir().unwrap();

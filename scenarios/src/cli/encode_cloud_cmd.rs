@@ -30,8 +30,11 @@ pub fn run(path: &Path, resolution_m: f64) -> ExitCode {
                 "bytes_per_point": encoded.bytes_per_point(),
                 "max_error": encoded.max_error_m,
             });
-            println!("{out}");
-            ExitCode::SUCCESS
+            if super::stdout::emit("encode-cloud", &out.to_string()) {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(2)
+            }
         }
         Err(message) => {
             eprintln!("sgm encode-cloud: {}: {message}", path.display());

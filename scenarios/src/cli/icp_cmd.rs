@@ -94,11 +94,12 @@ pub fn run(options: Options) -> ExitCode {
             let m = r.target_from_source.to_homogeneous();
             let rows: Vec<[f64; 4]> = (0..4).map(|i| [m[(i, 0)], m[(i, 1)], m[(i, 2)], m[(i, 3)]]).collect();
             let rmse = if r.rmse_m.is_finite() { json!(r.rmse_m) } else { json!(null) };
-            println!(
-                "{}",
-                json!({"converged": r.converged, "T": rows, "fitness": r.fitness, "rmse": rmse, "iterations": r.iterations, "time_ms": time_ms})
-            );
-            ExitCode::SUCCESS
+            let out = json!({"converged": r.converged, "T": rows, "fitness": r.fitness, "rmse": rmse, "iterations": r.iterations, "time_ms": time_ms});
+            if super::stdout::emit("icp", &out.to_string()) {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(2)
+            }
         }
         Err(e) => {
             eprintln!("sgm icp: {e}");

@@ -47,6 +47,9 @@ pub fn run(local: &Path, remote: &Path, config: Option<&Path>) -> ExitCode {
             "time_ms": time_ms,
         }),
     };
-    println!("{output}");
-    ExitCode::SUCCESS
+    if super::stdout::emit("match", &output.to_string()) {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(2)
+    }
 }

@@ -7,3 +7,4 @@ pub mod pcd_convert_cmd;
 pub mod replay_cmd;
 pub mod ros_cmd;
 pub mod run_cmd;
+pub mod stdout;

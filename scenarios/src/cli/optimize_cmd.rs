@@ -87,7 +87,7 @@ pub fn run(options: Options) -> ExitCode {
             return ExitCode::FAILURE;
         }
     }
-    if options.json {
+    let text = if options.json {
         let out = json!({
             "initial_error": summary.initial_error,
             "final_error": summary.final_error,
@@ -95,17 +95,25 @@ pub fn run(options: Options) -> ExitCode {
             "time_ms": time_ms,
             "rejected": rejected,
         });
-        println!("{out}");
+        out.to_string()
     } else {
-        println!("initial error {:.6}", summary.initial_error);
-        println!("final error   {:.6}", summary.final_error);
-        println!("iterations    {}{}", summary.iterations, if summary.converged { "" } else { " (not converged)" });
-        println!("time          {time_ms:.1} ms");
+        let mut text = format!(
+            "initial error {:.6}\nfinal error   {:.6}\niterations    {}{}\ntime          {time_ms:.1} ms",
+            summary.initial_error,
+            summary.final_error,
+            summary.iterations,
+            if summary.converged { "" } else { " (not converged)" }
+        );
         if !rejected.is_empty() {
-            println!("rejected      {} edges: {:?}", rejected.len(), rejected);
+            text.push_str(&format!("\nrejected      {} edges: {:?}", rejected.len(), rejected));
         }
+        text
+    };
+    if super::stdout::emit("optimize", &text) {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(2)
     }
-    ExitCode::SUCCESS
 }
 
 /// Writes to a temporary file beside `path`, then renames: a reader never sees half a file.
