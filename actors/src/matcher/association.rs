@@ -3,6 +3,7 @@
 //! `matcher.association = "scan_context"`, by Scan Context descriptors (the evaluation's
 //! Swarm-SC baseline).
 
+use super::relay::RoundStart;
 use super::*;
 
 /// A neighbour's object data as graph objects (its world).
@@ -48,7 +49,7 @@ impl Matcher {
             MatchOutcome::Aligned(alignment) if refuted_recently(&refuted, &alignment.local_from_remote, now) => None,
             MatchOutcome::Aligned(alignment) => {
                 let pairs: Vec<(ObjectId, ObjectId)> = alignment.matches.iter().map(|m| (m.local, m.remote)).collect();
-                Some((alignment.local_from_remote, pairs, None))
+                Some(RoundStart { local_from_remote: alignment.local_from_remote, pairs, via: None })
             }
             MatchOutcome::Refused(refusal) => {
                 tracing::debug!(robot = %self.robot, neighbour = %robot, reason = %refusal.reason, "object graphs not matched");
@@ -56,7 +57,7 @@ impl Matcher {
             }
         };
         // Graph matching found nothing to pursue: a neighbour's alignment may still place it.
-        let Some((local_from_remote, pairs, via)) =
+        let Some(RoundStart { local_from_remote, pairs, via }) =
             matched.or_else(|| self.hinted(robot, local.objects(), remote.objects(), now))
         else {
             return;

@@ -8,6 +8,14 @@ use super::*;
 use sgm_model::matching::closure::ClosurePlan;
 use sgm_model::matching::relay::{hinted_round, hints_for};
 
+/// Where an alignment round starts: the first estimate, the object pairs whose clouds are asked
+/// for, and whose alignment it came from (`None`: object-graph matching).
+pub(super) struct RoundStart {
+    pub(super) local_from_remote: Pose3,
+    pub(super) pairs: Vec<(ObjectId, ObjectId)>,
+    pub(super) via: Option<RobotId>,
+}
+
 impl Matcher {
     fn relaying(&self) -> bool {
         self.config.relay.enabled && self.config.association == Association::Objects
@@ -50,7 +58,7 @@ impl Matcher {
         local: &[GraphObject],
         remote: &[GraphObject],
         now: Stamp,
-    ) -> Option<(Pose3, Vec<(ObjectId, ObjectId)>, Option<RobotId>)> {
+    ) -> Option<RoundStart> {
         if !self.relaying() {
             return None;
         }
@@ -68,7 +76,7 @@ impl Matcher {
             .find_map(|hint| {
                 let round = hinted_round(local, remote, &hint, &self.labels, &plan)?;
                 let pairs = round.iter().map(|p| (p.local, p.remote)).collect();
-                Some((hint.local_from_remote, pairs, Some(hint.via)))
+                Some(RoundStart { local_from_remote: hint.local_from_remote, pairs, via: Some(hint.via) })
             })
     }
 }
