@@ -36,10 +36,13 @@ pub fn execute(options: Options) -> Result<bool> {
         }
         _ => bail!("give --bag FILE or --live"),
     };
-    if options.json {
-        println!("{}", serde_json::to_string_pretty(&report).context("the report as JSON")?);
+    let text = if options.json {
+        format!("{}\n", serde_json::to_string_pretty(&report).context("the report as JSON")?)
     } else {
-        print!("{}", report.text());
+        report.text()
+    };
+    if !super::stdout::emit_text("doctor", &text) {
+        bail!("the report could not be written");
     }
     Ok(report.verdict != Verdict::Fail)
 }

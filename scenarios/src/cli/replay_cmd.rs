@@ -8,6 +8,7 @@ use sgm_bridge::tf::mounts::MountSource;
 use sgm_scenarios::replay::replay_with;
 use sgm_scenarios::report;
 use sgm_scenarios::scenario::{RobotSpec, Scenario};
+use std::fmt::Write as _;
 use std::path::PathBuf;
 
 pub struct Options {
@@ -48,13 +49,14 @@ pub fn execute(options: Options) -> Result<()> {
     let bags = serde_json::to_string_pretty(&outcome.bags).context("bag statistics")?;
     std::fs::write(dir.join("bags.json"), bags)
         .with_context(|| format!("writing {}", dir.join("bags.json").display()))?;
-    print!("{}", summary(&report, &outcome.run.timing, &dir));
+    let mut text = summary(&report, &outcome.run.timing, &dir);
     if let Some(path) = &result_bag {
-        println!("result bag (RViz: bridge/ros/sgm/rviz/team.rviz): {}", path.display());
+        let _ = writeln!(text, "result bag (RViz: bridge/ros/sgm/rviz/team.rviz): {}", path.display());
     }
     for b in &outcome.bags {
         let refused: u64 = b.refused.values().sum();
-        println!(
+        let _ = writeln!(
+            text,
             "  {}: {} frames from {} ({} messages refused, {} clouds without odometry, {} without a label image)",
             b.robot,
             b.sync.frames,
@@ -66,7 +68,8 @@ pub fn execute(options: Options) -> Result<()> {
         let s = &b.sync;
         if s.compensated > 0 || s.unlabelled > 0 {
             let labelled = s.frames - s.unlabelled;
-            println!(
+            let _ = writeln!(
+ text,
                 "  {}: {} frames labelled by an image up to {} ms away ({} motion-compensated, mean skew {} ms), {} without labels",
                 b.robot,
                 labelled,
@@ -89,18 +92,22 @@ pub fn execute(options: Options) -> Result<()> {
                     }
                 })
                 .collect();
-            println!("  {}: mounts: {}", b.robot, mounts.join(", "));
+            let _ = writeln!(text, "  {}: mounts: {}", b.robot, mounts.join(", "));
         }
         for finding in &b.health {
-            println!("  {}: health: {}; likely cause: {}", b.robot, finding.detail, finding.likely_cause);
+            let _ = writeln!(text, "  {}: health: {}; likely cause: {}", b.robot, finding.detail, finding.likely_cause);
         }
         let t = &b.timeline;
         if t.restarts > 0 || t.outliers > 0 {
-            println!(
+            let _ = writeln!(
+                text,
                 "  {}: stamps: {} outliers dropped, the timeline restarted {} times (last jump {:?})",
                 b.robot, t.outliers, t.restarts, t.last_jump
             );
         }
+    }
+    if !super::stdout::emit_text("replay", &text) {
+        anyhow::bail!("the summary could not be written (the report is in {})", dir.display());
     }
     Ok(())
 }

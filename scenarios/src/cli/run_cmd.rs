@@ -9,6 +9,7 @@ use sgm_scenarios::record::Timing;
 use sgm_scenarios::report::{self, Report};
 use sgm_scenarios::runner::{run_with, RunOutputs};
 use sgm_scenarios::scenario::Scenario;
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 pub struct Options {
@@ -52,12 +53,15 @@ pub fn execute(options: Options) -> Result<()> {
     let outcome = system.block_on(run_with(&scenario, Some(&bar), outputs)).context("the run failed")?;
     bar.finish_and_clear();
     let report = report::write(&outcome, &dir).context("writing the report")?;
-    print!("{}", summary(&report, &outcome.timing, &dir));
+    let mut text = summary(&report, &outcome.timing, &dir);
     if let Some(bags) = &options.bag_out {
-        println!("bags: {}", bags.display());
+        let _ = writeln!(text, "bags: {}", bags.display());
     }
     if let Some(path) = &result_bag {
-        println!("result bag (RViz: bridge/ros/sgm/rviz/team.rviz): {}", path.display());
+        let _ = writeln!(text, "result bag (RViz: bridge/ros/sgm/rviz/team.rviz): {}", path.display());
+    }
+    if !super::stdout::emit_text("run", &text) {
+        anyhow::bail!("the summary could not be written (the report is in {})", dir.display());
     }
     Ok(())
 }
@@ -72,7 +76,6 @@ pub fn progress_bar(quiet: bool, template: &str) -> ProgressBar {
 }
 
 pub fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
-    use std::fmt::Write as _;
     let mut s = String::new();
     let m = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.2} m"));
     let _ = writeln!(
