@@ -70,14 +70,18 @@ impl Matcher {
             spacing_m: 0.0,
             min_pairs: self.config.min_matched_objects.max(3),
         };
-        hints_for(self.robot, robot, &ours, &self.hints)
-            .into_iter()
-            .filter(|hint| !refuted_recently(refuted, &hint.local_from_remote, now))
-            .find_map(|hint| {
-                let round = hinted_round(local, remote, &hint, &self.labels, &plan)?;
+        let hints = hints_for(self.robot, robot, &ours, &self.hints);
+        let start =
+            hints.iter().filter(|hint| !refuted_recently(refuted, &hint.local_from_remote, now)).find_map(|hint| {
+                let round = hinted_round(local, remote, hint, &self.labels, &plan)?;
                 let pairs = round.iter().map(|p| (p.local, p.remote)).collect();
                 Some(RoundStart { local_from_remote: hint.local_from_remote, pairs, via: Some(hint.via) })
-            })
+            });
+        if start.is_none() && !hints.is_empty() {
+            tracing::debug!(robot = %self.robot, neighbour = %robot, hints = hints.len(),
+                "relayed alignments start no round (too few objects pair through them, or refuted recently)");
+        }
+        start
     }
 }
 

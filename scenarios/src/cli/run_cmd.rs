@@ -114,10 +114,7 @@ pub fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
             a.remote,
             a.state,
             match (a.first_aligned_s, a.translation_error_m, a.rotation_error_deg) {
-                (Some(t), Some(e), Some(r)) => format!(
-                    " at {t:.0} s{}, error {e:.2} m / {r:.2}°",
-                    a.aligned_via.as_ref().map_or(String::new(), |v| format!(" (relayed by {v})"))
-                ),
+                (Some(t), Some(e), Some(r)) => format!(" at {t:.0} s{}, error {e:.2} m / {r:.2}°", a.relayed_note()),
                 _ => String::new(),
             },
             match (a.inter_robot_factors, a.inconsistent_factors) {

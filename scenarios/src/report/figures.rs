@@ -77,6 +77,13 @@ pub struct AlignmentReport {
     pub realigned: u32,
 }
 
+impl AlignmentReport {
+    /// " (relayed by NAME)" when the first alignment started from that robot's, else "".
+    pub fn relayed_note(&self) -> String {
+        self.aligned_via.as_ref().map_or(String::new(), |v| format!(" (relayed by {v})"))
+    }
+}
+
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct MessageRow {
     pub count: u64,

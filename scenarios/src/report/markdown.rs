@@ -163,10 +163,7 @@ pub fn render(report: &Report, timing: &Timing) -> String {
             a.local,
             a.remote,
             a.state,
-            a.first_aligned_s.map_or("—".into(), |t| format!(
-                "{t:.1}{}",
-                a.aligned_via.as_ref().map_or(String::new(), |v| format!(" (relayed by {v})"))
-            )),
+            a.first_aligned_s.map_or("—".into(), |t| format!("{t:.1}{}", a.relayed_note())),
             metres(a.translation_error_m),
             a.rotation_error_deg.map_or("—".into(), |v| format!("{v:.2}")),
             a.closures.rounds,
