@@ -14,6 +14,7 @@
 //! - [`perception`]: segmentation to objects, keyframes, the object tracker, ICP (§IV-A, §IV-E).
 //! - [`matching`]: object-graph matching and transform estimation (§IV-B, §IV-C, eqs. 5–8), and
 //!   the keyframe alignment that confirms it (§IV-D).
+//! - [`odometry`]: the LiDAR-inertial front end's parts (local map, adaptive threshold).
 //! - [`optim`]: the pose-graph solver on faer (§IV-F); [`wire`]: the radio protocol;
 //!   [`eval`]: metrics and the paper's synthetic matching protocol (§V-A); [`pcd`], [`snapshot`]:
 //!   file formats.
@@ -22,6 +23,7 @@
 pub mod eval;
 pub mod geometry;
 pub mod matching;
+pub mod odometry;
 pub mod optim;
 pub mod pcd;
 pub mod perception;

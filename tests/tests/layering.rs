@@ -13,7 +13,7 @@ const MODEL: Layers = &[
     &["spatial", "pcd", "snapshot"],
     &["scene_graph"],
     &["perception"],
-    &["matching", "optim"],
+    &["matching", "optim", "odometry"],
     &["wire", "eval"],
 ];
 
