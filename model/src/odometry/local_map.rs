@@ -183,6 +183,29 @@ impl LocalMap {
         best
     }
 
+    /// Up to `k` map points nearest to `p` within `radius` ≤ `voxel_m` (exact, as `nearest`),
+    /// nearest first; ties by the order of the search.
+    pub fn nearest_k(&self, p: &Point3<f64>, k: usize, radius: f64) -> Vec<Point3<f64>> {
+        let [x, y, z] = self.key(p);
+        let r2 = radius * radius;
+        let mut found: Vec<(f64, Point3<f64>)> = Vec::new();
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let Some(voxel) = self.voxels.get(&[x + dx, y + dy, z + dz]) else { continue };
+                    found.extend(voxel.points.iter().map(|q| ((q - p).norm_squared(), *q)).filter(|(d2, _)| *d2 <= r2));
+                }
+            }
+        }
+        found.sort_by(|a, b| a.0.total_cmp(&b.0));
+        found.into_iter().take(k).map(|(_, q)| q).collect()
+    }
+
+    /// The points of the voxel that holds `p` (empty when none).
+    pub fn voxel_points(&self, p: &Point3<f64>) -> &[Point3<f64>] {
+        self.voxels.get(&self.key(p)).map_or(&[], |v| &v.points[..])
+    }
+
     /// Every point, voxels in key order.
     pub fn points(&self) -> Vec<Point3<f64>> {
         let mut keys: Vec<&Key> = self.voxels.keys().collect();
@@ -281,6 +304,27 @@ mod tests {
             let found = m.nearest(&q, radius).map(|(_, d)| d);
             prop_assert_eq!(found.is_some(), brute.is_some());
             if let (Some(f), Some(b)) = (found, brute) {
+                prop_assert!((f - b).abs() < 1e-12);
+            }
+        }
+
+        /// So is the k-nearest search: the brute force's k nearest distances.
+        #[test]
+        fn nearest_k_within_a_voxel_side_is_exact(
+            cloud in prop::collection::vec((-3.0f64..3.0, -3.0f64..3.0, -1.0f64..1.0), 1..200),
+            query in (-3.0f64..3.0, -3.0f64..3.0, -1.0f64..1.0),
+            k in 1usize..8,
+        ) {
+            let mut m = map(LocalMapConfig { voxel_m: 1.0, max_points_per_voxel: 1000, ..Default::default() });
+            let points: Vec<Point3<f64>> = cloud.iter().map(|&(x, y, z)| Point3::new(x, y, z)).collect();
+            m.insert(&points, &Point3::origin());
+            let q = Point3::new(query.0, query.1, query.2);
+            let mut brute: Vec<f64> = m.points().iter().map(|p| (p - q).norm()).filter(|d| *d <= 1.0).collect();
+            brute.sort_by(f64::total_cmp);
+            brute.truncate(k);
+            let found: Vec<f64> = m.nearest_k(&q, k, 1.0).iter().map(|p| (p - q).norm()).collect();
+            prop_assert_eq!(found.len(), brute.len());
+            for (f, b) in found.iter().zip(&brute) {
                 prop_assert!((f - b).abs() < 1e-12);
             }
         }
