@@ -15,7 +15,7 @@
 //! - [`matching`]: object-graph matching and transform estimation (§IV-B, §IV-C, eqs. 5–8), and
 //!   the keyframe alignment that confirms it (§IV-D).
 //! - [`odometry`]: the LiDAR-inertial front end's parts (local map, adaptive threshold,
-//!   scan-to-map registration with a prior and degeneracy).
+//!   scan-to-map registration with a prior and degeneracy, IMU propagation).
 //! - [`optim`]: the pose-graph solver on faer (§IV-F); [`wire`]: the radio protocol;
 //!   [`eval`]: metrics and the paper's synthetic matching protocol (§V-A); [`pcd`], [`snapshot`]:
 //!   file formats.

@@ -9,12 +9,13 @@
 //!   f_k = R_kᵀ (a_k + g ẑ)                           (specific force: at rest it reads +g up)
 //!
 //! so that strapdown integration — R_{k+1} = R_k Exp(ω_k Δt), v_k = v_{k−1} + (R_k f_k − g ẑ) Δt,
-//! p_{k+1} = p_k + v_k Δt — gives back the truth exactly when the noise is off (the test).
+//! p_{k+1} = p_k + v_k Δt, the odometry's propagation (`sgm_model::odometry::propagation`) —
+//! gives back the truth exactly when the noise is off (the test).
 //! Measured: ω̃ = ω + b_g + n_g, f̃ = f + b_a + n_a, n ~ N(0, σ²·rate) per sample, and each
 //! bias steps by N(0, σ_b²·Δt) per sample.
 
 use crate::scenario::ImuSpec;
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use sgm_model::geometry::Pose3;
@@ -88,27 +89,6 @@ impl Imu {
     }
 }
 
-/// Strapdown integration of `samples` (consecutive, Δt apart) from the pose at the first one
-/// and the velocity over the interval before it; the pose after each sample's interval.
-pub fn integrate(
-    samples: &[ImuSample],
-    start: &Pose3,
-    velocity_before: Vector3<f64>,
-    dt: f64,
-    gravity_mps2: f64,
-) -> Vec<Pose3> {
-    let (mut rotation, mut position, mut velocity) = (start.rotation, start.translation.vector, velocity_before);
-    samples
-        .iter()
-        .map(|s| {
-            velocity += (rotation * s.specific_force - Vector3::z() * gravity_mps2) * dt;
-            position += velocity * dt;
-            rotation *= UnitQuaternion::from_scaled_axis(s.angular_velocity * dt);
-            Pose3::from_parts(position.into(), rotation)
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -118,6 +98,7 @@ mod tests {
     use crate::sim::trajectory::Route;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
+    use sgm_model::odometry::propagation::NavState;
     use std::sync::Arc;
 
     /// A legged robot walking a square on 10° hills: roll, pitch, bounce and turns.
@@ -151,12 +132,14 @@ mod tests {
         let start = truth(samples[0].stamp).expect("truth");
         let before = truth(samples[0].stamp - dt).expect("truth");
         let velocity = (start.translation.vector - before.translation.vector) / dt;
-        let poses = integrate(&samples, &start, velocity, dt, spec.gravity_mps2);
+        // Integrated by the odometry's own propagation (`sgm_model::odometry::propagation`).
+        let mut state = NavState { velocity, ..NavState::at_rest(start.rotation, start.translation.vector) };
         let mut worst = (0.0f64, 0.0f64);
-        for (s, integrated) in samples.iter().zip(&poses) {
+        for s in &samples {
+            state = state.propagated(s, dt, spec.gravity_mps2);
             let expected = truth(s.stamp + dt).expect("truth");
-            worst.0 = worst.0.max((integrated.translation.vector - expected.translation.vector).norm());
-            worst.1 = worst.1.max(integrated.rotation.angle_to(&expected.rotation));
+            worst.0 = worst.0.max((state.position - expected.translation.vector).norm());
+            worst.1 = worst.1.max(state.rotation.angle_to(&expected.rotation));
         }
         assert!(worst.0 < 1e-6 && worst.1 < 1e-9, "after 30 s: {worst:?}");
         // Standing still it reads gravity, up in the body.
