@@ -17,7 +17,8 @@ use nalgebra::{
 /// order (truncation ~θ⁶ < 1e-12); above it, directly (cancellation error < 1e-11).
 const SERIES_BELOW: f64 = 1e-4;
 
-fn hat(w: &Vector3<f64>) -> Matrix3<f64> {
+/// The cross-product matrix: hat(w) · x = w × x.
+pub fn hat(w: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -w.z, w.y, w.z, 0.0, -w.x, -w.y, w.x, 0.0)
 }
 

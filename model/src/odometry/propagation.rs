@@ -26,7 +26,7 @@
 //!
 //! F is checked against numeric differentiation of the propagation in the tests.
 
-use crate::geometry::lie::{se3_right_jacobian, Tangent3};
+use crate::geometry::lie::{hat, se3_right_jacobian, Tangent3};
 use crate::perception::imu::ImuSample;
 use nalgebra::{Matrix3, SMatrix, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -97,10 +97,6 @@ impl NavState {
             ..*self
         }
     }
-}
-
-fn hat(w: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -w.z, w.y, w.z, 0.0, -w.x, -w.y, w.x, 0.0)
 }
 
 /// SO(3) right Jacobian, the rotation block of SE(3)'s.
