@@ -255,10 +255,8 @@ mod tests {
     #[ignore = "known failure: the level shortcut on a gentle slope with a kerb (issue 31)"]
     fn a_kerb_on_a_gentle_slope_is_not_structure() {
         let tan = 0.444f64.to_radians().tan();
-        let world = SlopedWorld {
-            height: move |x: f64, y: f64| tan * x + if -y > 8.947 { 0.15 } else { 0.0 },
-            boxes: boxes(),
-        };
+        let world =
+            SlopedWorld { height: move |x: f64, y: f64| tan * x + if -y > 8.947 { 0.15 } else { 0.0 }, boxes: boxes() };
         let mut rng = ChaCha8Rng::seed_from_u64(0);
         let at = Vector3::new(0.0, 0.0, (world.height)(0.0, 0.0) + 0.5);
         let world_from_body = Pose3::from_parts(at.into(), nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7));
