@@ -36,7 +36,7 @@ pub type Matrix15 = SMatrix<f64, 15, 15>;
 
 /// Continuous noise densities of the IMU (a datasheet's or a Kalibr calibration's). Defaults:
 /// EuRoC's ADIS16448, as the simulator's.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ImuNoise {
     /// rad/s/√Hz. Default 1.6968e-4.
@@ -155,12 +155,19 @@ impl Propagator {
     /// One sample held for `dt` s. Non-finite samples and non-positive or non-finite `dt` are
     /// refused (false) and change nothing.
     pub fn propagate(&mut self, sample: &ImuSample, dt: f64) -> bool {
+        let noise = self.noise;
+        self.propagate_with(sample, dt, &noise)
+    }
+
+    /// As [`Self::propagate`], with the process noise of `noise` instead of the IMU's (a sample
+    /// held over a gap is less certain than one that was measured); gravity stays the IMU's.
+    pub fn propagate_with(&mut self, sample: &ImuSample, dt: f64, noise: &ImuNoise) -> bool {
         let finite = sample.angular_velocity.iter().chain(sample.specific_force.iter()).all(|v| v.is_finite());
         if !(finite && dt.is_finite() && dt > 0.0) {
             return false;
         }
         let f = transition(&self.state, sample, dt);
-        self.covariance = f * self.covariance * f.transpose() + process_noise(&self.noise, dt);
+        self.covariance = f * self.covariance * f.transpose() + process_noise(noise, dt);
         self.state = self.state.propagated(sample, dt, self.noise.gravity_mps2);
         true
     }

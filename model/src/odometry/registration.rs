@@ -109,6 +109,9 @@ pub struct Registration {
     /// Correspondences of the last pass.
     pub correspondences: usize,
     pub degeneracy: Degeneracy,
+    /// The scan term's Gauss–Newton Hessian Σ w JᵀJ of the last pass (left perturbation,
+    /// residuals in metres, no prior): divided by a residual's variance, the scan's information.
+    pub scan_hessian: Matrix6,
 }
 
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -228,6 +231,7 @@ pub fn register_scan(
         iterations,
         correspondences,
         degeneracy: Degeneracy { rotation_eigenvalues, translation_eigenvalues, weak_rotations, weak_translations },
+        scan_hessian: h_scan,
     })
 }
 

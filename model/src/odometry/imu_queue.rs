@@ -1,0 +1,368 @@
+//! The IMU's samples between scans: checked as they arrive, and turned into the piecewise-constant
+//! motion that propagation integrates (`propagation`).
+//!
+//! A sample (ω̃_k, f̃_k) holds from its stamp t_k to the next one's (the simulator's convention
+//! and a driver's: the rate measured at t_k is the rate until the next measurement). The motion
+//! from t₀ to t₁ is then a list of segments [s, e) each with the sample holding over it:
+//!
+//! ```text
+//! [t₀, t_{j+1}) with sample j (the last with t_j ≤ t₀), [t_{j+1}, t_{j+2}) with j+1, …, [t_i, t₁)
+//! ```
+//!
+//! A segment whose sample is older than `max_gap_s` at the segment's end is a *gap* (samples
+//! lost, or not yet arrived): the sample is still held (zero-order hold), but the caller
+//! propagates it with the larger noise of a coasting robot. Before any sample, the robot coasts
+//! at constant velocity (a sample that reads the state's own biases: ω = 0, f = Rᵀ g).
+//!
+//! Gravity at start (FAST-LIO2's static initialisation, §IV-B): the mean specific force f̄ over
+//! the first samples points up in the body, so roll φ = atan2(f̄_y, f̄_z) and pitch
+//! θ = atan2(−f̄_x, √(f̄_y² + f̄_z²)) level the odometry frame (yaw is free: it is set to 0).
+//! When the body was still (the samples' spread is small), the mean rate is the gyro's bias.
+
+use super::propagation::{ImuNoise, NavState};
+use crate::perception::imu::ImuSample;
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
+
+/// Samples kept waiting for their scan, at most (10 s at 1 kHz); beyond it the oldest go.
+pub const MAX_PENDING: usize = 10_000;
+
+/// What the IMU may read, and how long a sample may be held.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ImuLimits {
+    /// A rate this large on any axis is the gyro's full scale: saturated, rad/s. Default 34.9
+    /// (2000 °/s).
+    pub gyro_range_rad_s: f64,
+    /// A specific force this large on any axis is saturated, m/s². Default 156.9 (16 g).
+    pub accel_range_mps2: f64,
+    /// A sample held longer than this is a gap, s. Default 0.05 (a 200 Hz IMU missing 9).
+    pub max_gap_s: f64,
+}
+
+impl Default for ImuLimits {
+    fn default() -> Self {
+        Self { gyro_range_rad_s: 34.9, accel_range_mps2: 156.9, max_gap_s: 0.05 }
+    }
+}
+
+/// What became of the samples handed in, and of the time between them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ImuCounts {
+    pub kept: u64,
+    /// A NaN or infinite value: dropped.
+    pub non_finite: u64,
+    /// At or beyond the range on some axis: dropped (the sample before is held over it).
+    pub saturated: u64,
+    /// Not after the newest kept sample (time going backwards, or a repeat): dropped.
+    pub out_of_order: u64,
+    /// Dropped because more than [`MAX_PENDING`] waited for a scan.
+    pub overflow: u64,
+    /// Segments integrated across a gap (see the module notes).
+    pub gaps: u64,
+}
+
+/// One piece of the motion: the sample held over [start, end), `None` = constant velocity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Segment {
+    pub start: f64,
+    pub end: f64,
+    pub sample: Option<ImuSample>,
+    /// The sample is older than `max_gap_s` at `end`.
+    pub gap: bool,
+}
+
+/// The sample that leaves `state` moving as it is: no rotation, no acceleration.
+pub fn coasting_sample(state: &NavState, gravity_mps2: f64, stamp: f64) -> ImuSample {
+    ImuSample {
+        stamp,
+        angular_velocity: state.gyro_bias,
+        specific_force: state.rotation.inverse() * (Vector3::z() * gravity_mps2) + state.accel_bias,
+    }
+}
+
+/// Gravity and the gyro's bias from the first samples (module notes).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Level {
+    /// world_from_body rotation with roll and pitch from gravity, yaw 0.
+    pub rotation: UnitQuaternion<f64>,
+    /// The body did not move while they were taken.
+    pub still: bool,
+    /// The mean rate, when still.
+    pub gyro_bias: Option<Vector3<f64>>,
+    pub samples: usize,
+}
+
+/// Spread of the specific force's norm and largest mean rate below which the body was still.
+const STILL_FORCE_SPREAD_MPS2: f64 = 0.2;
+const STILL_RATE_RAD_S: f64 = 0.05;
+
+/// The samples between the state's time and the newest.
+#[derive(Clone, Debug, Default)]
+pub struct ImuQueue {
+    limits: ImuLimits,
+    /// The last sample at or before the state's time: it holds at that time.
+    holding: Option<ImuSample>,
+    /// The samples after it, in stamp order.
+    pending: VecDeque<ImuSample>,
+    newest: Option<f64>,
+    counts: ImuCounts,
+}
+
+impl ImuQueue {
+    pub fn new(limits: ImuLimits) -> Self {
+        Self { limits, ..Self::default() }
+    }
+
+    pub fn counts(&self) -> ImuCounts {
+        self.counts
+    }
+
+    /// Stamp of the newest sample kept.
+    pub fn newest(&self) -> Option<f64> {
+        self.newest
+    }
+
+    /// Keeps `sample` when it is finite, within range and after the newest (else counts why not).
+    pub fn push(&mut self, sample: &ImuSample) {
+        let values = || sample.angular_velocity.iter().chain(sample.specific_force.iter());
+        if !(sample.stamp.is_finite() && values().all(|v| v.is_finite())) {
+            self.counts.non_finite += 1;
+        } else if sample.angular_velocity.amax() >= self.limits.gyro_range_rad_s
+            || sample.specific_force.amax() >= self.limits.accel_range_mps2
+        {
+            self.counts.saturated += 1;
+        } else if self.newest.is_some_and(|t| sample.stamp <= t) {
+            self.counts.out_of_order += 1;
+        } else {
+            if self.pending.len() >= MAX_PENDING {
+                self.pending.pop_front();
+                self.counts.overflow += 1;
+            }
+            self.pending.push_back(*sample);
+            self.newest = Some(sample.stamp);
+            self.counts.kept += 1;
+        }
+    }
+
+    /// The segments from `from` to `to` (module notes); empty unless `to > from`.
+    pub fn segments(&self, from: f64, to: f64) -> Vec<Segment> {
+        let mut out = Vec::new();
+        if !(from.is_finite() && to.is_finite() && to > from) {
+            return out;
+        }
+        let mut held = self.holding;
+        let mut start = from;
+        for s in self.pending.iter() {
+            if s.stamp <= start {
+                held = Some(*s);
+                continue;
+            }
+            let end = s.stamp.min(to);
+            // Before the first sample the robot coasts; after it, the sample held.
+            out.push(self.segment(start, end, held));
+            start = end;
+            held = Some(*s);
+            if start >= to {
+                return out;
+            }
+        }
+        out.push(self.segment(start, to, held));
+        out
+    }
+
+    fn segment(&self, start: f64, end: f64, sample: Option<ImuSample>) -> Segment {
+        let gap = sample.is_none_or(|s| end - s.stamp > self.limits.max_gap_s);
+        Segment { start, end, sample, gap }
+    }
+
+    /// Forgets the samples before `time`, keeping the one that holds at it, and counts the gaps
+    /// of the motion up to it.
+    pub fn advance(&mut self, from: f64, time: f64) {
+        self.counts.gaps += self.segments(from, time).iter().filter(|s| s.gap).count() as u64;
+        while self.pending.front().is_some_and(|s| s.stamp <= time) {
+            self.holding = self.pending.pop_front();
+        }
+    }
+
+    /// Gravity from the samples of the last `window_s` up to `until`; none with fewer than
+    /// `min_samples`.
+    pub fn level(&self, until: f64, window_s: f64, min_samples: usize) -> Option<Level> {
+        let taken: Vec<&ImuSample> =
+            self.pending.iter().filter(|s| s.stamp <= until && s.stamp >= until - window_s).collect();
+        if taken.len() < min_samples.max(1) {
+            return None;
+        }
+        let n = taken.len() as f64;
+        let force = taken.iter().map(|s| s.specific_force).sum::<Vector3<f64>>() / n;
+        let rate = taken.iter().map(|s| s.angular_velocity).sum::<Vector3<f64>>() / n;
+        let mean_norm = taken.iter().map(|s| s.specific_force.norm()).sum::<f64>() / n;
+        let spread = (taken.iter().map(|s| (s.specific_force.norm() - mean_norm).powi(2)).sum::<f64>() / n).sqrt();
+        if force.norm() < 1e-6 {
+            return None;
+        }
+        let roll = force.y.atan2(force.z);
+        let pitch = (-force.x).atan2(force.y.hypot(force.z));
+        let still = spread < STILL_FORCE_SPREAD_MPS2 && rate.amax() < STILL_RATE_RAD_S;
+        Some(Level {
+            rotation: UnitQuaternion::from_euler_angles(roll, pitch, 0.0),
+            still,
+            gyro_bias: still.then_some(rate),
+            samples: taken.len(),
+        })
+    }
+}
+
+/// The predicted motion over a sweep, for deskewing: the state at the start of each segment.
+#[derive(Clone, Debug)]
+pub struct Track {
+    /// (segment, the state at its start), in time order.
+    knots: Vec<(Segment, NavState)>,
+    gravity_mps2: f64,
+}
+
+impl Track {
+    /// The states of `state` (at `from`) propagated over `segments`, without covariance.
+    pub fn new(state: &NavState, segments: &[Segment], noise: &ImuNoise) -> Self {
+        let g = noise.gravity_mps2;
+        let mut knots = Vec::with_capacity(segments.len());
+        let mut now = *state;
+        for segment in segments {
+            knots.push((*segment, now));
+            let sample = segment.sample.unwrap_or_else(|| coasting_sample(&now, g, segment.start));
+            now = now.propagated(&sample, segment.end - segment.start, g);
+        }
+        Self { knots, gravity_mps2: g }
+    }
+
+    /// The state at `t`; none outside the track (or before it starts).
+    pub fn state_at(&self, t: f64) -> Option<NavState> {
+        let k = self.knots.partition_point(|(s, _)| s.start <= t).checked_sub(1)?;
+        let (segment, state) = self.knots.get(k)?;
+        if t > segment.end + 1e-9 {
+            return None;
+        }
+        let sample = segment.sample.unwrap_or_else(|| coasting_sample(state, self.gravity_mps2, segment.start));
+        let dt = t - segment.start;
+        Some(if dt > 0.0 { state.propagated(&sample, dt, self.gravity_mps2) } else { *state })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(stamp: f64, w: f64) -> ImuSample {
+        ImuSample { stamp, angular_velocity: Vector3::new(0.0, 0.0, w), specific_force: Vector3::z() * 9.81 }
+    }
+
+    #[test]
+    fn bad_samples_are_counted_and_dropped() {
+        let mut q = ImuQueue::new(ImuLimits::default());
+        q.push(&sample(0.0, 0.1));
+        q.push(&sample(f64::NAN, 0.1));
+        q.push(&ImuSample { specific_force: Vector3::new(0.0, f64::INFINITY, 0.0), ..sample(0.01, 0.0) });
+        q.push(&sample(0.01, 40.0)); // beyond 2000 °/s
+        q.push(&ImuSample { specific_force: Vector3::new(200.0, 0.0, 0.0), ..sample(0.01, 0.0) });
+        q.push(&sample(0.0, 0.1)); // repeated
+        q.push(&sample(-1.0, 0.1)); // backwards
+        q.push(&sample(0.01, 0.1));
+        let c = q.counts();
+        assert_eq!((c.kept, c.non_finite, c.saturated, c.out_of_order), (2, 2, 2, 2));
+        assert_eq!(q.newest(), Some(0.01));
+    }
+
+    #[test]
+    fn segments_hold_each_sample_until_the_next_and_mark_gaps() {
+        let mut q = ImuQueue::new(ImuLimits::default());
+        for t in [0.0, 0.005, 0.010, 0.100, 0.105] {
+            q.push(&sample(t, t));
+        }
+        let s = q.segments(0.002, 0.103);
+        let spans: Vec<(f64, f64, f64, bool)> =
+            s.iter().map(|s| (s.start, s.end, s.sample.map_or(-1.0, |x| x.stamp), s.gap)).collect();
+        assert_eq!(
+            spans,
+            vec![
+                (0.002, 0.005, 0.0, false),
+                (0.005, 0.010, 0.005, false),
+                (0.010, 0.100, 0.010, true),
+                (0.100, 0.103, 0.100, false)
+            ]
+        );
+        // Beyond the newest sample, the last one is held: a gap once it is old.
+        let tail = q.segments(0.105, 0.2);
+        assert_eq!(tail.len(), 1);
+        assert!(tail[0].gap && tail[0].sample.is_some_and(|x| x.stamp == 0.105));
+        // Before any sample: coasting.
+        let early = q.segments(-0.1, 0.0);
+        assert_eq!(early.len(), 1);
+        assert!(early[0].sample.is_none() && early[0].gap);
+        // Advancing keeps the sample holding at the new time, and counts the gap crossed.
+        q.advance(0.002, 0.102);
+        assert_eq!(q.counts().gaps, 1);
+        let after = q.segments(0.102, 0.104);
+        assert_eq!(after[0].sample.map(|x| x.stamp), Some(0.100));
+        assert!(q.segments(0.2, 0.1).is_empty());
+    }
+
+    #[test]
+    fn the_pending_queue_is_bounded() {
+        let mut q = ImuQueue::new(ImuLimits::default());
+        for k in 0..(MAX_PENDING + 5) {
+            q.push(&sample(k as f64 * 1e-3, 0.0));
+        }
+        assert_eq!(q.counts().overflow, 5);
+        assert_eq!(q.pending.len(), MAX_PENDING);
+    }
+
+    #[test]
+    fn levelling_finds_roll_pitch_and_a_still_gyros_bias() {
+        let truth = UnitQuaternion::from_euler_angles(0.2, -0.15, 0.0);
+        let bias = Vector3::new(0.003, -0.002, 0.001);
+        let mut q = ImuQueue::new(ImuLimits::default());
+        for k in 0..100 {
+            q.push(&ImuSample {
+                stamp: k as f64 * 0.005,
+                angular_velocity: bias,
+                specific_force: truth.inverse() * Vector3::z() * 9.81,
+            });
+        }
+        let level = q.level(0.5, 1.0, 20).expect("enough samples");
+        assert!(level.rotation.angle_to(&truth) < 1e-9, "{:?}", level.rotation.euler_angles());
+        assert!(level.still);
+        assert!((level.gyro_bias.expect("still") - bias).norm() < 1e-12);
+        assert!(q.level(0.05, 1.0, 20).is_none(), "11 samples are too few");
+    }
+
+    #[test]
+    fn a_track_reproduces_propagation_at_any_time() {
+        let noise = ImuNoise::default();
+        let mut q = ImuQueue::new(ImuLimits::default());
+        for k in 0..30 {
+            let t = k as f64 * 0.005;
+            q.push(&ImuSample {
+                stamp: t,
+                angular_velocity: Vector3::new(0.1, -0.2, 1.0 + t),
+                specific_force: Vector3::new(0.5, 0.1, 9.9),
+            });
+        }
+        let start = NavState {
+            velocity: Vector3::new(1.0, 0.0, 0.0),
+            ..NavState::at_rest(UnitQuaternion::identity(), Vector3::zeros())
+        };
+        let segments = q.segments(0.0, 0.1);
+        let track = Track::new(&start, &segments, &noise);
+        // Sample by sample to 0.0725 (half-way through a sample's interval).
+        let mut direct = start;
+        for k in 0..14 {
+            direct = direct.propagated(&q.pending[k], 0.005, noise.gravity_mps2);
+        }
+        direct = direct.propagated(&q.pending[14], 0.0025, noise.gravity_mps2);
+        let at = track.state_at(0.0725).expect("inside");
+        assert!((at.position - direct.position).norm() < 1e-12);
+        assert!(at.rotation.angle_to(&direct.rotation) < 1e-12);
+        assert!(track.state_at(0.2).is_none() && track.state_at(-0.1).is_none());
+    }
+}
