@@ -10,9 +10,11 @@
 //! ```
 //!
 //! A segment whose sample is older than `max_gap_s` at the segment's end is a *gap* (samples
-//! lost, or not yet arrived): the sample is still held (zero-order hold), but the caller
-//! propagates it with the larger noise of a coasting robot. Before any sample, the robot coasts
-//! at constant velocity (a sample that reads the state's own biases: ω = 0, f = Rᵀ g).
+//! lost, or not yet arrived). A stale sample is no evidence of the motion since — held through
+//! a second of a legged gait, one instant's turn rate tilts the estimate by a tenth of a radian
+//! and gravity leaks into the velocity — so across a gap, as before any sample, the robot
+//! coasts at constant velocity: a sample that reads the state's own biases plus a turn rate
+//! ω_c, f = Rᵀ g + b_a; the caller propagates it with the larger noise of a coasting robot.
 //!
 //! Gravity at start (FAST-LIO2's static initialisation, §IV-B): the mean specific force f̄ over
 //! the first samples points up in the body, so roll φ = atan2(f̄_y, f̄_z) and pitch
@@ -63,7 +65,8 @@ pub struct ImuCounts {
     pub gaps: u64,
 }
 
-/// One piece of the motion: the sample held over [start, end), `None` = constant velocity.
+/// One piece of the motion: the sample held over [start, end), `None` = constant velocity (no
+/// sample yet, or across a gap).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Segment {
     pub start: f64,
@@ -73,11 +76,11 @@ pub struct Segment {
     pub gap: bool,
 }
 
-/// The sample that leaves `state` moving as it is: no rotation, no acceleration.
-pub fn coasting_sample(state: &NavState, gravity_mps2: f64, stamp: f64) -> ImuSample {
+/// The sample that leaves `state` moving as it is: turning at `rate`, no acceleration.
+pub fn coasting_sample(state: &NavState, gravity_mps2: f64, stamp: f64, rate: &Vector3<f64>) -> ImuSample {
     ImuSample {
         stamp,
-        angular_velocity: state.gyro_bias,
+        angular_velocity: state.gyro_bias + rate,
         specific_force: state.rotation.inverse() * (Vector3::z() * gravity_mps2) + state.accel_bias,
     }
 }
@@ -117,6 +120,11 @@ impl ImuQueue {
 
     pub fn counts(&self) -> ImuCounts {
         self.counts
+    }
+
+    /// Samples waiting after the state's time.
+    pub fn waiting(&self) -> usize {
+        self.pending.len()
     }
 
     /// Stamp of the newest sample kept.
@@ -174,13 +182,15 @@ impl ImuQueue {
 
     fn segment(&self, start: f64, end: f64, sample: Option<ImuSample>) -> Segment {
         let gap = sample.is_none_or(|s| end - s.stamp > self.limits.max_gap_s);
-        Segment { start, end, sample, gap }
+        Segment { start, end, sample: sample.filter(|_| !gap), gap }
     }
 
     /// Forgets the samples before `time`, keeping the one that holds at it, and counts the gaps
     /// of the motion up to it.
     pub fn advance(&mut self, from: f64, time: f64) {
-        self.counts.gaps += self.segments(from, time).iter().filter(|s| s.gap).count() as u64;
+        if self.newest.is_some() {
+            self.counts.gaps += self.segments(from, time).iter().filter(|s| s.gap).count() as u64;
+        }
         while self.pending.front().is_some_and(|s| s.stamp <= time) {
             self.holding = self.pending.pop_front();
         }
@@ -220,20 +230,32 @@ pub struct Track {
     /// (segment, the state at its start), in time order.
     knots: Vec<(Segment, NavState)>,
     gravity_mps2: f64,
+    coast_rate: Vector3<f64>,
 }
 
 impl Track {
-    /// The states of `state` (at `from`) propagated over `segments`, without covariance.
-    pub fn new(state: &NavState, segments: &[Segment], noise: &ImuNoise) -> Self {
+    /// The states of `state` (at the first segment's start) propagated over `segments`, without
+    /// covariance; segments without a sample coast turning at `coast_rate`.
+    pub fn new(state: &NavState, segments: &[Segment], noise: &ImuNoise, coast_rate: &Vector3<f64>) -> Self {
         let g = noise.gravity_mps2;
         let mut knots = Vec::with_capacity(segments.len());
         let mut now = *state;
         for segment in segments {
             knots.push((*segment, now));
-            let sample = segment.sample.unwrap_or_else(|| coasting_sample(&now, g, segment.start));
+            let sample = segment.sample.unwrap_or_else(|| coasting_sample(&now, g, segment.start, coast_rate));
             now = now.propagated(&sample, segment.end - segment.start, g);
         }
-        Self { knots, gravity_mps2: g }
+        Self { knots, gravity_mps2: g, coast_rate: *coast_rate }
+    }
+
+    /// The state at the track's end.
+    pub fn last(&self) -> Option<NavState> {
+        self.knots.last().and_then(|(s, _)| self.state_at(s.end))
+    }
+
+    /// Its time span.
+    pub fn span(&self) -> Option<(f64, f64)> {
+        Some((self.knots.first()?.0.start, self.knots.last()?.0.end))
     }
 
     /// The state at `t`; none outside the track (or before it starts).
@@ -243,7 +265,9 @@ impl Track {
         if t > segment.end + 1e-9 {
             return None;
         }
-        let sample = segment.sample.unwrap_or_else(|| coasting_sample(state, self.gravity_mps2, segment.start));
+        let sample = segment
+            .sample
+            .unwrap_or_else(|| coasting_sample(state, self.gravity_mps2, segment.start, &self.coast_rate));
         let dt = t - segment.start;
         Some(if dt > 0.0 { state.propagated(&sample, dt, self.gravity_mps2) } else { *state })
     }
@@ -287,14 +311,15 @@ mod tests {
             vec![
                 (0.002, 0.005, 0.0, false),
                 (0.005, 0.010, 0.005, false),
-                (0.010, 0.100, 0.010, true),
+                (0.010, 0.100, -1.0, true),
                 (0.100, 0.103, 0.100, false)
             ]
         );
-        // Beyond the newest sample, the last one is held: a gap once it is old.
+        // Beyond the newest sample, the last one is held until it is old: then a gap, coasted.
         let tail = q.segments(0.105, 0.2);
         assert_eq!(tail.len(), 1);
-        assert!(tail[0].gap && tail[0].sample.is_some_and(|x| x.stamp == 0.105));
+        assert!(tail[0].gap && tail[0].sample.is_none());
+        assert!(q.segments(0.105, 0.12).iter().all(|s| !s.gap && s.sample.is_some()));
         // Before any sample: coasting.
         let early = q.segments(-0.1, 0.0);
         assert_eq!(early.len(), 1);
@@ -353,7 +378,7 @@ mod tests {
             ..NavState::at_rest(UnitQuaternion::identity(), Vector3::zeros())
         };
         let segments = q.segments(0.0, 0.1);
-        let track = Track::new(&start, &segments, &noise);
+        let track = Track::new(&start, &segments, &noise, &Vector3::zeros());
         // Sample by sample to 0.0725 (half-way through a sample's interval).
         let mut direct = start;
         for k in 0..14 {

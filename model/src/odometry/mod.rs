@@ -6,9 +6,14 @@
 //! correction of the whole state (`update`), and the estimator that joins them (`estimator`).
 //! The Odometry actor is a thin shell over the estimator.
 
+pub mod config;
+pub mod estimator;
 pub mod imu_queue;
 pub mod local_map;
 pub mod propagation;
 pub mod registration;
 pub mod threshold;
 pub mod update;
+
+#[cfg(test)]
+mod testing;

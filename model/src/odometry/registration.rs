@@ -2,8 +2,10 @@
 //!
 //! A deskewed scan (body frame) is registered onto the local map (odometry frame) by
 //! Gauss–Newton over a left perturbation T ← Exp(δ) T, δ = (ω, v). Each scan point s, at
-//! p = T s, is paired with its nearest map point q within the adaptive threshold τ
-//! (`threshold`), and the plane through q's `plane_neighbours` nearest map points (FAST-LIO2's
+//! p = T s, is paired with its nearest map point q within τ + v/2 (τ the adaptive threshold of
+//! `threshold`, v the map's voxel: the map is sampled, so a point on a surface lies up to about
+//! the sampling distance from its nearest map point whatever the pose error), and the plane
+//! through q's `plane_neighbours` nearest map points (FAST-LIO2's
 //! residual: Xu et al. 2022, "FAST-LIO2: Fast Direct LiDAR-Inertial Odometry", T-RO 38(4),
 //! §V-B) gives the residual along its normal n:
 //!
@@ -11,8 +13,13 @@
 //! r = nᵀ(p − q),   ∂r/∂δ = [(p × n)ᵀ, nᵀ]
 //! ```
 //!
+//! kept when |r| ≤ τ: the threshold bounds the pose error's effect along the surface normal,
+//! which is what the residual measures.
+//!
 //! The plane counts only when every neighbour lies within `plane_tolerance_m` of it and they
-//! span a plane (λ₀ < `planarity` · λ₁ of their covariance). Points with no such plane are left
+//! span a plane (λ₀ < `planarity` · λ₁ of their covariance, and λ₁ ≥ `planarity` · λ₂: points
+//! along a line — one LiDAR ring across the floor — have no normal, and a normal fitted to them
+//! points anywhere around the line, constraining the scan along a direction nothing measured). Points with no such plane are left
 //! out, not paired point-to-point: a point-to-point residual on a surface pins the scan to the
 //! map's sampling along the surface, a constraint that does not exist, and would hide the very
 //! degeneracy measured below.
@@ -29,13 +36,20 @@
 //! **Degeneracy** (Zhang, Kaess & Singh 2016, "On degeneracy of optimization-based state
 //! estimation problems", ICRA): the scan term's Hessian H_scan, split into its rotation and
 //! translation blocks (units differ), has an eigenvalue per direction; a direction whose
-//! eigenvalue is below `degenerate_ratio` times its block's largest is one the scan does not
+//! eigenvalue is below `weak_rotation_ratio` / `weak_translation_ratio` times its block's
+//! largest is one the scan does not
 //! constrain — the axis of a corridor, the plane of an open field. There the prior decides, as
 //! it should: without one the step along it is whatever noise says. The weak directions are
-//! reported (odometry frame).
+//! reported, and with a prior the solution is remapped (Zhang et al. §IV): the registered pose's
+//! departure from the prediction is kept only off the weak axes, and the scan's Hessian returned
+//! without them, so that what little the scan says there — a plane fitted a hair off a
+//! corridor's axis, the map's sampling — does not drag the estimate against the IMU: the prior
+//! alone decides a weak direction. The test is made once, on the converged Hessian: weak axes
+//! decided per iteration, while the correspondences still move, switch on and off and can walk
+//! the iteration into a wrong minimum.
 
 use super::local_map::LocalMap;
-use crate::geometry::lie::{se3_adjoint, se3_exp, se3_log, se3_right_jacobian_inverse, Matrix6, Tangent3};
+use crate::geometry::lie::{hat, se3_adjoint, se3_exp, se3_log, se3_right_jacobian_inverse, Matrix6, Tangent3};
 use crate::geometry::Pose3;
 use nalgebra::{Matrix3, Point3, SMatrix, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
@@ -55,11 +69,16 @@ pub struct RegistrationConfig {
     pub plane_neighbours: usize,
     /// Every one of them within this of the plane, m. Default 0.1.
     pub plane_tolerance_m: f64,
-    /// ... and spanning a plane: λ₀ < planarity · λ₁ of their covariance. Default 0.1.
+    /// ... and spanning a plane: λ₀ < planarity · λ₁ ≤ planarity² · λ₂ of their covariance (flat,
+    /// and not a line). Default 0.1.
     pub planarity: f64,
     /// A direction is weak when its eigenvalue is below this fraction of its block's largest.
-    /// Default 0.02.
-    pub degenerate_ratio: f64,
+    /// Translations, default 0.05: a corridor's axis measures 0.002–0.02 in the simulated
+    /// corridor of the odometry's tests, a closed room's weakest axis 0.1 or more. Rotations,
+    /// default 0.01: a rotation's information grows with the square of its lever arms, so a
+    /// 3 m corridor's roll measures ~0.025 of its yaw and is still well constrained.
+    pub weak_translation_ratio: f64,
+    pub weak_rotation_ratio: f64,
 }
 
 impl Default for RegistrationConfig {
@@ -72,7 +91,8 @@ impl Default for RegistrationConfig {
             plane_neighbours: 5,
             plane_tolerance_m: 0.1,
             planarity: 0.1,
-            degenerate_ratio: 0.02,
+            weak_translation_ratio: 0.05,
+            weak_rotation_ratio: 0.01,
         }
     }
 }
@@ -84,7 +104,8 @@ pub struct Prior {
     pub information: Matrix6,
 }
 
-/// What the scan does not constrain, in the odometry frame.
+/// What the scan does not constrain: rotations about the body (body-centred, odometry axes),
+/// translations in the odometry frame.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Degeneracy {
     /// Eigenvalues of the rotation and translation blocks, ascending.
@@ -134,10 +155,10 @@ fn plane_normal(points: &[Point3<f64>], tolerance_m: f64, planarity: f64) -> Opt
     let eigen = SymmetricEigen::new(covariance);
     let mut order = [0usize, 1, 2];
     order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
-    let (l0, l1) = (eigen.eigenvalues[order[0]], eigen.eigenvalues[order[1]]);
+    let (l0, l1, l2) = (eigen.eigenvalues[order[0]], eigen.eigenvalues[order[1]], eigen.eigenvalues[order[2]]);
     let n = eigen.eigenvectors.column(order[0]).into_owned();
     let flat = points.iter().all(|p| n.dot(&(p.coords - mean)).abs() <= tolerance_m);
-    (l1 > 0.0 && l0 < planarity * l1 && flat).then_some(n)
+    (l1 > 0.0 && l0 < planarity * l1 && l1 >= planarity * l2 && flat).then_some(n)
 }
 
 /// Eigenvalues (ascending) and the axes below `ratio` of the largest, of a symmetric 3 × 3 block.
@@ -152,6 +173,59 @@ fn weak_axes(block: Matrix3<f64>, ratio: f64) -> ([f64; 3], Vec<Vector3<f64>>) {
         .map(|&k| eigen.eigenvectors.column(k).into_owned())
         .collect();
     (values, weak)
+}
+
+/// M: the left perturbation δ of `pose` that an error a = (δθ, δp) of the error state
+/// (R Exp(δθ), p + δp) makes, δ = M a, M = [[R, 0], [p^ R, I]] (Exp(δ)·T moves R to
+/// R Exp(Rᵀω) and p to p + ω × p + v).
+pub fn left_from_error(pose: &Pose3) -> Matrix6 {
+    let r = pose.rotation.to_rotation_matrix().into_inner();
+    let mut m = Matrix6::zeros();
+    m.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
+    m.fixed_view_mut::<3, 3>(3, 0).copy_from(&(hat(&pose.translation.vector) * r));
+    m.fixed_view_mut::<3, 3>(3, 3).copy_from(&Matrix3::identity());
+    m
+}
+
+/// The degeneracy of the scan Hessian `h` at `pose`, measured on a body-centred rotation
+/// (Mᵀ H M: in the left perturbation a rotation turns about the map's origin, and its block grows
+/// with the distance from it), and P: the projector off the weak axes, in the error's
+/// coordinates a.
+fn degeneracy_of(h: &Matrix6, pose: &Pose3, config: &RegistrationConfig) -> (Degeneracy, Matrix6) {
+    let m = left_from_error(pose);
+    let in_error = m.transpose() * h * m;
+    let (rotation_eigenvalues, weak_rotations) =
+        weak_axes(in_error.fixed_view::<3, 3>(0, 0).into_owned(), config.weak_rotation_ratio);
+    let (translation_eigenvalues, weak_translations) =
+        weak_axes(in_error.fixed_view::<3, 3>(3, 3).into_owned(), config.weak_translation_ratio);
+    let mut p = Matrix6::identity();
+    for v in &weak_rotations {
+        let mut block = p.fixed_view_mut::<3, 3>(0, 0);
+        block -= v * v.transpose();
+    }
+    for v in &weak_translations {
+        let mut block = p.fixed_view_mut::<3, 3>(3, 3);
+        block -= v * v.transpose();
+    }
+    (Degeneracy { rotation_eigenvalues, translation_eigenvalues, weak_rotations, weak_translations }, p)
+}
+
+/// Solution remapping (Zhang et al. §IV): the registered pose's departure from the prediction,
+/// a* = (Log(R̂ᵀR*), p* − p̂), kept only off the weak axes, a = P a*; and the scan's Hessian
+/// without them, H' = M⁻ᵀ P Mᵀ H M P M⁻¹ (at the remapped pose).
+fn remapped(h: &Matrix6, pose: &Pose3, prediction: &Pose3, p: &Matrix6) -> (Pose3, Matrix6) {
+    let dtheta = (prediction.rotation.inverse() * pose.rotation).scaled_axis();
+    let dp = pose.translation.vector - prediction.translation.vector;
+    let a = p * Tangent3::new(dtheta.x, dtheta.y, dtheta.z, dp.x, dp.y, dp.z);
+    let rotation = prediction.rotation * nalgebra::UnitQuaternion::from_scaled_axis(Vector3::new(a[0], a[1], a[2]));
+    let at = Pose3::from_parts(
+        nalgebra::Translation3::from(prediction.translation.vector + Vector3::new(a[3], a[4], a[5])),
+        rotation,
+    );
+    let m = left_from_error(&at);
+    let Some(m_inv) = m.try_inverse() else { return (at, *h) };
+    let projected = m_inv.transpose() * p * m.transpose() * h * m * p * m_inv;
+    (at, (projected + projected.transpose()) * 0.5)
 }
 
 /// Registers `points_in_body` onto `map` from `initial` (see the module notes).
@@ -183,14 +257,17 @@ pub fn register_scan(
         correspondences = 0;
         for s in points_in_body.iter().filter(|s| finite(s)) {
             let p = pose * s;
-            let Some((q, _)) = map.nearest(&p, threshold_m) else { continue };
+            let Some((q, _)) = map.nearest(&p, threshold_m + radius / 2.0) else { continue };
             let normal = *planes.entry([q.x.to_bits(), q.y.to_bits(), q.z.to_bits()]).or_insert_with(|| {
                 let around = map.nearest_k(&q, config.plane_neighbours, radius);
                 plane_normal(&around, config.plane_tolerance_m, config.planarity)
             });
             let Some(n) = normal else { continue };
-            correspondences += 1;
             let r = n.dot(&(p - q));
+            if r.abs() > threshold_m {
+                continue;
+            }
+            correspondences += 1;
             let j = SMatrix::<f64, 1, 6>::from_iterator(p.coords.cross(&n).iter().chain(n.iter()).copied());
             let w = weight(r * r);
             h += w * j.transpose() * j;
@@ -221,18 +298,11 @@ pub fn register_scan(
             break;
         }
     }
-    let (rotation_eigenvalues, weak_rotations) =
-        weak_axes(h_scan.fixed_view::<3, 3>(0, 0).into_owned(), config.degenerate_ratio);
-    let (translation_eigenvalues, weak_translations) =
-        weak_axes(h_scan.fixed_view::<3, 3>(3, 3).into_owned(), config.degenerate_ratio);
-    Ok(Registration {
-        map_from_body: pose,
-        converged,
-        iterations,
-        correspondences,
-        degeneracy: Degeneracy { rotation_eigenvalues, translation_eigenvalues, weak_rotations, weak_translations },
-        scan_hessian: h_scan,
-    })
+    let (degeneracy, projector) = degeneracy_of(&h_scan, &pose, config);
+    if let (Some(prior), true) = (prior, degeneracy.is_degenerate()) {
+        (pose, h_scan) = remapped(&h_scan, &pose, &prior.map_from_body, &projector);
+    }
+    Ok(Registration { map_from_body: pose, converged, iterations, correspondences, degeneracy, scan_hessian: h_scan })
 }
 
 #[cfg(test)]

@@ -26,7 +26,8 @@
 //! (N P_aa Nᵀ)⁻¹; the same N carries the posterior pose covariance out as Cov(e).
 
 use super::propagation::{Matrix15, NavState};
-use crate::geometry::lie::{hat, Matrix6};
+use super::registration::left_from_error;
+use crate::geometry::lie::Matrix6;
 use crate::geometry::Pose3;
 use nalgebra::{Matrix3, SMatrix, Translation3, Vector3};
 
@@ -65,11 +66,7 @@ pub fn prior_information(covariance: &Matrix15, state: &NavState) -> Option<Matr
 /// Λ of the module notes: the scan Hessian `h_left` (left perturbation at `pose`) as
 /// information on the error state's pose, for residual noise `sigma_m`.
 pub fn scan_information(h_left: &Matrix6, pose: &Pose3, sigma_m: f64) -> Matrix6 {
-    let r = pose.rotation.to_rotation_matrix().into_inner();
-    let mut m = Matrix6::zeros();
-    m.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
-    m.fixed_view_mut::<3, 3>(3, 0).copy_from(&(hat(&pose.translation.vector) * r));
-    m.fixed_view_mut::<3, 3>(3, 3).copy_from(&Matrix3::identity());
+    let m = left_from_error(pose);
     let l = m.transpose() * h_left * m / (sigma_m * sigma_m);
     (l + l.transpose()) * 0.5
 }

@@ -1,0 +1,652 @@
+//! The LiDAR-inertial odometry: an error-state filter whose prediction is IMU propagation and
+//! whose correction is scan-to-map registration held by that prediction. Per scan at stamp t:
+//!
+//! 1. **Predict** (`propagation`, `imu_queue`): the state and covariance from the last scan's
+//!    time to t over the samples that arrived; across a gap the last sample is held, with the
+//!    larger `coast` noise.
+//! 2. **Deskew** (`perception::deskew`): each point at t + τ moved into the body at t by the
+//!    predicted motion, T(t)⁻¹ T(t + τ), over the samples of the sweep (FAST-LIO2's backward
+//!    propagation, forwards).
+//! 3. **Register** (`registration`): the scan (voxel `scan_voxel_m`) onto the local map from
+//!    the prediction, with the prediction as a prior of information (N P_aa Nᵀ)⁻¹ scaled by σ²
+//!    (the scan's residuals carry weight 1/σ², the prior its own), within the adaptive threshold
+//!    (`threshold`), which never goes below what the points' own noise produces: τ ≥ 3σ and
+//!    the kernel κ ≥ σ (an IMU predicts to millimetres, and a threshold learnt from that alone
+//!    would refuse every honest residual and give the scan no weight against the prior). The result is the pose's maximum a posteriori: in a direction the scan does
+//!    not constrain (a corridor's axis, an open field's plane), the prior decides — the
+//!    degeneracy is reported, and the IMU carries the estimate there.
+//! 4. **Update** (`update`): the registered pose and the scan's information Hᵀ/σ² correct the
+//!    velocity and biases through their correlation with the pose.
+//! 5. **Map**: the deskewed scan (one measured point per voxel of `map_voxel_m`, as the scan
+//!    registered is one per `scan_voxel_m`) enters the local map at the new pose.
+//!
+//! Nothing from outside can make it publish a NaN: a scan whose stamp does not advance is
+//! refused unstored; a scan with no usable points, a registration that fails or that would move
+//! the prediction by more than `max_correction_*`, or an update that is not well posed leaves
+//! the prediction standing (coasting, counted with the reason); a state that is not finite or
+//! faster than `max_speed_mps` is reset to the last registered one (velocity unknown again),
+//! and says so. The filter starts once `level_min_samples` IMU samples give gravity (scans
+//! before are refused): the odometry frame is the body's first pose, levelled, yaw zero. There
+//! is no LiDAR-only mode: without the IMU's prediction, a legged robot's 4 Hz bounce defeats
+//! the constant-velocity deskew and the threshold (KISS-ICP is the reference for that case,
+//! `sgm bench odometry`).
+
+use super::config::OdometryConfig;
+use super::imu_queue::{coasting_sample, ImuCounts, ImuQueue, Track};
+use super::local_map::LocalMap;
+use super::propagation::{Matrix15, NavState, Propagator};
+use super::registration::{register_scan, Degeneracy, Prior, RegistrationError};
+use super::threshold::AdaptiveThreshold;
+use super::update::{apply_pose_update, pose_covariance, pose_of, prior_information, scan_information, UpdateError};
+use crate::geometry::lie::Matrix6;
+use crate::geometry::Pose3;
+use crate::perception::deskew::{deskew_with, DeskewRefusal};
+use crate::perception::imu::ImuSample;
+use crate::spatial::voxel::downsample_first;
+use nalgebra::{Point3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Why a scan was refused (nothing about it was stored).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ScanRefusal {
+    #[error("the scan's stamp {0} is not finite")]
+    NonFiniteStamp(f64),
+    #[error("the scan's stamp {stamp} is not after the last scan's {previous}")]
+    NotAfterPrevious { stamp: f64, previous: f64 },
+    #[error("waiting for the IMU: {samples} samples before the first scan, {needed} needed to find gravity")]
+    WaitingForImu { samples: usize, needed: usize },
+}
+
+/// Why the prediction was kept instead of the scan's correction.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum CoastReason {
+    #[error("no usable point in the scan")]
+    NoPoints,
+    #[error("registration failed: {0}")]
+    Registration(RegistrationError),
+    #[error("registration moved the prediction by {moved_m:.2} m and {turned_rad:.3} rad, more than allowed")]
+    Implausible { moved_m: f64, turned_rad: f64 },
+    #[error("update refused: {0}")]
+    Update(UpdateError),
+}
+
+/// What happened to a scan.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ScanOutcome {
+    /// The filter started here: the scan is the local map's first.
+    First,
+    Registered {
+        correspondences: usize,
+        iterations: usize,
+        converged: bool,
+    },
+    Coasted(CoastReason),
+    /// The state diverged (not finite, or faster than allowed) and was reset to the last
+    /// registered one.
+    Reset {
+        speed_mps: f64,
+    },
+}
+
+/// The estimate at a scan.
+#[derive(Clone, Debug)]
+pub struct OdometryEstimate {
+    pub stamp: f64,
+    pub odom_from_body: Pose3,
+    /// Odometry frame, m/s.
+    pub velocity: Vector3<f64>,
+    /// Cov of e = Log(T̂⁻¹ T), (ω, v), in the body frame.
+    pub covariance: Matrix6,
+    /// Every point of the scan (same order, non-finite ones as they came), in the body at the
+    /// stamp: deskewed when `deskew` is Ok.
+    pub points_in_body: Vec<Point3<f64>>,
+    pub deskew: Result<(), DeskewRefusal>,
+    pub outcome: ScanOutcome,
+    /// What the scan left unconstrained, when it was registered.
+    pub degeneracy: Option<Degeneracy>,
+    pub gyro_bias: Vector3<f64>,
+    pub accel_bias: Vector3<f64>,
+}
+
+/// Counts over the run, for status and the report.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct OdometryCounts {
+    /// Scans that produced an estimate.
+    pub scans: u64,
+    pub refused: u64,
+    pub registered: u64,
+    pub coasted: u64,
+    /// Of the registered, those with a weak direction.
+    pub degenerate: u64,
+    pub resets: u64,
+    pub not_deskewed: u64,
+    pub imu: ImuCounts,
+}
+
+#[derive(Clone, Debug)]
+struct Filter {
+    time: f64,
+    propagator: Propagator,
+}
+
+/// The odometry (module notes).
+#[derive(Clone, Debug)]
+pub struct LidarInertialOdometry {
+    config: OdometryConfig,
+    map: LocalMap,
+    threshold: AdaptiveThreshold,
+    imu: ImuQueue,
+    filter: Option<Filter>,
+    last_registered: Option<Filter>,
+    counts: OdometryCounts,
+}
+
+fn finite_pose(pose: &Pose3) -> bool {
+    pose.translation.vector.iter().chain(pose.rotation.coords.iter()).all(|c| c.is_finite())
+}
+
+fn finite_state(s: &NavState) -> bool {
+    finite_pose(&pose_of(s))
+        && s.velocity.iter().chain(s.gyro_bias.iter()).chain(s.accel_bias.iter()).all(|c| c.is_finite())
+}
+
+impl LidarInertialOdometry {
+    pub fn new(config: OdometryConfig) -> Result<Self, super::config::OdometryConfigError> {
+        config.validate()?;
+        let map = LocalMap::new(config.local_map.clone()).map_err(|e| super::config::OdometryConfigError {
+            key: format!("local_map.{}", e.key),
+            value: e.value,
+            allowed: e.allowed,
+        })?;
+        Ok(Self {
+            threshold: AdaptiveThreshold::new(config.threshold.clone()),
+            imu: ImuQueue::new(config.imu_limits),
+            map,
+            filter: None,
+            last_registered: None,
+            counts: OdometryCounts::default(),
+            config,
+        })
+    }
+
+    pub fn config(&self) -> &OdometryConfig {
+        &self.config
+    }
+
+    pub fn counts(&self) -> OdometryCounts {
+        OdometryCounts { imu: self.imu.counts(), ..self.counts }
+    }
+
+    pub fn local_map(&self) -> &LocalMap {
+        &self.map
+    }
+
+    /// Takes IMU samples; bad ones are counted and dropped.
+    pub fn push_imu(&mut self, samples: &[ImuSample]) {
+        for s in samples {
+            self.imu.push(s);
+        }
+    }
+
+    /// The initial state and covariance at `stamp`, or why not yet.
+    fn start(&self, stamp: f64) -> Result<Propagator, ScanRefusal> {
+        let c = &self.config;
+        let level = self
+            .imu
+            .level(stamp, c.level_window_s, c.level_min_samples)
+            .ok_or(ScanRefusal::WaitingForImu { samples: self.imu.waiting(), needed: c.level_min_samples })?;
+        let (rotation, still, samples) = (level.rotation, level.still, level.samples);
+        let gyro_bias = level.gyro_bias.unwrap_or_else(Vector3::zeros);
+        // Still, the mean rate measured the gyro's bias to its white noise over the window
+        // (σ/√T, T the window's duration: samples over the span they cover).
+        let gyro_bias_variance = if still {
+            let span = c.level_window_s.min(samples as f64 * 0.01).max(1e-3);
+            (c.imu.gyro_noise.powi(2) / span).max(1e-10)
+        } else {
+            c.initial_gyro_bias_sigma_rad_s.powi(2)
+        };
+        let state = NavState { gyro_bias, ..NavState::at_rest(rotation, Vector3::zeros()) };
+        let tilt = c.initial_tilt_sigma_rad.powi(2);
+        let velocity = if still { 1e-4 } else { c.initial_velocity_sigma_mps.powi(2) };
+        let mut p = Matrix15::zeros();
+        for (k, v) in [
+            tilt,
+            tilt,
+            1e-12,
+            1e-12,
+            1e-12,
+            1e-12,
+            velocity,
+            velocity,
+            velocity,
+            gyro_bias_variance,
+            gyro_bias_variance,
+            gyro_bias_variance,
+            c.initial_accel_bias_sigma_mps2.powi(2),
+            c.initial_accel_bias_sigma_mps2.powi(2),
+            c.initial_accel_bias_sigma_mps2.powi(2),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            p[(k, k)] = v;
+        }
+        Ok(Propagator::new(state, p, c.imu))
+    }
+
+    /// The filter propagated from its time to `to` (module notes, step 1).
+    fn predict(&self, filter: &Filter, to: f64) -> Propagator {
+        let mut p = filter.propagator.clone();
+        let g = self.config.imu.gravity_mps2;
+        for segment in self.imu.segments(filter.time, to) {
+            let sample =
+                segment.sample.unwrap_or_else(|| coasting_sample(&p.state, g, segment.start, &Vector3::zeros()));
+            let noise = if segment.gap { self.config.coast } else { self.config.imu };
+            p.propagate_with(&sample, segment.end - segment.start, &noise);
+        }
+        p
+    }
+
+    /// The scan's points in the body at `stamp`, moved along `track` (step 2).
+    fn deskew(
+        &self,
+        track: &Track,
+        stamp: f64,
+        points: &[Point3<f64>],
+        times: Option<&[f32]>,
+    ) -> (Vec<Point3<f64>>, Result<(), DeskewRefusal>) {
+        let Some(times) = times else { return (points.to_vec(), Err(DeskewRefusal::NoTimes)) };
+        let (Some(at_stamp), Some((lo, hi))) = (track.state_at(stamp), track.span()) else {
+            return (points.to_vec(), Err(DeskewRefusal::NoMotion));
+        };
+        let body_from_odom = pose_of(&at_stamp).inverse();
+        let straight = deskew_with(points, times, |tau| {
+            let t = (stamp + f64::from(tau)).clamp(lo, hi);
+            track.state_at(t).map_or(Pose3::identity(), |s| body_from_odom * pose_of(&s))
+        });
+        match straight {
+            Ok(p) => (p, Ok(())),
+            Err(refusal) => (points.to_vec(), Err(refusal)),
+        }
+    }
+
+    /// The points registration and the map use: finite, within range.
+    fn usable(&self, points: &[Point3<f64>]) -> Vec<Point3<f64>> {
+        let (lo, hi) = (self.config.min_range_m.powi(2), self.config.max_range_m.powi(2));
+        points
+            .iter()
+            .filter(|p| p.coords.iter().all(|c| c.is_finite()))
+            .filter(|p| (lo..=hi).contains(&p.coords.norm_squared()))
+            .copied()
+            .collect()
+    }
+
+    /// One scan: `points` in the sensor (= body) frame at their `times` after `stamp`.
+    pub fn process_scan(
+        &mut self,
+        stamp: f64,
+        points: &[Point3<f64>],
+        times: Option<&[f32]>,
+    ) -> Result<OdometryEstimate, ScanRefusal> {
+        let refuse = |this: &mut Self, r: ScanRefusal| {
+            this.counts.refused += 1;
+            Err(r)
+        };
+        if !stamp.is_finite() {
+            return refuse(self, ScanRefusal::NonFiniteStamp(stamp));
+        }
+        if let Some(f) = &self.filter {
+            if stamp <= f.time {
+                let previous = f.time;
+                return refuse(self, ScanRefusal::NotAfterPrevious { stamp, previous });
+            }
+        }
+        let (first, previous_time, predicted) = match &self.filter {
+            Some(f) => (false, f.time, self.predict(f, stamp)),
+            None => match self.start(stamp) {
+                Ok(p) => (true, stamp, p),
+                Err(r) => return refuse(self, r),
+            },
+        };
+        // The motion from the last scan through this sweep's end, for deskewing.
+        let sweep_end = times.map_or(0.0, |t| t.iter().fold(0.0f64, |m, &x| m.max(f64::from(x))).min(1.0));
+        let track_from = match &self.filter {
+            Some(f) => (f.time, f.propagator.state),
+            None => (stamp, predicted.state),
+        };
+        let segments = self.imu.segments(track_from.0, stamp + sweep_end.max(1e-6));
+        let track = Track::new(&track_from.1, &segments, &self.config.imu, &Vector3::zeros());
+        let (points_in_body, deskew) = self.deskew(&track, stamp, points, times);
+        if deskew.is_err() {
+            self.counts.not_deskewed += 1;
+        }
+        let usable = self.usable(&points_in_body);
+        let scan = downsample_first(&usable, self.config.scan_voxel_m);
+        let prediction = pose_of(&predicted.state);
+        let (mut propagator, outcome, degeneracy) =
+            if first { (predicted, ScanOutcome::First, None) } else { self.correct(predicted, &scan) };
+        let mut outcome = outcome;
+        let speed = propagator.state.velocity.norm();
+        if !(finite_state(&propagator.state) && speed <= self.config.max_speed_mps) {
+            propagator = self.reset_state();
+            outcome = ScanOutcome::Reset { speed_mps: speed };
+            self.counts.resets += 1;
+        }
+        match &outcome {
+            ScanOutcome::Registered { .. } => {
+                self.counts.registered += 1;
+                if degeneracy.as_ref().is_some_and(Degeneracy::is_degenerate) {
+                    self.counts.degenerate += 1;
+                }
+            }
+            ScanOutcome::Coasted(_) => self.counts.coasted += 1,
+            ScanOutcome::First | ScanOutcome::Reset { .. } => {}
+        }
+        let pose = pose_of(&propagator.state);
+        if let (Some(f), ScanOutcome::Registered { .. }) = (&self.filter, &outcome) {
+            let motion = pose_of(&f.propagator.state).inverse() * pose;
+            self.threshold.update(&(prediction.inverse() * pose), &motion);
+        }
+        let to_map: Vec<Point3<f64>> =
+            downsample_first(&usable, self.config.map_voxel_m).iter().map(|p| pose * p).collect();
+        self.map.insert(&to_map, &Point3::from(pose.translation.vector));
+        self.imu.advance(previous_time, stamp);
+        let filter = Filter { time: stamp, propagator };
+        if matches!(outcome, ScanOutcome::Registered { .. } | ScanOutcome::First) {
+            self.last_registered = Some(filter.clone());
+        }
+        let state = filter.propagator.state;
+        let covariance = pose_covariance(&filter.propagator.covariance.fixed_view::<6, 6>(0, 0).into_owned(), &state);
+        self.filter = Some(filter);
+        self.counts.scans += 1;
+        Ok(OdometryEstimate {
+            stamp,
+            odom_from_body: pose,
+            velocity: state.velocity,
+            covariance,
+            points_in_body,
+            deskew,
+            outcome,
+            degeneracy,
+            gyro_bias: state.gyro_bias,
+            accel_bias: state.accel_bias,
+        })
+    }
+
+    /// Steps 3 and 4: the prediction corrected by the scan, or kept (with the reason).
+    fn correct(&self, predicted: Propagator, scan: &[Point3<f64>]) -> (Propagator, ScanOutcome, Option<Degeneracy>) {
+        let coast = |reason| (predicted.clone(), ScanOutcome::Coasted(reason), None);
+        if scan.is_empty() {
+            return coast(CoastReason::NoPoints);
+        }
+        let c = &self.config;
+        let prediction = pose_of(&predicted.state);
+        let sigma2 = c.point_noise_m * c.point_noise_m;
+        let prior = prior_information(&predicted.covariance, &predicted.state).map(|information| Prior {
+            map_from_body: prediction,
+            information: information * (sigma2 / c.scan_information_scale),
+        });
+        let registered = match register_scan(
+            scan,
+            &self.map,
+            &prediction,
+            self.threshold.correspondence_m().max(3.0 * c.point_noise_m),
+            self.threshold.kernel_m().max(c.point_noise_m),
+            prior.as_ref(),
+            &c.registration,
+        ) {
+            Ok(r) => r,
+            Err(e) => return coast(CoastReason::Registration(e)),
+        };
+        let correction = prediction.inverse() * registered.map_from_body;
+        let (moved_m, turned_rad) = (correction.translation.vector.norm(), correction.rotation.angle());
+        if !(moved_m <= c.max_correction_m && turned_rad <= c.max_correction_rad) {
+            return coast(CoastReason::Implausible { moved_m, turned_rad });
+        }
+        let information = scan_information(&registered.scan_hessian, &registered.map_from_body, c.point_noise_m)
+            * c.scan_information_scale;
+        let outcome = ScanOutcome::Registered {
+            correspondences: registered.correspondences,
+            iterations: registered.iterations,
+            converged: registered.converged,
+        };
+        match apply_pose_update(&predicted.state, &predicted.covariance, &registered.map_from_body, &information) {
+            Ok((state, covariance)) => {
+                (Propagator { state, covariance, ..predicted }, outcome, Some(registered.degeneracy))
+            }
+            Err(e) => coast(CoastReason::Update(e)),
+        }
+    }
+
+    /// The last registered state, its velocity unknown again (module notes).
+    fn reset_state(&self) -> Propagator {
+        let mut p = self.last_registered.as_ref().map_or_else(|| self.start_fallback(), |f| f.propagator.clone());
+        p.state.velocity = Vector3::zeros();
+        let v = self.config.initial_velocity_sigma_mps.powi(2);
+        for k in 6..9 {
+            for j in 0..15 {
+                p.covariance[(k, j)] = 0.0;
+                p.covariance[(j, k)] = 0.0;
+            }
+            p.covariance[(k, k)] = v;
+        }
+        p
+    }
+
+    fn start_fallback(&self) -> Propagator {
+        let mut p = Matrix15::identity() * 1e-12;
+        for k in 6..9 {
+            p[(k, k)] = self.config.initial_velocity_sigma_mps.powi(2);
+        }
+        Propagator::new(NavState::at_rest(nalgebra::UnitQuaternion::identity(), Vector3::zeros()), p, self.config.imu)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::odometry::testing::{ImuErrors, Sensors, SWEEP_S};
+
+    struct Run {
+        /// (estimate, truth in the odometry frame) per scan.
+        track: Vec<(OdometryEstimate, Pose3)>,
+        odometry: LidarInertialOdometry,
+    }
+
+    /// `seconds` of scans at 10 Hz; `deskew` false hands the scans in without their times.
+    fn run(sensors: &mut Sensors, config: OdometryConfig, seconds: f64, deskew: bool) -> Run {
+        let mut odometry = LidarInertialOdometry::new(config).expect("valid");
+        // Gravity from the first second of samples; the odometry frame is the first pose, yaw
+        // removed (its roll and pitch are gravity's).
+        let first = 1.0;
+        let start = sensors.truth(first);
+        let yaw = start.rotation.euler_angles().2;
+        let world_from_odom =
+            Pose3::from_parts(start.translation, nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, yaw));
+        let mut track = Vec::new();
+        let scans = (seconds / 0.1).round() as usize;
+        for k in 0..scans {
+            let stamp = first + k as f64 * 0.1;
+            odometry.push_imu(&sensors.imu_until(stamp + SWEEP_S));
+            let sweep = sensors.sweep(stamp);
+            let times = deskew.then_some(sweep.times.as_slice());
+            let estimate = odometry.process_scan(stamp, &sweep.points, times).expect("accepted");
+            track.push((estimate, world_from_odom.inverse() * sensors.truth(stamp)));
+        }
+        Run { track, odometry }
+    }
+
+    impl Run {
+        /// The error of each scan's motion from the first scan (translation m, rotation rad):
+        /// an accelerometer bias tilts the levelled frame by bias/g, which the IMU cannot tell
+        /// from tilt at rest, so positions are compared as evo's `--align_origin` does.
+        fn errors(&self) -> Vec<(f64, f64)> {
+            let (e0, t0) = &self.track[0];
+            self.track
+                .iter()
+                .map(|(e, t)| {
+                    let d = (t0.inverse() * t).inverse() * (e0.odom_from_body.inverse() * e.odom_from_body);
+                    (d.translation.vector.norm(), d.rotation.angle())
+                })
+                .collect()
+        }
+
+        fn worst(&self) -> (f64, f64) {
+            self.errors().into_iter().fold((0.0f64, 0.0f64), |a, b| (a.0.max(b.0), a.1.max(b.1)))
+        }
+
+        fn rms(&self) -> f64 {
+            let e = self.errors();
+            (e.iter().map(|x| x.0 * x.0).sum::<f64>() / e.len() as f64).sqrt()
+        }
+
+        fn length(&self) -> f64 {
+            self.track.windows(2).map(|w| (w[1].1.translation.vector - w[0].1.translation.vector).norm()).sum()
+        }
+    }
+
+    #[test]
+    fn a_legged_robot_in_a_room_is_tracked_to_centimetres() {
+        let imu = ImuErrors {
+            gyro_white: 1.7e-4,
+            accel_white: 2e-3,
+            gyro_bias: Vector3::new(0.002, -0.001, 0.0015),
+            accel_bias: Vector3::new(0.05, -0.03, 0.02),
+        };
+        let mut sensors = Sensors::new(false, imu, 1);
+        let r = run(&mut sensors, OdometryConfig::default(), 20.0, true);
+        let (length, worst) = (r.length(), r.worst());
+        let counts = r.odometry.counts();
+        assert!(length > 25.0, "{length}");
+        assert!(
+            worst.0 < 0.05 && worst.1 < 0.3f64.to_radians(),
+            "worst error {worst:?} over {length:.1} m, {counts:?}"
+        );
+        assert_eq!(counts.registered, counts.scans - 1, "{counts:?}");
+        assert_eq!((counts.resets, counts.coasted, counts.not_deskewed), (0, 0, 0));
+        // The gyro's bias is found (the accelerometer's is weakly observable on this path).
+        let last = &r.track.last().expect("scans").0;
+        assert!((last.gyro_bias - imu.gyro_bias).norm() < 5e-4, "{} vs {}", last.gyro_bias, imu.gyro_bias);
+        // No NaN, and a covariance that is symmetric positive definite.
+        assert!(last.covariance.cholesky().is_some());
+    }
+
+    #[test]
+    fn deskewing_removes_the_sweeps_distortion() {
+        let mut straight = Sensors::new(false, ImuErrors::default(), 2);
+        let mut bent = Sensors::new(false, ImuErrors::default(), 2);
+        let with = run(&mut straight, OdometryConfig::default(), 8.0, true);
+        let without = run(&mut bent, OdometryConfig::default(), 8.0, false);
+        let (a, b) = (with.rms(), without.rms());
+        assert!(a < 0.02, "deskewed: {a}");
+        assert!(b > 2.0 * a, "deskewed {a} vs not {b}");
+        assert_eq!(without.odometry.counts().not_deskewed, 80);
+    }
+
+    #[test]
+    fn in_a_corridor_the_axis_is_weak_and_the_imu_carries_it() {
+        let mut sensors = Sensors::new(true, ImuErrors::default(), 4);
+        let r = run(&mut sensors, OdometryConfig::default(), 10.0, true);
+        let counts = r.odometry.counts();
+        assert!(counts.degenerate >= counts.registered * 9 / 10, "{counts:?}");
+        let weak = r.track[50].0.degeneracy.clone().expect("registered");
+        assert_eq!(weak.weak_translations.len(), 1);
+        assert!(weak.weak_translations[0].x.abs() > 0.99, "{:?}", weak.weak_translations);
+        // 13 m down the corridor with the IMU alone along it: the error along the axis is the
+        // integral of the tilt's gravity leak (a milliradian is 1 cm/s²), within 5 % of the way;
+        // across it, where the walls hold the estimate, centimetres.
+        let (e, t) = r.track.last().expect("scans");
+        let (dx, rest) = {
+            let d = e.odom_from_body.translation.vector - t.translation.vector;
+            (d.x.abs(), d.yz().norm())
+        };
+        let length = r.length();
+        assert!(length > 12.0 && dx < 0.05 * length && rest < 0.03, "along {dx} of {length}, across {rest}");
+    }
+
+    #[test]
+    fn bad_input_is_refused_or_coasted_and_never_yields_nan() {
+        let mut sensors = Sensors::new(false, ImuErrors::default(), 5);
+        let mut odometry = LidarInertialOdometry::new(OdometryConfig::default()).expect("valid");
+        // No IMU yet: the first scan waits.
+        let sweep = sensors.sweep(0.5);
+        assert!(matches!(
+            odometry.process_scan(0.5, &sweep.points, Some(&sweep.times)),
+            Err(ScanRefusal::WaitingForImu { samples: 0, .. })
+        ));
+        odometry.push_imu(&sensors.imu_until(1.1));
+        let sweep = sensors.sweep(1.0);
+        let first = odometry.process_scan(1.0, &sweep.points, Some(&sweep.times)).expect("starts");
+        assert_eq!(first.outcome, ScanOutcome::First);
+        // Time going backwards, and a NaN stamp: refused, nothing stored.
+        assert!(matches!(odometry.process_scan(0.9, &sweep.points, None), Err(ScanRefusal::NotAfterPrevious { .. })));
+        assert!(matches!(odometry.process_scan(f64::NAN, &sweep.points, None), Err(ScanRefusal::NonFiniteStamp(_))));
+        // An empty scan and an all-NaN one coast on the IMU.
+        odometry.push_imu(&sensors.imu_until(1.2));
+        let empty = odometry.process_scan(1.1, &[], Some(&[])).expect("coasts");
+        assert_eq!(empty.outcome, ScanOutcome::Coasted(CoastReason::NoPoints));
+        odometry.push_imu(&sensors.imu_until(1.3));
+        let nan = vec![Point3::new(f64::NAN, 0.0, 0.0); 100];
+        let coasted = odometry.process_scan(1.2, &nan, Some(&[0.0; 100])).expect("coasts");
+        assert_eq!(coasted.outcome, ScanOutcome::Coasted(CoastReason::NoPoints));
+        assert_eq!(coasted.points_in_body.len(), 100);
+        // Mismatched times: used as they came, counted.
+        odometry.push_imu(&sensors.imu_until(1.4));
+        let sweep = sensors.sweep(1.3);
+        let skewed = odometry.process_scan(1.3, &sweep.points, Some(&[0.0; 3])).expect("registers");
+        assert!(skewed.deskew.is_err());
+        // A second-long IMU gap: the robot coasts at constant velocity across it, with coasting
+        // noise; the scan after still registers.
+        let _lost = sensors.imu_until(2.3);
+        odometry.push_imu(&sensors.imu_until(2.5));
+        let sweep = sensors.sweep(2.4);
+        let after_gap = odometry.process_scan(2.4, &sweep.points, Some(&sweep.times)).expect("accepted");
+        assert!(matches!(after_gap.outcome, ScanOutcome::Registered { .. }), "{:?}", after_gap.outcome);
+        let c = odometry.counts();
+        assert_eq!(c.refused, 3);
+        assert!(c.imu.gaps >= 1, "{c:?}");
+        for e in [&first, &empty, &coasted, &skewed, &after_gap] {
+            assert!(finite_pose(&e.odom_from_body) && e.covariance.iter().all(|v| v.is_finite()));
+        }
+        let start = sensors.truth(1.0);
+        let heading = nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, start.rotation.euler_angles().2);
+        let truth = Pose3::from_parts(start.translation, heading).inverse() * sensors.truth(2.4);
+        let d = truth.translation.vector - after_gap.odom_from_body.translation.vector;
+        assert!(d.norm() < 0.1, "{d}");
+    }
+
+    #[test]
+    fn a_diverged_state_is_reset_to_the_last_registered_one() {
+        let mut sensors = Sensors::new(false, ImuErrors::default(), 6);
+        let mut odometry = LidarInertialOdometry::new(OdometryConfig::default()).expect("valid");
+        odometry.push_imu(&sensors.imu_until(1.1));
+        let sweep = sensors.sweep(1.0);
+        odometry.process_scan(1.0, &sweep.points, Some(&sweep.times)).expect("starts");
+        // An accelerometer stuck at 150 m/s² sideways (below saturation) for 0.3 s: 45 m/s.
+        let _ = sensors.imu_until(1.4);
+        let stuck: Vec<ImuSample> = (0..60)
+            .map(|k| ImuSample {
+                stamp: 1.105 + k as f64 * 0.005,
+                angular_velocity: Vector3::zeros(),
+                specific_force: Vector3::new(0.0, 150.0, 9.81),
+            })
+            .collect();
+        odometry.push_imu(&stuck);
+        let sweep = sensors.sweep(1.4);
+        let e = odometry.process_scan(1.4, &sweep.points, Some(&sweep.times)).expect("accepted");
+        assert!(
+            matches!(e.outcome, ScanOutcome::Reset { .. }),
+            "{:?} at {} m/s, {:?}",
+            e.outcome,
+            e.velocity,
+            e.odom_from_body.translation
+        );
+        assert!(finite_pose(&e.odom_from_body) && e.velocity.norm() == 0.0);
+        assert_eq!(odometry.counts().resets, 1);
+        // The IMU is sane again: the scans after register.
+        odometry.push_imu(&sensors.imu_until(1.6));
+        let sweep = sensors.sweep(1.5);
+        let next = odometry.process_scan(1.5, &sweep.points, Some(&sweep.times)).expect("accepted");
+        assert!(matches!(next.outcome, ScanOutcome::Registered { .. }), "{:?}", next.outcome);
+    }
+}
