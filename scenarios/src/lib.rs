@@ -8,6 +8,7 @@
 //! the virtual clock) → `result_bag` → [`runner`], [`replay`].
 
 pub mod bag_out;
+pub mod front_end;
 pub mod memory;
 pub mod object_file;
 pub mod observation;

@@ -269,6 +269,20 @@ enum BenchCommand {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// SGM's LiDAR-inertial front end on the simulated sweeps and IMU of outdoor, indoor,
+    /// legged and handheld scenarios: drift (KITTI's metric) against the synthetic odometry,
+    /// CPU time per frame.
+    Odometry {
+        /// Cut each mission to this many simulated seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Only the scenarios whose names contain this.
+        #[arg(long)]
+        only: Option<String>,
+        /// Also write the table as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// Wrong inter-robot closures, 0–90 % of them, gross and subtle: team ATE against the clean
     /// run, and how many the back end (PCM, then GNC-TLS) rejected.
     Outliers {
@@ -427,6 +441,10 @@ fn main() -> ExitCode {
         Command::Bench { which: BenchCommand::Realism { duration, only, seeds, json } } => {
             let options = bench::realism::Options { duration, only: only.as_deref(), seeds };
             emit("realism", bench::realism::run_bench(&options), json.as_deref())
+        }
+        Command::Bench { which: BenchCommand::Odometry { duration, only, json } } => {
+            let options = bench::odometry::Options { duration, only: only.as_deref() };
+            emit("odometry", bench::odometry::run_bench(&options), json.as_deref())
         }
         Command::Bench { which: BenchCommand::All { out, reps, duration } } => {
             match bench::all::run_bench(bench::all::Options { out, reps, duration }) {

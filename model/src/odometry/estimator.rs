@@ -207,7 +207,9 @@ impl LidarInertialOdometry {
         };
         let state = NavState { gyro_bias, ..NavState::at_rest(rotation, Vector3::zeros()) };
         let tilt = c.initial_tilt_sigma_rad.powi(2);
-        let velocity = if still { 1e-4 } else { c.initial_velocity_sigma_mps.powi(2) };
+        // An IMU cannot tell rest from constant velocity: the velocity is unknown at start
+        // whatever the samples say, and the first scans measure it.
+        let velocity = c.initial_velocity_sigma_mps.powi(2);
         let mut p = Matrix15::zeros();
         for (k, v) in [
             tilt,

@@ -7,6 +7,7 @@ pub mod baselines;
 pub mod matching;
 pub mod matching_hard;
 pub mod messages;
+pub mod odometry;
 pub mod outliers;
 pub mod realism;
 pub mod sweeps;
