@@ -160,13 +160,12 @@ mod tests {
     fn the_front_end_is_deterministic_and_refuses_a_robot_that_is_not_there() {
         let scenario = legged();
         let config = OdometryConfig::default();
-        let a = run_front_end(&scenario, 0, &config, Some(1.0), Some(0.1)).expect("runs");
-        let b = run_front_end(&scenario, 0, &config, Some(1.0), Some(0.1)).expect("runs");
-        assert_eq!(a.frames.len(), 10);
-        assert!(
-            a.frames.iter().skip(1).all(|f| f.estimate.is_some()),
-            "every sweep after the first IMU second is taken"
-        );
+        let a = run_front_end(&scenario, 0, &config, Some(1.5), Some(0.1)).expect("runs");
+        let b = run_front_end(&scenario, 0, &config, Some(1.5), Some(0.1)).expect("runs");
+        assert_eq!(a.frames.len(), 15);
+        // Gravity needs a second of samples (`level_window_s`); every sweep after is taken.
+        let taken: Vec<bool> = a.frames.iter().map(|f| f.estimate.is_some()).collect();
+        assert_eq!(taken, (1..=15).map(|k| k >= 10).collect::<Vec<_>>());
         let poses = |r: &FrontEndRun| r.frames.iter().map(|f| f.estimate).collect::<Vec<_>>();
         assert_eq!(poses(&a), poses(&b));
         assert_eq!(a.counts, b.counts);

@@ -197,11 +197,14 @@ impl ImuQueue {
     }
 
     /// Gravity from the samples of the last `window_s` up to `until`; none with fewer than
-    /// `min_samples`.
+    /// `min_samples`, or before the samples span (nine tenths of) the window.
     pub fn level(&self, until: f64, window_s: f64, min_samples: usize) -> Option<Level> {
         let taken: Vec<&ImuSample> =
             self.pending.iter().filter(|s| s.stamp <= until && s.stamp >= until - window_s).collect();
-        if taken.len() < min_samples.max(1) {
+        // The whole window: a gait's or a vehicle's accelerations average out over seconds, not
+        // over a fraction of a stride (a legged robot's trunk swings by ±1 g at 4 Hz).
+        let span = taken.last().zip(taken.first()).map_or(0.0, |(b, a)| b.stamp - a.stamp);
+        if taken.len() < min_samples.max(1) || span < 0.9 * window_s {
             return None;
         }
         let n = taken.len() as f64;
@@ -354,11 +357,12 @@ mod tests {
                 specific_force: truth.inverse() * Vector3::z() * 9.81,
             });
         }
-        let level = q.level(0.5, 1.0, 20).expect("enough samples");
+        let level = q.level(0.5, 0.5, 20).expect("enough samples");
         assert!(level.rotation.angle_to(&truth) < 1e-9, "{:?}", level.rotation.euler_angles());
         assert!(level.still);
         assert!((level.gyro_bias.expect("still") - bias).norm() < 1e-12);
-        assert!(q.level(0.05, 1.0, 20).is_none(), "11 samples are too few");
+        assert!(q.level(0.05, 1.0, 5).is_none(), "0.05 s of samples do not span the window");
+        assert!(q.level(0.5, 0.5, 200).is_none(), "101 samples are too few");
     }
 
     #[test]
