@@ -4,7 +4,7 @@
 //! The modules, lowest first; each uses only those above it (`tests/tests/layering.rs` holds
 //! it): `memory`, `object_file`, `observation`, `settings` → [`scenario`] (scenario files, the
 //! class shapes they name) → [`sim`] (world, sensors, radio) → [`record`] (what a run
-//! observed), `bag_out` → [`report`] (figures from a record), [`team`] (the robots stepped on
+//! observed), `bag_out`, [`front_end`] (the odometry alone on simulated sensors) → [`report`] (figures from a record), [`team`] (the robots stepped on
 //! the virtual clock) → `result_bag` → [`runner`], [`replay`].
 
 pub mod bag_out;
