@@ -11,19 +11,13 @@ use crate::sim::imu::Imu;
 use crate::sim::lidar::Lidar;
 use crate::sim::mount::LidarMount;
 use crate::sim::odometry::Odometry;
-use crate::sim::people::People;
-use crate::sim::platform::Motion;
-use crate::sim::terrain::Terrain;
-use crate::sim::trajectory::Route;
-use crate::sim::world::generate;
-use nalgebra::Point2;
+use crate::sim::setup::{sweep_in_body, SimulatedWorld};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sgm_model::geometry::Pose3;
 use sgm_model::odometry::config::OdometryConfig;
 use sgm_model::odometry::estimator::{LidarInertialOdometry, OdometryCounts, ScanOutcome};
 use sgm_model::odometry::propagation::ImuNoise;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// One frame: the stamp, the estimate (None: refused), the truth and the synthetic odometry.
@@ -80,21 +74,7 @@ pub fn run_front_end(
         return Err(FrontEndError::NoSuchRobot { robots: scenario.robots.len(), index: k });
     }
     let seed = scenario.scenario.seed;
-    let [sx, sy] = scenario.world.size_m;
-    let terrain = Arc::new(Terrain::generate(&scenario.terrain, [-sx / 2.0, -sy / 2.0, sx / 2.0, sy / 2.0], seed));
-    let routes: Vec<Route> = scenario
-        .robots
-        .iter()
-        .enumerate()
-        .map(|(j, r)| {
-            let motion = Motion::new(terrain.clone(), r.platform, &scenario.platforms, r.sensor_height_m, j, seed);
-            Route::of(r, j, seed).with_motion(motion)
-        })
-        .collect();
-    let paths: Vec<Vec<Point2<f64>>> = routes.iter().map(|r| r.points.clone()).collect();
-    let mut world = generate(&scenario.world, &scenario.fusion.classes, &paths, seed);
-    world.settle_on(terrain);
-    let people = People::of_scenario(scenario, &world, &paths);
+    let SimulatedWorld { routes, mut world, people } = SimulatedWorld::of(scenario);
     let route = &routes[k];
     let mut lidar = Lidar::new(&scenario.lidar);
     let mount = LidarMount::new(&scenario.lidar, seed, k);
@@ -114,15 +94,7 @@ pub fn run_front_end(
         people.place(&mut world, t);
         let odometry = synthetic.step(&truth, &mut rng);
         let samples = imu.samples_until(t + sweep_s, &|s| route.pose_at(s), &mut imu_rng);
-        let mut frame = if mount.at_body() {
-            lidar.sweep(&world, &|tau| route.pose_at(t + tau).unwrap_or(truth), &mut rng)
-        } else {
-            let body_from_lidar = mount.body_from_lidar;
-            let world_from_lidar = |tau| route.pose_at(t + tau).unwrap_or(truth) * body_from_lidar;
-            let mut frame = lidar.sweep(&world, &world_from_lidar, &mut rng);
-            frame.points.iter_mut().for_each(|p| *p = (body_from_lidar * *p).map(|v| f64::from(v as f32)));
-            frame
-        };
+        let mut frame = sweep_in_body(&mut lidar, &mount, &world, route, t, &truth, &mut rng);
         if let Some(told) = mount.as_told(&frame.points) {
             frame.points = told;
         }

@@ -21,17 +21,14 @@ use crate::sim::imu::Imu;
 use crate::sim::lidar::Lidar;
 use crate::sim::mount::LidarMount;
 use crate::sim::odometry::Odometry;
-use crate::sim::people::People;
-use crate::sim::platform::Motion;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
 use crate::sim::segmenter_errors::SegmenterErrors;
-use crate::sim::terrain::Terrain;
+use crate::sim::setup::{sweep_in_body, SimulatedWorld};
 use crate::sim::trajectory::Route;
-use crate::sim::world::{generate, NO_LABEL};
+use crate::sim::world::NO_LABEL;
 pub use crate::team::RunError;
 use crate::team::Team;
 use indicatif::ProgressBar;
-use nalgebra::Point2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sgm_actors::messages::{FrameLabels, SensorFrame};
@@ -39,7 +36,6 @@ use sgm_actors::transport::InProcessRadio;
 use sgm_model::geometry::Pose3;
 use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, LabelId, RobotId, Stamp};
 use std::path::Path;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 struct SimRobot {
@@ -92,21 +88,7 @@ pub async fn run_with(
     let bag_out = outputs.bag_out;
     let wall = Instant::now();
     let seed = scenario.scenario.seed;
-    let [sx, sy] = scenario.world.size_m;
-    let terrain = Arc::new(Terrain::generate(&scenario.terrain, [-sx / 2.0, -sy / 2.0, sx / 2.0, sy / 2.0], seed));
-    let routes: Vec<Route> = scenario
-        .robots
-        .iter()
-        .enumerate()
-        .map(|(k, r)| {
-            let motion = Motion::new(terrain.clone(), r.platform, &scenario.platforms, r.sensor_height_m, k, seed);
-            Route::of(r, k, seed).with_motion(motion)
-        })
-        .collect();
-    let paths: Vec<Vec<Point2<f64>>> = routes.iter().map(|r| r.points.clone()).collect();
-    let mut world = generate(&scenario.world, &scenario.fusion.classes, &paths, seed);
-    world.settle_on(terrain);
-    let people = People::of_scenario(scenario, &world, &paths);
+    let SimulatedWorld { routes, mut world, people } = SimulatedWorld::of(scenario);
     let segmenter_errors = SegmenterErrors::of_scenario(scenario);
     let shared = RadioShared::default();
     let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
@@ -211,16 +193,7 @@ pub async fn run_with(
                 None => Vec::new(),
             };
             let mount = robot.lidar_mount;
-            let mut frame = if mount.at_body() {
-                robot.lidar.sweep(&world, &|tau| route.pose_at(t + tau).unwrap_or(truth), &mut robot.rng)
-            } else {
-                let body_from_lidar = mount.body_from_lidar;
-                let world_from_lidar = |tau| route.pose_at(t + tau).unwrap_or(truth) * body_from_lidar;
-                let mut frame = robot.lidar.sweep(&world, &world_from_lidar, &mut robot.rng);
-                // The returns in the body frame (through the true mount), float32 as a driver's.
-                frame.points.iter_mut().for_each(|p| *p = (body_from_lidar * *p).map(|v| f64::from(v as f32)));
-                frame
-            };
+            let mut frame = sweep_in_body(&mut robot.lidar, &mount, &world, route, t, &truth, &mut robot.rng);
             if let Some(errors) = &segmenter_errors {
                 errors.apply(&mut frame, &truth, &mut robot.segmenter_rng);
             }

@@ -11,6 +11,7 @@ pub mod people;
 pub mod platform;
 pub mod radio;
 pub mod segmenter_errors;
+pub mod setup;
 pub mod shapes;
 pub mod terrain;
 pub mod trajectory;
