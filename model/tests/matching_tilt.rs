@@ -117,3 +117,19 @@ proptest! {
         }
     }
 }
+
+/// A case CI's random draw found (before the property tests ran from a fixed seed): a 0.54°
+/// tilt under ±0.2 m of noise is not significant to the refit, so the planar estimate keeps it
+/// (0.52° of pitch, 0.38 m at the objects) although the property allows leaving only tilts under
+/// 0.5°: the threshold is statistical, not sharp. Kept as the known limit (the book's
+/// limitations page), not yet fixed.
+#[test]
+#[ignore = "known limit: a tilt just above 0.5° under ±0.2 m of noise is left by the refit"]
+fn a_tilt_just_above_half_a_degree_under_noise() {
+    let objects = scene(25, 679);
+    let truth = tilted(0.0, 0.539_390_776_436_121_5, -1.284_471_233_659_202_8, Vector3::zeros());
+    let local = graph(&objects, &Pose3::identity(), (0.0, 0.0), 0);
+    let remote = graph(&objects, &truth.inverse(), (0.2, 0.1), 680);
+    let e = pose_error(&aligned(&local, &remote, &MatcherConfig::default()), &truth);
+    assert!(e.max_axis_rotation_deg() < 0.3, "{e:?}");
+}
