@@ -77,6 +77,17 @@ pub struct PlatformsSpec {
     pub sway_deg: f64,
     /// Translation sway amplitude of a handheld rig (each axis), m. Default 0.05.
     pub sway_m: f64,
+    /// Acceleration limit, along the path and across it in turns, m/s². Default 1.
+    pub accel_mps2: f64,
+    /// Radius of the arc that rounds each corner of a route (smaller where the legs are short;
+    /// 0: turn on the spot), m. Default 1.
+    pub turn_radius_m: f64,
+    /// Yaw rate limit, °/s. Default 60.
+    pub yaw_rate_dps: f64,
+    /// Yaw acceleration limit of a turn on the spot, °/s². Default 120.
+    pub yaw_accel_dps2: f64,
+    /// How long a robot stands still after it is switched on before it sets off, s. Default 2.
+    pub still_at_start_s: f64,
 }
 
 impl Default for PlatformsSpec {
@@ -89,6 +100,11 @@ impl Default for PlatformsSpec {
             gait_bounce_m: 0.02,
             sway_deg: 4.0,
             sway_m: 0.05,
+            accel_mps2: 1.0,
+            turn_radius_m: 1.0,
+            yaw_rate_dps: 60.0,
+            yaw_accel_dps2: 120.0,
+            still_at_start_s: 2.0,
         }
     }
 }

@@ -96,6 +96,21 @@ impl Scenario {
         check(within(p.gait_bounce_m, 0.0, 0.3), "platforms.gait_bounce_m", p.gait_bounce_m, "0 ≤ x ≤ 0.3 m")?;
         check(within(p.sway_deg, 0.0, 30.0), "platforms.sway_deg", p.sway_deg, "0 ≤ x ≤ 30°")?;
         check(within(p.sway_m, 0.0, 1.0), "platforms.sway_m", p.sway_m, "0 ≤ x ≤ 1 m")?;
+        check(within(p.accel_mps2, 0.05, 20.0), "platforms.accel_mps2", p.accel_mps2, "0.05 ≤ x ≤ 20 m/s²")?;
+        check(within(p.turn_radius_m, 0.0, 50.0), "platforms.turn_radius_m", p.turn_radius_m, "0 ≤ x ≤ 50 m")?;
+        check(within(p.yaw_rate_dps, 1.0, 720.0), "platforms.yaw_rate_dps", p.yaw_rate_dps, "1 ≤ x ≤ 720 °/s")?;
+        check(
+            within(p.yaw_accel_dps2, 1.0, 7200.0),
+            "platforms.yaw_accel_dps2",
+            p.yaw_accel_dps2,
+            "1 ≤ x ≤ 7200 °/s²",
+        )?;
+        check(
+            within(p.still_at_start_s, 0.0, 600.0),
+            "platforms.still_at_start_s",
+            p.still_at_start_s,
+            "0 ≤ x ≤ 600 s",
+        )?;
 
         let i = &self.imu;
         check(

@@ -111,7 +111,7 @@ mod tests {
             ..RobotSpec::default()
         };
         let motion = Motion::new(terrain, Platform::Legged, &PlatformsSpec::default(), 0.5, 0, 2);
-        Route::of(&spec, 0, 2).with_motion(motion)
+        Route::of(&spec, 0, 2, &PlatformsSpec::default()).with_motion(motion)
     }
 
     #[test]

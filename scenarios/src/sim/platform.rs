@@ -7,7 +7,9 @@
 //!   pitch θ = −atan((h_f − h_r)/L) (nose up is negative about y), roll φ = atan((h_l − h_r′)/W),
 //!   and the sensor sits at the contacts' mean height plus R(φ, θ, ψ)·(0, 0, sensor height).
 //! - **Legged**: as wheeled, and while it walks the gait adds A·sin(2πft + φ₀) to roll,
-//!   A·sin(4πft + φ₁) to pitch and b·sin(4πft + φ₂) to the height (f = `gait_hz`).
+//!   A·sin(4πft + φ₁) to pitch and b·sin(4πft + φ₂) to the height (f = `gait_hz`), with A and b
+//!   scaled by how far it is under way (speed over cruise speed, or turn rate over the limit on
+//!   the spot), so the gait grows from standing without a jump.
 //! - **Handheld**: the ground's height under it, and on each of the six axes a sway of two
 //!   seeded sines (0.2–0.5 Hz and 0.7–1.3 Hz, weights 0.6 and 0.4), also when standing.
 
@@ -73,9 +75,10 @@ impl Motion {
         self.terrain.is_flat() && self.platform == Platform::Wheeled
     }
 
-    /// The body's pose at `position` heading `yaw` at time `t`; `walking`: the robot is under
-    /// way (a standing legged robot does not sway).
-    pub fn pose(&self, position: Point2<f64>, yaw: f64, t: f64, walking: bool) -> Pose3 {
+    /// The body's pose at `position` heading `yaw` at time `t`; `gait`: how far the robot is
+    /// under way, 0 (standing: a legged robot does not sway) to 1 (at its speed or turn rate:
+    /// the gait's full amplitude).
+    pub fn pose(&self, position: Point2<f64>, yaw: f64, t: f64, gait: f64) -> Pose3 {
         let ground = |forward: f64, left: f64| {
             let (s, c) = yaw.sin_cos();
             self.terrain.height(position.x + c * forward - s * left, position.y + s * forward + c * left)
@@ -90,11 +93,11 @@ impl Motion {
                 pitch = -((fl + fr - rl - rr) / 2.0).atan2(self.spec.wheelbase_m);
                 roll = ((fl + rl - fr - rr) / 2.0).atan2(self.spec.track_m);
                 height = (fl + fr + rl + rr) / 4.0;
-                if self.platform == Platform::Legged && walking {
-                    let (a, phase) = (self.spec.gait_amplitude_deg.to_radians(), TAU * self.spec.gait_hz * t);
+                if self.platform == Platform::Legged && gait > 0.0 {
+                    let (a, phase) = (gait * self.spec.gait_amplitude_deg.to_radians(), TAU * self.spec.gait_hz * t);
                     roll += a * (phase + self.gait_phases[0]).sin();
                     pitch += a * (2.0 * phase + self.gait_phases[1]).sin();
-                    offset.z += self.spec.gait_bounce_m * (2.0 * phase + self.gait_phases[2]).sin();
+                    offset.z += gait * self.spec.gait_bounce_m * (2.0 * phase + self.gait_phases[2]).sin();
                 }
             }
             Platform::Handheld => {
@@ -129,7 +132,7 @@ mod tests {
     fn on_flat_ground_a_wheeled_body_is_level_at_its_sensor_height() {
         let m = on(Terrain::flat(), Platform::Wheeled);
         assert!(m.is_planar());
-        let p = m.pose(Point2::new(3.0, -1.0), 0.7, 12.0, true);
+        let p = m.pose(Point2::new(3.0, -1.0), 0.7, 12.0, 1.0);
         assert!((p.translation.vector - Vector3::new(3.0, -1.0, 0.8)).norm() < 1e-12);
         assert!(p.rotation.angle_to(&UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7)) < 1e-12);
     }
@@ -140,14 +143,14 @@ mod tests {
         let m = on(incline(slope), Platform::Wheeled);
         assert!(!m.is_planar());
         // Heading up the slope: pitched nose up by the slope (negative about y), no roll.
-        let up = m.pose(Point2::new(2.0, 0.0), 0.0, 0.0, true);
+        let up = m.pose(Point2::new(2.0, 0.0), 0.0, 0.0, 1.0);
         let (roll, pitch, yaw) = up.rotation.euler_angles();
         assert!(roll.abs() < 1e-9 && (pitch + slope).abs() < 1e-9 && yaw.abs() < 1e-9, "{roll} {pitch} {yaw}");
         // The sensor is 0.8 m from the ground along the body's z.
         let ground = Vector3::new(2.0, 0.0, 2.0 * slope.tan());
         assert!((up.translation.vector - ground - up.rotation * Vector3::z() * 0.8).norm() < 1e-9);
         // Heading across it (slope rising to the right): rolled right side up, no pitch.
-        let across = m.pose(Point2::new(2.0, 0.0), std::f64::consts::FRAC_PI_2, 0.0, true);
+        let across = m.pose(Point2::new(2.0, 0.0), std::f64::consts::FRAC_PI_2, 0.0, 1.0);
         let (roll, pitch, _) = across.rotation.euler_angles();
         assert!((roll + slope).abs() < 1e-9 && pitch.abs() < 1e-9, "{roll} {pitch}");
     }
@@ -157,14 +160,14 @@ mod tests {
         let m = on(Terrain::flat(), Platform::Legged);
         let amplitude = PlatformsSpec::default().gait_amplitude_deg.to_radians();
         let rolls: Vec<f64> = (0..200)
-            .map(|k| m.pose(Point2::origin(), 0.0, f64::from(k) * 0.01, true).rotation.euler_angles().0)
+            .map(|k| m.pose(Point2::origin(), 0.0, f64::from(k) * 0.01, 1.0).rotation.euler_angles().0)
             .collect();
         let peak = rolls.iter().fold(0.0f64, |a, r| a.max(r.abs()));
         assert!(peak <= amplitude + 1e-9 && peak > 0.95 * amplitude, "{peak}");
         // Roll at 2 Hz: a period of 0.5 s.
-        let period = m.pose(Point2::origin(), 0.0, 0.5, true).rotation.euler_angles().0;
+        let period = m.pose(Point2::origin(), 0.0, 0.5, 1.0).rotation.euler_angles().0;
         assert!((period - rolls[0]).abs() < 1e-9);
-        let standing = m.pose(Point2::origin(), 0.0, 0.3, false);
+        let standing = m.pose(Point2::origin(), 0.0, 0.3, 0.0);
         assert!((standing.translation.vector - Vector3::new(0.0, 0.0, 0.8)).norm() < 1e-12);
     }
 
@@ -174,7 +177,7 @@ mod tests {
         let spec = PlatformsSpec::default();
         let (mut moved, mut turned) = (0.0f64, 0.0f64);
         for k in 0..2000 {
-            let p = m.pose(Point2::origin(), 0.0, f64::from(k) * 0.05, false);
+            let p = m.pose(Point2::origin(), 0.0, f64::from(k) * 0.05, 0.0);
             let (r, pi, y) = p.rotation.euler_angles();
             for a in [r, pi, y] {
                 assert!(a.abs() <= spec.sway_deg.to_radians() + 1e-9);

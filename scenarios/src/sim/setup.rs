@@ -11,7 +11,7 @@ use crate::sim::platform::Motion;
 use crate::sim::terrain::Terrain;
 use crate::sim::trajectory::Route;
 use crate::sim::world::{generate, World};
-use nalgebra::Point2;
+use nalgebra::{Point2, Vector3};
 use rand::Rng;
 use sgm_model::geometry::Pose3;
 use std::sync::Arc;
@@ -33,7 +33,7 @@ impl SimulatedWorld {
             .enumerate()
             .map(|(k, r)| {
                 let motion = Motion::new(terrain.clone(), r.platform, &scenario.platforms, r.sensor_height_m, k, seed);
-                Route::of(r, k, seed).with_motion(motion)
+                Route::of(r, k, seed, &scenario.platforms).with_motion(motion)
             })
             .collect();
         let paths: Vec<Vec<Point2<f64>>> = routes.iter().map(|r| r.points.clone()).collect();
@@ -64,4 +64,50 @@ pub fn sweep_in_body(
     let mut frame = lidar.sweep(world, &world_from_lidar, rng);
     frame.points.iter_mut().for_each(|p| *p = (body_from_lidar * *p).map(|v| f64::from(v as f32)));
     frame
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::ImuSpec;
+    use crate::sim::imu::Imu;
+
+    /// The largest body rate (rad/s) and the largest departure of the specific force from
+    /// gravity (m/s²) that each library scenario's robots go through, from noise-free samples.
+    fn envelope(name: &str) -> (f64, f64) {
+        let scenario = Scenario::load(name).expect("library scenario");
+        let sim = SimulatedWorld::of(&scenario);
+        let imu = Imu::new(&ImuSpec { rate_hz: 100.0, ..ImuSpec::default() });
+        let (mut rate, mut force) = (0.0f64, 0.0f64);
+        for route in &sim.routes {
+            let truth = |t: f64| route.pose_at(t);
+            let end = (route.arrival_s().min(scenario.scenario.duration_s) * 100.0) as i64;
+            for k in 0..end {
+                let Some(sample) = imu.true_sample(k, &truth) else { continue };
+                let Some(pose) = truth(sample.stamp) else { continue };
+                let gravity = pose.rotation.inverse() * Vector3::z() * 9.81;
+                rate = rate.max(sample.angular_velocity.amax());
+                force = force.max((sample.specific_force - gravity).amax());
+            }
+        }
+        (rate, force)
+    }
+
+    /// On flat ground the turn rate keeps within `platforms.yaw_rate_dps` (60°/s) and the
+    /// acceleration within `platforms.accel_mps2` (1 m/s²) along and across the path; gait,
+    /// sway and kerbs add to it, within what a MEMS IMU measures (±2000°/s, ±16 g): nothing
+    /// the simulator makes saturates the odometry's IMU.
+    #[test]
+    fn every_library_robot_moves_as_a_body_can() {
+        for name in ["quickstart", "outdoor_two_robots", "indoor_three_robots"] {
+            let (rate, force) = envelope(name);
+            assert!(rate <= 60f64.to_radians() + 1e-6, "{name}: {rate} rad/s");
+            assert!(force <= 2f64.sqrt() + 1e-6, "{name}: {force} m/s²");
+        }
+        for name in ["legged_campus", "handheld_indoor"] {
+            let (rate, force) = envelope(name);
+            assert!(rate <= 3.0, "{name}: {rate} rad/s");
+            assert!(force <= 16.0 * 9.81, "{name}: {force} m/s²");
+        }
+    }
 }
