@@ -7,10 +7,10 @@ use sgm_model::scene_graph::{LabelId, SceneGraph};
 use sgm_scenarios::runner::run;
 use sgm_scenarios::scenario::Scenario;
 
-/// Quickstart, shortened, with `people` walking.
+/// Quickstart cut to 60 s (the robots set off at 2 s and slow for corners), with `people` walking.
 fn scenario(people: usize) -> Scenario {
     let text = sgm_scenarios::scenario::library::get("quickstart").expect("in the library");
-    let text = text.replace("duration_s = 90.0", "duration_s = 50.0");
+    let text = text.replace("duration_s = 90.0", "duration_s = 60.0");
     let text = format!("{text}\n[segmentation]\npeople = {people}\n");
     Scenario::from_toml(&text, "people.toml", "SGM_PEOPLE_TEST").expect("loads")
 }

@@ -38,15 +38,16 @@
 //! translation blocks (units differ), has an eigenvalue per direction; a direction whose
 //! eigenvalue is below `weak_rotation_ratio` / `weak_translation_ratio` times its block's
 //! largest is one the scan does not
-//! constrain — the axis of a corridor, the plane of an open field. There the prior decides, as
-//! it should: without one the step along it is whatever noise says. The weak directions are
-//! reported, and with a prior the solution is remapped (Zhang et al. §IV): the registered pose's
-//! departure from the prediction is kept only off the weak axes, and the scan's Hessian returned
-//! without them, so that what little the scan says there — a plane fitted a hair off a
-//! corridor's axis, the map's sampling — does not drag the estimate against the IMU: the prior
-//! alone decides a weak direction. The test is made once, on the converged Hessian: weak axes
-//! decided per iteration, while the correspondences still move, switch on and off and can walk
-//! the iteration into a wrong minimum.
+//! constrain — the axis of a corridor, the plane of an open field. The weak directions are
+//! reported, and nothing more is done about them here: the prior is in the same solve, weighted
+//! by its information, so where the scan says little the prediction decides, and where the
+//! scan says a little (trees on an open campus) both count. Solution remapping (Zhang et al.
+//! §IV: keep the prediction along the weak axes and drop the scan's information there) was
+//! tried and removed: on `outdoor_two_robots` the campus's horizontal directions measure 1–4 %
+//! of the ground's vertical, so it handed the horizontal plane to the IMU alone, and the end
+//! error over 60 m was 57 % against 0.04 % without it (`sgm bench odometry --duration 60`);
+//! the corridors of the tests are held as well without it. The test is made once, on the
+//! converged Hessian.
 
 use super::local_map::LocalMap;
 use crate::geometry::lie::{hat, se3_adjoint, se3_exp, se3_log, se3_right_jacobian_inverse, Matrix6, Tangent3};
@@ -189,43 +190,15 @@ pub fn left_from_error(pose: &Pose3) -> Matrix6 {
 
 /// The degeneracy of the scan Hessian `h` at `pose`, measured on a body-centred rotation
 /// (Mᵀ H M: in the left perturbation a rotation turns about the map's origin, and its block grows
-/// with the distance from it), and P: the projector off the weak axes, in the error's
-/// coordinates a.
-fn degeneracy_of(h: &Matrix6, pose: &Pose3, config: &RegistrationConfig) -> (Degeneracy, Matrix6) {
+/// with the distance from it).
+fn degeneracy_of(h: &Matrix6, pose: &Pose3, config: &RegistrationConfig) -> Degeneracy {
     let m = left_from_error(pose);
     let in_error = m.transpose() * h * m;
     let (rotation_eigenvalues, weak_rotations) =
         weak_axes(in_error.fixed_view::<3, 3>(0, 0).into_owned(), config.weak_rotation_ratio);
     let (translation_eigenvalues, weak_translations) =
         weak_axes(in_error.fixed_view::<3, 3>(3, 3).into_owned(), config.weak_translation_ratio);
-    let mut p = Matrix6::identity();
-    for v in &weak_rotations {
-        let mut block = p.fixed_view_mut::<3, 3>(0, 0);
-        block -= v * v.transpose();
-    }
-    for v in &weak_translations {
-        let mut block = p.fixed_view_mut::<3, 3>(3, 3);
-        block -= v * v.transpose();
-    }
-    (Degeneracy { rotation_eigenvalues, translation_eigenvalues, weak_rotations, weak_translations }, p)
-}
-
-/// Solution remapping (Zhang et al. §IV): the registered pose's departure from the prediction,
-/// a* = (Log(R̂ᵀR*), p* − p̂), kept only off the weak axes, a = P a*; and the scan's Hessian
-/// without them, H' = M⁻ᵀ P Mᵀ H M P M⁻¹ (at the remapped pose).
-fn remapped(h: &Matrix6, pose: &Pose3, prediction: &Pose3, p: &Matrix6) -> (Pose3, Matrix6) {
-    let dtheta = (prediction.rotation.inverse() * pose.rotation).scaled_axis();
-    let dp = pose.translation.vector - prediction.translation.vector;
-    let a = p * Tangent3::new(dtheta.x, dtheta.y, dtheta.z, dp.x, dp.y, dp.z);
-    let rotation = prediction.rotation * nalgebra::UnitQuaternion::from_scaled_axis(Vector3::new(a[0], a[1], a[2]));
-    let at = Pose3::from_parts(
-        nalgebra::Translation3::from(prediction.translation.vector + Vector3::new(a[3], a[4], a[5])),
-        rotation,
-    );
-    let m = left_from_error(&at);
-    let Some(m_inv) = m.try_inverse() else { return (at, *h) };
-    let projected = m_inv.transpose() * p * m.transpose() * h * m * p * m_inv;
-    (at, (projected + projected.transpose()) * 0.5)
+    Degeneracy { rotation_eigenvalues, translation_eigenvalues, weak_rotations, weak_translations }
 }
 
 /// Registers `points_in_body` onto `map` from `initial` (see the module notes).
@@ -298,10 +271,7 @@ pub fn register_scan(
             break;
         }
     }
-    let (degeneracy, projector) = degeneracy_of(&h_scan, &pose, config);
-    if let (Some(prior), true) = (prior, degeneracy.is_degenerate()) {
-        (pose, h_scan) = remapped(&h_scan, &pose, &prior.map_from_body, &projector);
-    }
+    let degeneracy = degeneracy_of(&h_scan, &pose, config);
     Ok(Registration { map_from_body: pose, converged, iterations, correspondences, degeneracy, scan_hessian: h_scan })
 }
 

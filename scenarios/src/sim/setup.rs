@@ -11,7 +11,7 @@ use crate::sim::platform::Motion;
 use crate::sim::terrain::Terrain;
 use crate::sim::trajectory::Route;
 use crate::sim::world::{generate, World};
-use nalgebra::{Point2, Vector3};
+use nalgebra::Point2;
 use rand::Rng;
 use sgm_model::geometry::Pose3;
 use std::sync::Arc;
@@ -71,6 +71,7 @@ mod tests {
     use super::*;
     use crate::scenario::ImuSpec;
     use crate::sim::imu::Imu;
+    use nalgebra::Vector3;
 
     /// The largest body rate (rad/s) and the largest departure of the specific force from
     /// gravity (m/s²) that each library scenario's robots go through, from noise-free samples.

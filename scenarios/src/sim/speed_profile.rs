@@ -108,7 +108,7 @@ impl Profile {
     /// Where the robot is `tau` seconds after it set off (at its start before, at its end
     /// after); `None` for an empty path.
     pub fn at(&self, tau: f64) -> Option<Progress> {
-        let Some(last) = self.extents.len().checked_sub(1) else { return None };
+        let last = self.extents.len().checked_sub(1)?;
         let k = self.phases.partition_point(|p| p.start_s <= tau);
         let Some(phase) = k.checked_sub(1).and_then(|k| self.phases.get(k)) else {
             let piece = self.phases.first().map_or(0, |p| p.piece);

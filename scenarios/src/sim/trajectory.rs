@@ -80,7 +80,8 @@ impl Route {
         let (p, yaw) = piece.at(progress.along);
         Some(match &self.motion {
             Some(motion) => {
-                let top = if matches!(piece, Piece::Spin { .. }) { self.limits.yaw_rate_rps } else { self.limits.speed_mps };
+                let top =
+                    if matches!(piece, Piece::Spin { .. }) { self.limits.yaw_rate_rps } else { self.limits.speed_mps };
                 motion.pose(p, yaw, t, (progress.rate / top).clamp(0.0, 1.0))
             }
             None => pose_from_yaw_translation(yaw, Vector3::new(p.x, p.y, self.height_m)),
