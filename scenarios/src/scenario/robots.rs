@@ -23,13 +23,14 @@ pub struct RobotSpec {
     pub waypoints: Vec<[f64; 2]>,
     /// A generated route (seeded): the robot starts at a random point of the region.
     pub route: Option<RouteSpec>,
-    /// Default 1.5 m/s.
+    /// Cruise speed (from and to rest, slower on tight arcs: `[platforms]`). Default 1.5 m/s.
     pub speed_mps: f64,
     /// Height of the LiDAR above the ground, m. Default 0.8.
     pub sensor_height_m: f64,
     /// What carries the sensors: `wheeled`, `legged` or `handheld`. Default `wheeled`.
     pub platform: Platform,
-    /// The robot is switched on at this time, s. Default 0.
+    /// The robot is switched on at this time (it sets off `platforms.still_at_start_s` later), s.
+    /// Default 0.
     pub start_s: f64,
     /// SGM on this robot crashes at this time, s: its actors and everything they held are
     /// gone (the vehicle and its odometry drive on). Default none.
