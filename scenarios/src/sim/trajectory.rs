@@ -70,20 +70,24 @@ impl Route {
         self.sets_off_s + self.profile.duration_s()
     }
 
-    /// True pose of the body (sensor) at time `t`; `None` before the robot starts.
+    /// True pose of the body (sensor) at time `t`; `None` before the robot starts. Waypoints that
+    /// are all one point make no path: the robot stands there, heading along x.
     pub fn pose_at(&self, t: f64) -> Option<Pose3> {
         if t < self.start_s {
             return None;
         }
-        let progress = self.profile.at(t - self.sets_off_s)?;
-        let piece = self.pieces.get(progress.piece)?;
-        let (p, yaw) = piece.at(progress.along);
-        Some(match &self.motion {
-            Some(motion) => {
+        let (p, yaw, gait) = match self.profile.at(t - self.sets_off_s) {
+            Some(progress) => {
+                let piece = self.pieces.get(progress.piece)?;
+                let (p, yaw) = piece.at(progress.along);
                 let top =
                     if matches!(piece, Piece::Spin { .. }) { self.limits.yaw_rate_rps } else { self.limits.speed_mps };
-                motion.pose(p, yaw, t, (progress.rate / top).clamp(0.0, 1.0))
+                (p, yaw, (progress.rate / top).clamp(0.0, 1.0))
             }
+            None => (*self.points.first()?, 0.0, 0.0),
+        };
+        Some(match &self.motion {
+            Some(motion) => motion.pose(p, yaw, t, gait),
             None => pose_from_yaw_translation(yaw, Vector3::new(p.x, p.y, self.height_m)),
         })
     }
@@ -123,5 +127,15 @@ mod tests {
         let end = r.pose_at(r.arrival_s() + 1.0).unwrap();
         assert!((end.translation.vector - Vector3::new(10.0, 10.0, 0.8)).norm() < 1e-9);
         assert!((sgm_model::geometry::yaw_of(&end) - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn waypoints_that_are_one_point_park_the_robot_there() {
+        let spec = RobotSpec { waypoints: vec![[3.0, 4.0], [3.0, 4.0]], ..RobotSpec::default() };
+        let r = Route::of(&spec, 0, 1, &PlatformsSpec::default());
+        for t in [0.0, 10.0, 100.0] {
+            let p = r.pose_at(t).expect("on from its start");
+            assert!((p.translation.vector - Vector3::new(3.0, 4.0, 0.8)).norm() < 1e-12, "{t}");
+        }
     }
 }
