@@ -6,6 +6,7 @@
 //! simulated with the scenario's `[imu]` noise whether or not the scenario turns it on (the
 //! internal front end needs it); the estimator is told the same densities.
 
+use crate::bag_out::{BagRecorder, RecordedFrame};
 use crate::scenario::Scenario;
 use crate::sim::imu::Imu;
 use crate::sim::lidar::Lidar;
@@ -59,6 +60,8 @@ pub enum FrontEndError {
     NoSuchRobot { robots: usize, index: usize },
     #[error(transparent)]
     Config(#[from] sgm_model::odometry::config::OdometryConfigError),
+    #[error(transparent)]
+    Output(#[from] crate::output_error::OutputError),
 }
 
 /// Runs the front end on robot `k` of `scenario` for its whole mission (or `seconds`), a sweep
@@ -69,6 +72,20 @@ pub fn run_front_end(
     config: &OdometryConfig,
     seconds: Option<f64>,
     frame_interval_s: Option<f64>,
+) -> Result<FrontEndRun, FrontEndError> {
+    run_front_end_recording(scenario, k, config, seconds, frame_interval_s, None)
+}
+
+/// [`run_front_end`], and every sweep it takes, with its points' times, the IMU's samples, the
+/// synthetic odometry and the truth, written to `bag_dir/NAME.bag` as `sgm run --bag-out`
+/// writes them (for another odometry to run on the same data: `benches/compare_kiss_icp.sh`).
+pub fn run_front_end_recording(
+    scenario: &Scenario,
+    k: usize,
+    config: &OdometryConfig,
+    seconds: Option<f64>,
+    frame_interval_s: Option<f64>,
+    bag_dir: Option<&std::path::Path>,
 ) -> Result<FrontEndRun, FrontEndError> {
     if k >= scenario.robots.len() {
         return Err(FrontEndError::NoSuchRobot { robots: scenario.robots.len(), index: k });
@@ -88,6 +105,11 @@ pub fn run_front_end(
     let steps = (duration / dt).round() as u64;
     let sweep_s = scenario.lidar.sweep_s;
     let (mut frames, mut estimator_time, mut points) = (Vec::new(), Duration::ZERO, 0usize);
+    let names = (0..scenario.robots.len()).map(|j| scenario.robot_name(j)).collect();
+    let mut recorder = match bag_dir {
+        Some(dir) => Some(BagRecorder::new(dir, &scenario.ros, names)?.with_imu(&scenario.imu)),
+        None => None,
+    };
     for step in 1..=steps {
         let t = step as f64 * dt;
         let Some(truth) = route.pose_at(t) else { continue };
@@ -99,6 +121,19 @@ pub fn run_front_end(
             frame.points = told;
         }
         let times = (!frame.times.is_empty()).then_some(&frame.times[..]);
+        if let Some(recorder) = recorder.as_mut() {
+            let recorded = RecordedFrame {
+                t,
+                odometry: &odometry,
+                truth: &truth,
+                points: &frame.points,
+                labels: None,
+                image: None,
+                times,
+                imu: &samples,
+            };
+            recorder.record(k, recorded)?;
+        }
         points += frame.points.len();
         let started = Instant::now();
         estimator.push_imu(&samples);
@@ -109,6 +144,9 @@ pub fn run_front_end(
             Err(_) => (None, None),
         };
         frames.push(FrontEndFrame { t, estimate, outcome, truth, synthetic: odometry });
+    }
+    if let Some(recorder) = recorder {
+        recorder.finish()?;
     }
     let taken = frames.iter().filter(|f| f.estimate.is_some()).count().max(1);
     Ok(FrontEndRun {

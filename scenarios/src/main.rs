@@ -282,6 +282,10 @@ enum BenchCommand {
         /// Also write the table as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Write each scenario's sweeps, IMU and truth as a ROS 1 bag (and our estimate and
+        /// the truth as TUM files) to DIR/SCENARIO/, for KISS-ICP (benches/compare_kiss_icp.sh).
+        #[arg(long, value_name = "DIR")]
+        bag_out: Option<PathBuf>,
     },
     /// Wrong inter-robot closures, 0–90 % of them, gross and subtle: team ATE against the clean
     /// run, and how many the back end (PCM, then GNC-TLS) rejected.
@@ -442,8 +446,8 @@ fn main() -> ExitCode {
             let options = bench::realism::Options { duration, only: only.as_deref(), seeds };
             emit("realism", bench::realism::run_bench(&options), json.as_deref())
         }
-        Command::Bench { which: BenchCommand::Odometry { duration, only, json } } => {
-            let options = bench::odometry::Options { duration, only: only.as_deref() };
+        Command::Bench { which: BenchCommand::Odometry { duration, only, json, bag_out } } => {
+            let options = bench::odometry::Options { duration, only: only.as_deref(), bag_out: bag_out.as_deref() };
             emit("odometry", bench::odometry::run_bench(&options), json.as_deref())
         }
         Command::Bench { which: BenchCommand::All { out, reps, duration } } => {

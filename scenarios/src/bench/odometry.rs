@@ -7,12 +7,15 @@
 //! figures do not depend on the thread count, the times do.
 
 use super::{duration_arg, load_cut, or_dash, Section};
+use anyhow::Context;
 use serde::Serialize;
 use sgm_model::eval::drift::{kitti_drift, Drift};
 use sgm_model::geometry::Pose3;
 use sgm_model::odometry::config::OdometryConfig;
-use sgm_scenarios::front_end::{run_front_end, FrontEndRun};
+use sgm_scenarios::front_end::{run_front_end_recording, FrontEndRun};
+use sgm_scenarios::report::tum;
 use std::fmt::Write;
+use std::path::Path;
 
 /// The scenarios the issue names: the paper's two environments and the unkind world's two.
 pub const SCENARIOS: [&str; 4] = ["outdoor_two_robots", "indoor_three_robots", "legged_campus", "handheld_indoor"];
@@ -84,6 +87,27 @@ fn row(name: &str, run: &FrontEndRun) -> Row {
 pub struct Options<'a> {
     pub duration: Option<f64>,
     pub only: Option<&'a str>,
+    /// Write each scenario's sweeps, IMU and truth as a ROS 1 bag, and our estimate and the
+    /// truth as TUM files, to `DIR/SCENARIO/` (`benches/compare_kiss_icp.sh` runs KISS-ICP on
+    /// the bags).
+    pub bag_out: Option<&'a Path>,
+}
+
+/// Our estimates (the frames the front end took) and the truth at every frame, as
+/// `NAME.ours.tum` and `NAME.truth.tum` in `dir`.
+fn write_tum(dir: &Path, run: &FrontEndRun) -> anyhow::Result<()> {
+    let (mut ours, mut truth) = (String::new(), String::new());
+    for frame in &run.frames {
+        if let Some(estimate) = &frame.estimate {
+            tum::line(&mut ours, frame.t, estimate);
+        }
+        tum::line(&mut truth, frame.t, &frame.truth);
+    }
+    for (suffix, text) in [("ours", ours), ("truth", truth)] {
+        let path = dir.join(format!("{}.{suffix}.tum", run.robot));
+        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
 }
 
 pub fn run_bench(options: &Options) -> anyhow::Result<Section> {
@@ -97,7 +121,12 @@ pub fn run_bench(options: &Options) -> anyhow::Result<Section> {
                 let config = config.clone();
                 scope.spawn(move || -> anyhow::Result<Row> {
                     let scenario = load_cut(name, options.duration)?;
-                    let run = run_front_end(&scenario, 0, &config, None, Some(LIDAR_INTERVAL_S))?;
+                    let dir = options.bag_out.map(|d| d.join(name));
+                    let run =
+                        run_front_end_recording(&scenario, 0, &config, None, Some(LIDAR_INTERVAL_S), dir.as_deref())?;
+                    if let Some(dir) = &dir {
+                        write_tum(dir, &run)?;
+                    }
                     eprintln!(
                         "{name}: {} frames, {:.1} ms per frame",
                         run.frames.len(),

@@ -8,7 +8,7 @@ pub mod ledger;
 mod map_cloud;
 mod markdown;
 pub mod plots;
-mod tum;
+pub mod tum;
 
 pub(crate) use figures::reference_from;
 pub use figures::{compute, series_point, AlignmentReport, MessageRow, Report, RobotReport};

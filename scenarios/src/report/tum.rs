@@ -12,7 +12,8 @@ use std::fmt::Write as _;
 /// Stamp shift between robots in the team files, s.
 pub const TEAM_STAMP_SHIFT_S: f64 = 100_000.0;
 
-fn line(out: &mut String, stamp: f64, pose: &Pose3) {
+/// One TUM line: `stamp tx ty tz qx qy qz qw`.
+pub fn line(out: &mut String, stamp: f64, pose: &Pose3) {
     let t = pose.translation.vector;
     let q = pose.rotation.coords; // (i, j, k, w)
     let _ = writeln!(out, "{stamp:.6} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}", t.x, t.y, t.z, q.x, q.y, q.z, q.w);
