@@ -104,6 +104,10 @@ impl Fusion {
     /// first refusal of each kind is logged).
     fn deskewed(&mut self, mut frame: SensorFrame, twist: Option<&Tangent3>) -> SensorFrame {
         let Some(deskewer) = self.deskewer.as_mut() else { return frame };
+        if frame.points_deskewed {
+            deskewer.count_upstream();
+            return frame;
+        }
         let before = deskewer.counts();
         let points = std::mem::take(&mut frame.points_in_body);
         let gyro = (self.gyro.counts().kept > 0).then_some((&self.gyro, frame.stamp));
@@ -186,6 +190,7 @@ impl Handler<SensorFrame> for Fusion {
             let frame = self.deskewed(frame, twist.as_ref());
             let labels = match &frame.labels {
                 FrameLabels::PerPoint(labels) => labels.clone(),
+                FrameLabels::Unlabelled => vec![None; frame.points_in_body.len()],
                 FrameLabels::Image { image, camera, camera_from_body, image_offset_s } => {
                     let camera_from_body = self.camera_for_scan(camera_from_body, *image_offset_s, twist.as_ref());
                     match label_points(&frame.points_in_body, &camera_from_body, camera, image) {

@@ -67,6 +67,7 @@ pub mod journal;
 pub mod map_view;
 pub mod matcher;
 pub mod messages;
+pub mod odometry;
 pub mod optimiser;
 pub mod progress;
 pub mod protocol;

@@ -29,6 +29,10 @@ pub enum FrameLabels {
         /// synchroniser compensates from the odometry at both stamps and sends 0.
         image_offset_s: f64,
     },
+    /// No labels: a sweep between labelled frames (the LiDAR turns faster than the camera
+    /// fires), for the internal odometry only. It registers the sweep and does not hand it on;
+    /// with an external odometry, Sensor drops it (counted).
+    Unlabelled,
 }
 
 /// One synchronised sensor frame: a LiDAR scan in the body frame, its labels, and the
@@ -43,6 +47,9 @@ pub struct SensorFrame {
     /// Each point's time after `stamp`, s, when the driver gives it (a sweep measured on the
     /// move): Fusion deskews the scan with it. `None`: the scan is used as it came.
     pub point_times: Option<Vec<f32>>,
+    /// The points are already in the body at `stamp` (the internal odometry deskewed them):
+    /// Fusion does not deskew them again, and counts them as deskewed upstream.
+    pub points_deskewed: bool,
     pub labels: FrameLabels,
     /// The IMU's samples since the previous frame, up to the end of this one's sweep (empty
     /// without an IMU): Fusion deskews with the gyro's rotation where they cover the sweep.

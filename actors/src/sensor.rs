@@ -1,6 +1,8 @@
 //! `Sensor`: frames in (scenario simulator, bag replay or the ROS bridge) → checked
-//! [`SensorFrame`]s to `Fusion`. A frame with a non-finite pose or stamp, a label count that does
-//! not match its points, or an out-of-order stamp is dropped and counted; the robot keeps running.
+//! [`SensorFrame`]s to `Odometry` (`odometry.source = "internal"`) or straight to `Fusion`. A
+//! frame with a non-finite pose or stamp, a label count that does not match its points, or an
+//! out-of-order stamp is dropped and counted, as is an unlabelled sweep when there is no internal
+//! odometry to take it; the robot keeps running.
 
 use crate::containment::contained;
 use crate::messages::SensorFrame;
@@ -8,7 +10,8 @@ use actix::{Actor, Context, Handler, Message, Recipient, Supervised};
 use sgm_model::scene_graph::Stamp;
 
 pub struct Sensor {
-    fusion: Recipient<SensorFrame>,
+    /// Odometry when internal, else Fusion.
+    next: Recipient<SensorFrame>,
     gate: FrameGate,
 }
 
@@ -21,9 +24,16 @@ pub struct GetDroppedFrames;
 pub struct FrameGate {
     last_stamp: Option<Stamp>,
     dropped: u64,
+    /// Whether unlabelled sweeps have a taker (the internal odometry).
+    takes_unlabelled: bool,
 }
 
 impl FrameGate {
+    /// A gate for a robot whose odometry is internal (`takes_unlabelled`) or external.
+    pub fn new(takes_unlabelled: bool) -> Self {
+        Self { takes_unlabelled, ..Self::default() }
+    }
+
     /// Lets `frame` through, or says why not (and counts it).
     pub fn admit(&mut self, frame: &SensorFrame) -> Result<(), &'static str> {
         let checked = self.check(frame);
@@ -52,18 +62,23 @@ impl FrameGate {
         if self.last_stamp.is_some_and(|t| frame.stamp <= t) {
             return Err("stamp not after the previous frame's");
         }
-        if let crate::messages::FrameLabels::PerPoint(labels) = &frame.labels {
-            if labels.len() != frame.points_in_body.len() {
+        match &frame.labels {
+            crate::messages::FrameLabels::PerPoint(labels) if labels.len() != frame.points_in_body.len() => {
                 return Err("label count differs from point count");
             }
+            crate::messages::FrameLabels::Unlabelled if !self.takes_unlabelled => {
+                return Err("an unlabelled sweep, and no internal odometry to take it");
+            }
+            _ => {}
         }
         Ok(())
     }
 }
 
 impl Sensor {
-    pub fn new(fusion: Recipient<SensorFrame>) -> Self {
-        Self { fusion, gate: FrameGate::default() }
+    /// `next`: the Odometry actor (`internal`: unlabelled sweeps are let through) or Fusion.
+    pub fn new(next: Recipient<SensorFrame>, internal_odometry: bool) -> Self {
+        Self { next, gate: FrameGate::new(internal_odometry) }
     }
 }
 
@@ -77,7 +92,7 @@ impl Handler<SensorFrame> for Sensor {
     type Result = ();
     fn handle(&mut self, frame: SensorFrame, ctx: &mut Context<Self>) {
         contained(ctx, "sensor", || match self.gate.admit(&frame) {
-            Ok(()) => self.fusion.do_send(frame),
+            Ok(()) => self.next.do_send(frame),
             Err(why) => tracing::warn!(stamp = frame.stamp, "sensor frame dropped: {why}"),
         });
     }
@@ -106,6 +121,7 @@ mod tests {
             odom_from_body: Pose3::identity(),
             points_in_body: vec![Point3::origin(); 2],
             point_times: None,
+            points_deskewed: false,
             labels: FrameLabels::PerPoint(vec![Some(LabelId(1)); labels]),
             imu: Vec::new(),
         }
@@ -126,5 +142,17 @@ mod tests {
         // A dropped frame does not move the gate: the next good stamp after 1.0 goes through.
         assert_eq!(gate.admit(&frame(1.5, 2)), Ok(()));
         assert_eq!(gate.dropped(), 5);
+    }
+
+    #[test]
+    fn unlabelled_sweeps_go_through_only_to_an_internal_odometry() {
+        let sweep = |stamp| SensorFrame { labels: FrameLabels::Unlabelled, ..frame(stamp, 2) };
+        let mut external = FrameGate::new(false);
+        assert_eq!(external.admit(&sweep(1.0)), Err("an unlabelled sweep, and no internal odometry to take it"));
+        assert_eq!(external.dropped(), 1);
+        let mut internal = FrameGate::new(true);
+        assert_eq!(internal.admit(&sweep(1.0)), Ok(()));
+        assert_eq!(internal.admit(&frame(1.1, 2)), Ok(()));
+        assert_eq!(internal.dropped(), 0);
     }
 }

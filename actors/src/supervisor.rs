@@ -9,10 +9,11 @@
 
 use crate::clock::Clock;
 use crate::comms::{Comms, CommsLinks, CommsState};
-use crate::config::{Association, ConfigError, RobotConfig};
+use crate::config::{Association, ConfigError, OdometrySource, RobotConfig};
 use crate::fusion::Fusion;
 use crate::matcher::{Matcher, MatcherLinks, MatcherState};
 use crate::messages::{Connect, Freeze, Halt, Republish, SensorFrame, Tick};
+use crate::odometry::{Odometry, OdometryStage};
 use crate::optimiser::{Optimiser, OptimiserLinks};
 use crate::progress::FrameProgress;
 use crate::sensor::Sensor;
@@ -33,6 +34,8 @@ pub struct RobotHandle {
     pub clock: Clock,
     pub supervisor: Addr<RobotSupervisor>,
     pub sensor: Addr<Sensor>,
+    /// The internal odometry (`odometry.source = "internal"`).
+    pub odometry: Option<Addr<Odometry>>,
     pub fusion: Addr<Fusion>,
     pub tracker: Addr<Tracker>,
     pub matcher: Addr<Matcher>,
@@ -174,8 +177,24 @@ pub fn start_robot_restored(
     let (fusion_config, fusion_classes) = (config.fusion.clone(), tracker_config_classes);
     let tracker_in = tracker.clone().recipient();
     let fusion = Supervisor::start(move |_| Fusion::new(&fusion_config, fusion_classes, label_map, tracker_in));
-    let fusion_in = fusion.clone().recipient();
-    let sensor = Supervisor::start(move |_| Sensor::new(fusion_in));
+    let odometry = match config.odometry.source {
+        OdometrySource::Internal => {
+            let stage = OdometryStage::new(config.odometry.estimator.clone()).map_err(|e| ConfigError::Invalid {
+                key: format!("odometry.estimator.{}", e.key),
+                value: e.value.to_string(),
+                allowed: e.allowed.into(),
+            })?;
+            let fusion_in = fusion.clone().recipient();
+            Some(Supervisor::start(move |_| Odometry::new(stage.clone(), fusion_in.clone())))
+        }
+        OdometrySource::External => None,
+    };
+    let sensor_next = match &odometry {
+        Some(odometry) => odometry.clone().recipient(),
+        None => fusion.clone().recipient(),
+    };
+    let internal = odometry.is_some();
+    let sensor = Supervisor::start(move |_| Sensor::new(sensor_next.clone(), internal));
 
     comms.do_send(Connect(CommsLinks {
         objects: matcher.clone().recipient(),
@@ -225,6 +244,7 @@ pub fn start_robot_restored(
         clock,
         supervisor,
         sensor,
+        odometry,
         fusion,
         tracker,
         matcher,

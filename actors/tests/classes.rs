@@ -86,6 +86,7 @@ fn fusion_maps_ade_ids_and_counts_an_unknown_one() {
             odom_from_body: Pose3::identity(),
             points_in_body: points,
             point_times: None,
+            points_deskewed: false,
             labels: FrameLabels::PerPoint(labels),
             imu: Vec::new(),
         };

@@ -57,6 +57,7 @@ async fn map_of_a_loop(loop_closure: bool) -> SceneGraph {
             odom_from_body: drift * truth,
             points_in_body: points,
             point_times: None,
+            points_deskewed: false,
             labels: FrameLabels::PerPoint(labels),
             imu: Vec::new(),
         });

@@ -86,6 +86,7 @@ async fn run_team_with(
                 odom_from_body,
                 points_in_body: points,
                 point_times: None,
+                points_deskewed: false,
                 labels: FrameLabels::PerPoint(labels),
                 imu: Vec::new(),
             });
@@ -308,6 +309,7 @@ async fn foreign_replayed_truncated_and_oversized_envelopes_are_refused_and_coun
             odom_from_body: pose,
             points_in_body: points,
             point_times: None,
+            points_deskewed: false,
             labels: FrameLabels::PerPoint(labels),
             imu: Vec::new(),
         });

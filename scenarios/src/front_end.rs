@@ -44,14 +44,7 @@ pub struct FrontEndRun {
 
 /// The estimator's IMU noise: the scenario's.
 pub fn imu_noise(scenario: &Scenario) -> ImuNoise {
-    let s = &scenario.imu;
-    ImuNoise {
-        gyro_noise: s.gyro_noise,
-        accel_noise: s.accel_noise,
-        gyro_bias_walk: s.gyro_bias_walk,
-        accel_bias_walk: s.accel_bias_walk,
-        gravity_mps2: s.gravity_mps2,
-    }
+    scenario.odometry_section().estimator.imu
 }
 
 #[derive(Debug, thiserror::Error)]

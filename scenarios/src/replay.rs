@@ -361,6 +361,7 @@ pub async fn replay_with(
         false_factors: Vec::new(),
         optimisers: team.optimiser_statuses().await?,
         deskew: team.deskew_counts().await?,
+        odometry: team.odometry_statuses().await?,
     };
     let timing = Timing::measure(wall, sim_s, decoding, memory);
     Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing }, bags: bag_stats })

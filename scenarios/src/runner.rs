@@ -4,6 +4,12 @@
 //! what is due; the team runs until quiet again. Nothing reads the wall clock except the
 //! timing kept apart in [`Timing`], so the same scenario and seed give the same run.
 //!
+//! With `odometry.source = "internal"`, a robot also gets an unlabelled sweep every
+//! `odometry.sweep_interval_s` between two frames (its LiDAR turns faster than its camera
+//! fires), for its own odometry; the frame's pose is then the odometry's, and its world frame is
+//! the body's pose where that odometry started, levelled. The people walking through the scene
+//! move once per frame.
+//!
 //! A robot with `crash_s` goes down then (its vehicle and odometry drive on, unheard), and at
 //! `restart_s` comes back from its latest snapshot: the run keeps snapshots whenever a robot
 //! crashes or `persistence.directory` is set.
@@ -14,7 +20,7 @@ use crate::record::Timing;
 use crate::record::{RobotTruth, RunOutcome, RunRecord, TruthTrack, RAW_BYTES_PER_POINT};
 use crate::report::series_point;
 use crate::result_bag::ResultBag;
-use crate::scenario::{CameraSpec, Scenario};
+use crate::scenario::{CameraSpec, OdometrySourceSpec, Scenario};
 use crate::sim::camera::{camera_model, mislabels, noisy_labels, render, segmenter_ids, CameraMount};
 use crate::sim::false_factors::FalseFactors;
 use crate::sim::imu::Imu;
@@ -33,7 +39,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_actors::transport::InProcessRadio;
-use sgm_model::geometry::Pose3;
+use sgm_model::geometry::{pose_from_yaw_translation, yaw_of, Pose3};
 use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, LabelId, RobotId, Stamp};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -51,6 +57,8 @@ struct SimRobot {
     /// The segmenter's errors (`[segmentation]`), apart from `rng` so that with them off the
     /// run is the same.
     segmenter_rng: ChaCha8Rng,
+    /// The unlabelled sweeps' range noise (internal odometry), apart from `rng` likewise.
+    sweep_rng: ChaCha8Rng,
     frames: u64,
     raw_bytes: u64,
     raw_max_bytes: u64,
@@ -138,6 +146,7 @@ pub async fn run_with(
             }),
             rng: ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (k as u64 + 1)),
             segmenter_rng: ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x5E67_4D45_4E54_4552) ^ (k as u64 + 1)),
+            sweep_rng: ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x5357_4545_5053_0001) ^ (k as u64 + 1)),
             frames: 0,
             raw_bytes: 0,
             raw_max_bytes: 0,
@@ -168,6 +177,9 @@ pub async fn run_with(
         bar.set_length(steps);
     }
     let dt_nanos = nanos_from_stamp(dt);
+    let internal = scenario.odometry.source == OdometrySourceSpec::Internal;
+    let sweep_nanos = nanos_from_stamp(scenario.odometry.sweep_interval_s);
+    let sweeps_per_frame = if internal { (dt_nanos / sweep_nanos.max(1)).max(1) } else { 1 };
     for step in 1..=steps {
         let t = stamp_from_nanos(step as i64 * dt_nanos);
         let sim_started = Instant::now();
@@ -187,6 +199,30 @@ pub async fn run_with(
                 continue;
             }
             let route = &robot.route;
+            // The sweeps between the last frame and this one, for the internal odometry.
+            let mut between_imu = Vec::new();
+            for j in 1..sweeps_per_frame {
+                let s = stamp_from_nanos((step as i64 - 1) * dt_nanos + j * sweep_nanos);
+                let Some(truth_s) = route.pose_at(s) else { continue };
+                let samples = match robot.imu.as_mut() {
+                    Some((imu, rng)) => imu.samples_until(s + scenario.lidar.sweep_s, &|u| route.pose_at(u), rng),
+                    None => Vec::new(),
+                };
+                let mount = robot.lidar_mount;
+                let sweep = sweep_in_body(&mut robot.lidar, &mount, &world, route, s, &truth_s, &mut robot.sweep_rng);
+                let told = mount.as_told(&sweep.points);
+                let sweep_frame = SensorFrame {
+                    stamp: s,
+                    odom_from_body: Pose3::identity(),
+                    points_in_body: told.unwrap_or(sweep.points),
+                    point_times: (!sweep.times.is_empty()).then_some(sweep.times),
+                    points_deskewed: false,
+                    labels: FrameLabels::Unlabelled,
+                    imu: samples.clone(),
+                };
+                team.frame(k, || scenario.robot_config(k), sweep_frame)?;
+                between_imu.extend(samples);
+            }
             // A driver hands on a sweep once it ends: the IMU has sampled it by then.
             let imu_samples = match robot.imu.as_mut() {
                 Some((imu, rng)) => imu.samples_until(t + scenario.lidar.sweep_s, &|s| route.pose_at(s), rng),
@@ -223,6 +259,7 @@ pub async fn run_with(
             robot.raw_bytes += raw;
             robot.raw_max_bytes = robot.raw_max_bytes.max(raw);
             if let Some(recorder) = recorder.as_mut() {
+                between_imu.extend_from_slice(&imu_samples);
                 let image = match &labels {
                     FrameLabels::Image { image, camera, camera_from_body, image_offset_s } => Some(RecordedImage {
                         image,
@@ -230,7 +267,7 @@ pub async fn run_with(
                         stamp: t + image_offset_s,
                         camera_from_body: *camera_from_body,
                     }),
-                    FrameLabels::PerPoint(_) => None,
+                    FrameLabels::PerPoint(_) | FrameLabels::Unlabelled => None,
                 };
                 let recorded = RecordedFrame {
                     t,
@@ -240,7 +277,7 @@ pub async fn run_with(
                     labels: recorded_labels.as_deref(),
                     image,
                     times: (!frame.times.is_empty()).then_some(&frame.times[..]),
-                    imu: &imu_samples,
+                    imu: &between_imu,
                 };
                 recorder.record(k, recorded)?;
             }
@@ -250,6 +287,7 @@ pub async fn run_with(
                 odom_from_body: odometry,
                 points_in_body: told.unwrap_or(frame.points),
                 point_times,
+                points_deskewed: false,
                 labels,
                 imu: imu_samples,
             };
@@ -270,9 +308,19 @@ pub async fn run_with(
             if let Some(result) = result.as_mut() {
                 result.observe(&last)?;
             }
-            // A robot's world is placed on the truth at its first step.
-            for (truth, robot) in truths.iter_mut().zip(&robots) {
-                truth.truth_from_world = robot.odometry.truth_from_world;
+            // A robot's world is placed on the truth at its first step, or where its internal
+            // odometry started.
+            let origins = match internal {
+                true => team.odometry_statuses().await?.into_iter().map(|s| s.and_then(|s| s.origin_stamp)).collect(),
+                false => Vec::new(),
+            };
+            for (k, (truth, robot)) in truths.iter_mut().zip(&robots).enumerate() {
+                truth.truth_from_world = match origins.get(k).copied().flatten() {
+                    Some(origin) => robot.route.pose_at(origin).map_or(robot.odometry.truth_from_world, |p| {
+                        pose_from_yaw_translation(yaw_of(&p), p.translation.vector)
+                    }),
+                    None => robot.odometry.truth_from_world,
+                };
             }
             series.push(series_point(&last, &truths));
             crate::memory::release_free_pages();
@@ -312,6 +360,7 @@ pub async fn run_with(
         false_factors: false_factors.injected,
         optimisers,
         deskew,
+        odometry: team.odometry_statuses().await?,
     };
     drop(snapshots);
     Ok(RunOutcome { record, world, maps, timing })

@@ -15,6 +15,7 @@ use sgm_actors::config::{PersistenceConfig, RobotConfig};
 use sgm_actors::fusion::GetFusionStatus;
 use sgm_actors::matcher::GetNeighbours;
 use sgm_actors::messages::{InterRobotConstraints, SensorFrame, Tick};
+use sgm_actors::odometry::{GetOdometryStatus, OdometryStatus};
 use sgm_actors::optimiser::{GetOptimiserStatus, OptimiserStatus};
 use sgm_actors::quiescence::until_quiet;
 use sgm_actors::snapshot::SnapshotStore;
@@ -264,6 +265,19 @@ impl Team {
         for member in &self.members {
             out.push(match &member.handle {
                 Some(handle) => Some(handle.fusion.send(GetFusionStatus).await.map_err(mailbox)?.deskew),
+                None => None,
+            });
+        }
+        Ok(out)
+    }
+
+    /// Each robot's internal odometry's status (`None`: not running, or its odometry is
+    /// external).
+    pub async fn odometry_statuses(&self) -> Result<Vec<Option<OdometryStatus>>, RunError> {
+        let mut out = Vec::new();
+        for member in &self.members {
+            out.push(match member.handle.as_ref().and_then(|h| h.odometry.as_ref()) {
+                Some(odometry) => Some(odometry.send(GetOdometryStatus).await.map_err(mailbox)?),
                 None => None,
             });
         }

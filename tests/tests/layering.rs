@@ -22,8 +22,8 @@ const SCENARIOS: Layers = &[
     &["memory", "object_file", "observation", "output_error", "settings"],
     &["scenario"],
     &["sim"],
-    &["record", "bag_out", "front_end"],
-    &["report", "team"],
+    &["record", "bag_out"],
+    &["report", "team", "front_end"],
     &["result_bag"],
     &["runner", "replay"],
 ];

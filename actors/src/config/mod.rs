@@ -7,12 +7,14 @@
 mod comms;
 mod error;
 mod matcher;
+mod odometry;
 mod optimiser;
 mod perception;
 
 pub use comms::{CommsConfig, PublicTeamKey, Secret, DEFAULT_TEAM_SALT, DEVELOPMENT_TEAM_KEY, PUBLIC_TEAM_KEYS};
 pub use error::ConfigError;
 pub use matcher::{Association, MatcherSection};
+pub use odometry::{OdometrySection, OdometrySource};
 pub use optimiser::OptimiserConfig;
 pub use perception::{default_classes, FusionConfig, TrackerSection};
 pub use sgm_model::matching::place_candidates::ScanContextSection;
@@ -24,12 +26,13 @@ use sgm_model::perception::colour_ids::ColourIds;
 use sgm_model::perception::label_map::{LabelMap, LabelMapSpec};
 use std::path::Path;
 
-/// Everything one robot needs; `[robot]`, `[fusion]`, `[classes]`, `[tracker]`, `[matcher]`,
+/// Everything one robot needs; `[robot]`, `[odometry]`, `[fusion]`, `[classes]`, `[tracker]`, `[matcher]`,
 /// `[optimiser]`, `[comms]`, `[persistence]`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RobotConfig {
     pub robot: RobotSection,
+    pub odometry: OdometrySection,
     pub fusion: FusionConfig,
     /// Which segmenter's pixel values the label images carry, and how they group onto
     /// `fusion.classes` (`model::perception::label_map`). Default: `identity`.
@@ -162,6 +165,7 @@ impl RobotConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.matcher.validate_matching()?;
         self.colour_ids()?;
+        self.odometry.validate()?;
         self.fusion.validate()?;
         self.tracker.validate()?;
         self.matcher.validate()?;

@@ -62,6 +62,7 @@ impl Synchroniser {
                         odom_from_body: pose,
                         points_in_body: scan.points,
                         point_times: scan.times,
+                        points_deskewed: false,
                         labels,
                         imu: Vec::new(),
                     });

@@ -53,8 +53,11 @@ pub enum ScanRefusal {
     NonFiniteStamp(f64),
     #[error("the scan's stamp {stamp} is not after the last scan's {previous}")]
     NotAfterPrevious { stamp: f64, previous: f64 },
-    #[error("waiting for the IMU: {samples} samples before the first scan, {needed} needed to find gravity")]
-    WaitingForImu { samples: usize, needed: usize },
+    #[error(
+        "waiting for the IMU to find gravity: it needs {window_s} s of samples (at least {needed}) before the \
+         first scan, and has {samples}"
+    )]
+    WaitingForImu { samples: usize, needed: usize, window_s: f64 },
 }
 
 /// Why the prediction was kept instead of the scan's correction.
@@ -153,11 +156,12 @@ fn finite_state(s: &NavState) -> bool {
 impl LidarInertialOdometry {
     pub fn new(config: OdometryConfig) -> Result<Self, super::config::OdometryConfigError> {
         config.validate()?;
-        let map = LocalMap::new(config.local_map.clone()).map_err(|e| super::config::OdometryConfigError {
+        let mut map = LocalMap::new(config.local_map.clone()).map_err(|e| super::config::OdometryConfigError {
             key: format!("local_map.{}", e.key),
             value: e.value,
             allowed: e.allowed,
         })?;
+        map.cache_planes(config.registration.plane_params());
         Ok(Self {
             threshold: AdaptiveThreshold::new(config.threshold.clone()),
             imu: ImuQueue::new(config.imu_limits),
@@ -191,10 +195,11 @@ impl LidarInertialOdometry {
     /// The initial state and covariance at `stamp`, or why not yet.
     fn start(&self, stamp: f64) -> Result<Propagator, ScanRefusal> {
         let c = &self.config;
-        let level = self
-            .imu
-            .level(stamp, c.level_window_s, c.level_min_samples)
-            .ok_or(ScanRefusal::WaitingForImu { samples: self.imu.waiting(), needed: c.level_min_samples })?;
+        let level = self.imu.level(stamp, c.level_window_s, c.level_min_samples).ok_or(ScanRefusal::WaitingForImu {
+            samples: self.imu.waiting(),
+            needed: c.level_min_samples,
+            window_s: c.level_window_s,
+        })?;
         let (rotation, still, samples) = (level.rotation, level.still, level.samples);
         let gyro_bias = level.gyro_bias.unwrap_or_else(Vector3::zeros);
         // Still, the mean rate measured the gyro's bias to its white noise over the window

@@ -16,12 +16,19 @@
 //! within `voxel_m` of the query is among them, so a search within d ≤ `voxel_m` is exact;
 //! beyond that it returns the nearest of those 27 voxels (KISS-ICP's approximation).
 //!
+//! **Planes, kept across scans.** Registration fits a plane through the `k` map points nearest
+//! each map point it pairs with (`registration`). With [`LocalMap::cache_planes`], the fit is
+//! kept beside the point until one of the 27 voxels around the point's changes (a point added,
+//! a voxel dropped): exactly the voxels the fit's neighbour search reads, so a kept fit is
+//! always the one a new fit would give. Most of a map is unchanged from one scan to the next.
+//!
 //! Determinism: lookups go by key; every pass over all voxels (pruning, the budget, `points`)
 //! either does not depend on the order or sorts by key.
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
+use rustc_hash::{FxHashMap, FxHashSet};
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
+use std::cell::OnceCell;
 
 /// The local map's parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -78,8 +85,22 @@ type Key = [i64; 3];
 #[derive(Clone, Debug)]
 struct Voxel {
     points: Vec<Point3<f64>>,
+    /// Each point's plane fit, once made ([`LocalMap::cache_planes`]).
+    planes: Vec<PlaneSlot>,
     /// The insertion (scan) that last added a point.
     updated: u64,
+}
+
+/// A map point's plane fit: its unit normal, or none (no plane there); empty until made.
+pub type PlaneSlot = OnceCell<Option<Vector3<f64>>>;
+
+/// What a plane fit depends on besides the map: the registration's `plane_neighbours`,
+/// `plane_tolerance_m` and `planarity`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlaneParams {
+    pub neighbours: usize,
+    pub tolerance_m: f64,
+    pub planarity: f64,
 }
 
 /// Points in the odometry frame, by voxel.
@@ -87,16 +108,58 @@ struct Voxel {
 pub struct LocalMap {
     config: LocalMapConfig,
     min_spacing2: f64,
-    voxels: HashMap<Key, Voxel>,
+    voxels: FxHashMap<Key, Voxel>,
     insertions: u64,
     points: usize,
+    /// The parameters the kept plane fits were made with (none: fits are not kept).
+    plane_params: Option<PlaneParams>,
 }
 
 impl LocalMap {
     pub fn new(config: LocalMapConfig) -> Result<Self, LocalMapConfigError> {
         config.validate()?;
         let spacing = config.voxel_m / (config.max_points_per_voxel as f64).sqrt();
-        Ok(Self { min_spacing2: spacing * spacing, config, voxels: HashMap::new(), insertions: 0, points: 0 })
+        Ok(Self {
+            min_spacing2: spacing * spacing,
+            config,
+            voxels: FxHashMap::default(),
+            insertions: 0,
+            points: 0,
+            plane_params: None,
+        })
+    }
+
+    /// Keep plane fits made with `params` beside their points (module notes); fits made before
+    /// are forgotten.
+    pub fn cache_planes(&mut self, params: PlaneParams) {
+        self.plane_params = Some(params);
+        for voxel in self.voxels.values_mut() {
+            voxel.planes.iter_mut().for_each(|slot| *slot = PlaneSlot::new());
+        }
+    }
+
+    /// The parameters plane fits are kept for, if any.
+    pub fn plane_params(&self) -> Option<PlaneParams> {
+        self.plane_params
+    }
+
+    /// Forgets the plane fits of the points in the 27 voxels around each of `keys`.
+    fn forget_planes_around(&mut self, keys: &FxHashSet<Key>) {
+        let mut around: FxHashSet<Key> = FxHashSet::default();
+        for [x, y, z] in keys {
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        around.insert([x + dx, y + dy, z + dz]);
+                    }
+                }
+            }
+        }
+        for key in &around {
+            if let Some(voxel) = self.voxels.get_mut(key) {
+                voxel.planes.iter_mut().for_each(|slot| *slot = PlaneSlot::new());
+            }
+        }
     }
 
     pub fn config(&self) -> &LocalMapConfig {
@@ -126,18 +189,27 @@ impl LocalMap {
     /// beyond `max_distance_m` of `sensor` and, over the budget, the oldest.
     pub fn insert(&mut self, points: &[Point3<f64>], sensor: &Point3<f64>) {
         self.insertions += 1;
+        let mut changed: FxHashSet<Key> = FxHashSet::default();
         for p in points.iter().filter(|p| p.coords.iter().all(|c| c.is_finite())) {
             let key = self.key(p);
             let (cap, spacing2, stamp) = (self.config.max_points_per_voxel, self.min_spacing2, self.insertions);
-            let voxel =
-                self.voxels.entry(key).or_insert_with(|| Voxel { points: Vec::with_capacity(cap), updated: stamp });
+            let voxel = self.voxels.entry(key).or_insert_with(|| Voxel {
+                points: Vec::with_capacity(cap),
+                planes: Vec::with_capacity(cap),
+                updated: stamp,
+            });
             if voxel.points.len() < cap && voxel.points.iter().all(|q| (q - p).norm_squared() >= spacing2) {
                 voxel.points.push(*p);
+                voxel.planes.push(PlaneSlot::new());
                 voxel.updated = stamp;
                 self.points += 1;
+                changed.insert(key);
             }
         }
-        self.prune(sensor);
+        changed.extend(self.prune(sensor));
+        if self.plane_params.is_some() && !changed.is_empty() {
+            self.forget_planes_around(&changed);
+        }
     }
 
     /// A voxel's distance from the sensor: its first point's, as KISS-ICP measures it.
@@ -145,9 +217,14 @@ impl LocalMap {
         voxel.points.first().map_or(f64::INFINITY, |p| (p - sensor).norm_squared())
     }
 
-    fn prune(&mut self, sensor: &Point3<f64>) {
+    /// Drops the voxels out of range and over the budget; returns their keys.
+    fn prune(&mut self, sensor: &Point3<f64>) -> Vec<Key> {
         let max2 = self.config.max_distance_m * self.config.max_distance_m;
-        self.voxels.retain(|_, v| Self::distance2(v, sensor) <= max2);
+        let mut dropped: Vec<Key> =
+            self.voxels.iter().filter(|(_, v)| Self::distance2(v, sensor) > max2).map(|(k, _)| *k).collect();
+        for key in &dropped {
+            self.voxels.remove(key);
+        }
         if self.voxels.len() > self.config.max_voxels {
             let mut order: Vec<(u64, f64, Key)> =
                 self.voxels.iter().map(|(k, v)| (v.updated, -Self::distance2(v, sensor), *k)).collect();
@@ -155,26 +232,39 @@ impl LocalMap {
             let excess = self.voxels.len() - self.config.max_voxels;
             for (_, _, key) in order.into_iter().take(excess) {
                 self.voxels.remove(&key);
+                dropped.push(key);
             }
         }
         self.points = self.voxels.values().map(|v| v.points.len()).sum();
+        dropped
     }
 
     /// The nearest map point to `p` within `max_distance` (see the module notes), with its
     /// distance; ties go to the voxel visited first (fixed order), then the point added first.
     pub fn nearest(&self, p: &Point3<f64>, max_distance: f64) -> Option<(Point3<f64>, f64)> {
+        self.nearest_with_plane(p, max_distance).map(|(q, d, _)| (q, d))
+    }
+
+    /// [`LocalMap::nearest`], with the point's plane slot (kept across scans only under
+    /// [`LocalMap::cache_planes`]).
+    pub fn nearest_with_plane(&self, p: &Point3<f64>, max_distance: f64) -> Option<(Point3<f64>, f64, &PlaneSlot)> {
         let [x, y, z] = self.key(p);
-        let mut best: Option<(Point3<f64>, f64)> = None;
+        let mut best: Option<(Point3<f64>, f64, &PlaneSlot)> = None;
         let mut best2 = max_distance * max_distance;
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    let Some(voxel) = self.voxels.get(&[x + dx, y + dy, z + dz]) else { continue };
-                    for q in &voxel.points {
+                    let key = [x + dx, y + dy, z + dz];
+                    // No point of a voxel farther than the best so far can win (nor tie).
+                    if self.box_distance2(&key, p) > best2 {
+                        continue;
+                    }
+                    let Some(voxel) = self.voxels.get(&key) else { continue };
+                    for (q, slot) in voxel.points.iter().zip(&voxel.planes) {
                         let d2 = (q - p).norm_squared();
-                        if d2 <= best2 && best.is_none_or(|(_, b)| d2 < b * b) {
+                        if d2 <= best2 && best.is_none_or(|(_, b, _)| d2 < b * b) {
                             best2 = d2;
-                            best = Some((*q, d2.sqrt()));
+                            best = Some((*q, d2.sqrt(), slot));
                         }
                     }
                 }
@@ -188,17 +278,46 @@ impl LocalMap {
     pub fn nearest_k(&self, p: &Point3<f64>, k: usize, radius: f64) -> Vec<Point3<f64>> {
         let [x, y, z] = self.key(p);
         let r2 = radius * radius;
-        let mut found: Vec<(f64, Point3<f64>)> = Vec::new();
+        // The k nearest so far, nearest first; a point goes after those at its distance or
+        // nearer, so ties keep the search's order (as a stable sort of all would).
+        let mut best: Vec<(f64, Point3<f64>)> = Vec::with_capacity(k + 1);
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    let Some(voxel) = self.voxels.get(&[x + dx, y + dy, z + dz]) else { continue };
-                    found.extend(voxel.points.iter().map(|q| ((q - p).norm_squared(), *q)).filter(|(d2, _)| *d2 <= r2));
+                    let key = [x + dx, y + dy, z + dz];
+                    let bound = if best.len() == k { best.last().map_or(r2, |b| b.0) } else { r2 };
+                    if k == 0 || self.box_distance2(&key, p) > bound {
+                        continue;
+                    }
+                    let Some(voxel) = self.voxels.get(&key) else { continue };
+                    for q in &voxel.points {
+                        let d2 = (q - p).norm_squared();
+                        if d2 > r2 || (best.len() == k && best.last().is_some_and(|b| d2 >= b.0)) {
+                            continue;
+                        }
+                        let at = best.partition_point(|b| b.0 <= d2);
+                        best.insert(at, (d2, *q));
+                        best.truncate(k);
+                    }
                 }
             }
         }
-        found.sort_by(|a, b| a.0.total_cmp(&b.0));
-        found.into_iter().take(k).map(|(_, q)| q).collect()
+        best.into_iter().map(|(_, q)| q).collect()
+    }
+
+    /// Squared distance from `p` to the box of the voxel `key` (0 inside it), the box grown by
+    /// a micrometre: a point that `key` rounded into the voxel may lie a rounding error outside
+    /// key · v, and must not be skipped.
+    fn box_distance2(&self, key: &Key, p: &Point3<f64>) -> f64 {
+        const SLACK_M: f64 = 1e-6;
+        let v = self.config.voxel_m;
+        (0..3)
+            .map(|i| {
+                let lo = key[i] as f64 * v - SLACK_M;
+                let gap = (lo - p[i]).max(p[i] - (lo + v + 2.0 * SLACK_M)).max(0.0);
+                gap * gap
+            })
+            .sum()
     }
 
     /// The points of the voxel that holds `p` (empty when none).
@@ -326,6 +445,33 @@ mod tests {
             prop_assert_eq!(found.len(), brute.len());
             for (f, b) in found.iter().zip(&brute) {
                 prop_assert!((f - b).abs() < 1e-12);
+            }
+        }
+
+        /// A kept plane fit is always what a fresh fit would give, whatever scans came since:
+        /// every slot is filled after each scan, and checked against a fresh fit after the next
+        /// (a fit here is any function of the k nearest map points, as the real one is). The
+        /// budget and the range make scans drop voxels too.
+        #[test]
+        fn kept_plane_fits_are_what_a_fresh_fit_gives(
+            scans in prop::collection::vec(prop::collection::vec((-4.0f64..4.0, -4.0f64..4.0, -1.5f64..1.5), 0..80), 1..6),
+            sensor in prop::collection::vec((-4.0f64..4.0, -4.0f64..4.0), 6),
+        ) {
+            let config = LocalMapConfig { max_voxels: 60, max_points_per_voxel: 6, max_distance_m: 5.0, ..Default::default() };
+            let mut m = map(config);
+            m.cache_planes(PlaneParams { neighbours: 5, tolerance_m: 0.1, planarity: 0.1 });
+            let fit = |m: &LocalMap, q: &Point3<f64>| {
+                Some(m.nearest_k(q, 5, 1.0).iter().fold(Vector3::zeros(), |a, p| a + p.coords))
+            };
+            for (scan, (sx, sy)) in scans.iter().zip(&sensor) {
+                let points: Vec<Point3<f64>> = scan.iter().map(|&(x, y, z)| Point3::new(x, y, z)).collect();
+                m.insert(&points, &Point3::new(*sx, *sy, 0.0));
+                for q in m.points() {
+                    let (_, d, slot) = m.nearest_with_plane(&q, 1e-9).expect("a map point is its own nearest");
+                    prop_assert_eq!(d, 0.0);
+                    let kept = *slot.get_or_init(|| fit(&m, &q));
+                    prop_assert_eq!(kept, fit(&m, &q));
+                }
             }
         }
 

@@ -49,12 +49,12 @@
 //! the corridors of the tests are held as well without it. The test is made once, on the
 //! converged Hessian.
 
-use super::local_map::LocalMap;
+use super::local_map::{LocalMap, PlaneParams};
 use crate::geometry::lie::{hat, se3_adjoint, se3_exp, se3_log, se3_right_jacobian_inverse, Matrix6, Tangent3};
 use crate::geometry::Pose3;
 use nalgebra::{Matrix3, Point3, SMatrix, SymmetricEigen, Vector3};
+use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -94,6 +94,17 @@ impl Default for RegistrationConfig {
             planarity: 0.1,
             weak_translation_ratio: 0.05,
             weak_rotation_ratio: 0.01,
+        }
+    }
+}
+
+impl RegistrationConfig {
+    /// What a plane fit depends on ([`LocalMap::cache_planes`]).
+    pub fn plane_params(&self) -> PlaneParams {
+        PlaneParams {
+            neighbours: self.plane_neighbours,
+            tolerance_m: self.plane_tolerance_m,
+            planarity: self.planarity,
         }
     }
 }
@@ -218,9 +229,15 @@ pub fn register_scan(
     }
     let kernel2 = (kernel_m * kernel_m).max(1e-12);
     let weight = |r2: f64| (kernel2 / (kernel2 + r2)).powi(2);
-    // Planes by map point (the map does not change during a registration).
-    let mut planes: HashMap<[u64; 3], Option<Vector3<f64>>> = HashMap::new();
+    // Planes by map point: kept in the map across scans when it keeps them for these
+    // parameters, else for this registration (the map does not change during one).
+    let mut planes: FxHashMap<[u64; 3], Option<Vector3<f64>>> = FxHashMap::default();
     let radius = map.config().voxel_m;
+    let kept = map.plane_params() == Some(config.plane_params());
+    let fit = |q: &Point3<f64>| {
+        let around = map.nearest_k(q, config.plane_neighbours, radius);
+        plane_normal(&around, config.plane_tolerance_m, config.planarity)
+    };
     let mut pose = *initial;
     let (mut iterations, mut converged, mut correspondences) = (0, false, 0);
     let mut h_scan = Matrix6::zeros();
@@ -230,11 +247,11 @@ pub fn register_scan(
         correspondences = 0;
         for s in points_in_body.iter().filter(|s| finite(s)) {
             let p = pose * s;
-            let Some((q, _)) = map.nearest(&p, threshold_m + radius / 2.0) else { continue };
-            let normal = *planes.entry([q.x.to_bits(), q.y.to_bits(), q.z.to_bits()]).or_insert_with(|| {
-                let around = map.nearest_k(&q, config.plane_neighbours, radius);
-                plane_normal(&around, config.plane_tolerance_m, config.planarity)
-            });
+            let Some((q, _, slot)) = map.nearest_with_plane(&p, threshold_m + radius / 2.0) else { continue };
+            let normal = match kept {
+                true => *slot.get_or_init(|| fit(&q)),
+                false => *planes.entry([q.x.to_bits(), q.y.to_bits(), q.z.to_bits()]).or_insert_with(|| fit(&q)),
+            };
             let Some(n) = normal else { continue };
             let r = n.dot(&(p - q));
             if r.abs() > threshold_m {

@@ -112,6 +112,14 @@ pub struct DeskewCounts {
     /// Of the deskewed, those whose IMU samples did not cover the sweep (a gap, or samples not
     /// yet arrived): deskewed with the odometry's twist instead.
     pub imu_not_covering: u64,
+    /// Scans deskewed before they came (by the internal odometry, from the IMU's propagation),
+    /// not counted above.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub upstream: u64,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 /// The constant-velocity deskew of a stream of scans, counted: the twist over a scan's sweep is
@@ -175,6 +183,11 @@ impl Deskewer {
 
     pub fn counts(&self) -> DeskewCounts {
         self.counts
+    }
+
+    /// Counts a scan deskewed before it came ([`DeskewCounts::upstream`]).
+    pub fn count_upstream(&mut self) {
+        self.counts.upstream += 1;
     }
 }
 
@@ -246,7 +259,15 @@ mod tests {
         assert!(matches!(outcome, Err(DeskewRefusal::TimesMismatch { .. })));
         assert_eq!(
             deskewer.counts(),
-            DeskewCounts { deskewed: 2, no_times: 1, no_motion: 1, refused: 1, with_imu: 0, imu_not_covering: 0 }
+            DeskewCounts {
+                deskewed: 2,
+                no_times: 1,
+                no_motion: 1,
+                refused: 1,
+                with_imu: 0,
+                imu_not_covering: 0,
+                upstream: 0
+            }
         );
     }
 

@@ -5,13 +5,14 @@
 //! Output order follows the first point of each voxel, so the result is deterministic.
 
 use nalgebra::Point3;
-use std::collections::HashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 pub fn downsample(points: &[Point3<f64>], size: f64) -> Vec<Point3<f64>> {
     if !size.is_finite() || size <= 0.0 {
         return points.to_vec();
     }
-    let mut index: HashMap<[i64; 3], usize> = HashMap::with_capacity(points.len() / 4 + 1);
+    let mut index: FxHashMap<[i64; 3], usize> =
+        FxHashMap::with_capacity_and_hasher(points.len() / 4 + 1, Default::default());
     let mut sums: Vec<(nalgebra::Vector3<f64>, usize)> = Vec::new();
     for p in points {
         let key = [(p.x / size).floor() as i64, (p.y / size).floor() as i64, (p.z / size).floor() as i64];
@@ -31,7 +32,7 @@ pub fn downsample_first(points: &[Point3<f64>], size: f64) -> Vec<Point3<f64>> {
     if !size.is_finite() || size <= 0.0 {
         return points.to_vec();
     }
-    let mut seen: std::collections::HashSet<[i64; 3]> = std::collections::HashSet::with_capacity(points.len() / 4 + 1);
+    let mut seen: FxHashSet<[i64; 3]> = FxHashSet::with_capacity_and_hasher(points.len() / 4 + 1, Default::default());
     points
         .iter()
         .filter(|p| {

@@ -64,6 +64,8 @@ pub struct RunRecord {
     pub optimisers: Vec<Option<OptimiserStatus>>,
     /// Each robot's scans deskewed and used as they came (`None`: not running).
     pub deskew: Vec<Option<DeskewCounts>>,
+    /// Each robot's internal odometry (`None`: external, or not running).
+    pub odometry: Vec<Option<sgm_actors::odometry::OdometryStatus>>,
 }
 
 /// A finished run: everything the report is made of.

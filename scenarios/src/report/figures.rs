@@ -45,6 +45,9 @@ pub struct RobotReport {
     /// Scans deskewed from their per-point times, and those used as they came with the reason
     /// (`fusion.deskew`; since Fusion last started).
     pub deskew: sgm_model::perception::deskew::DeskewCounts,
+    /// The internal odometry's counts (`odometry.source = "internal"`; absent otherwise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub odometry: Option<sgm_actors::odometry::OdometryStatus>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -326,6 +329,7 @@ pub fn compute(record: &RunRecord) -> Report {
                 clouds: map.map(|m| m.clouds).unwrap_or_default(),
                 moving_objects: map.map_or(0, |m| m.moving_objects),
                 deskew: record.deskew.get(k).copied().flatten().unwrap_or_default(),
+                odometry: record.odometry.get(k).copied().flatten(),
             }
         })
         .collect();

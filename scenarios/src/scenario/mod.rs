@@ -19,7 +19,7 @@ pub use imu::ImuSpec;
 pub use radio::{PartitionSpec, RadioSpec};
 pub use robots::{RobotSpec, RouteSpec};
 pub use segmentation::SegmentationSpec;
-pub use sensors::{CameraSpec, LidarPattern, LidarSpec, OdometrySpec};
+pub use sensors::{CameraSpec, LidarPattern, LidarSpec, OdometrySourceSpec, OdometrySpec};
 pub use terrain::{Platform, PlatformsSpec, TerrainSpec};
 
 use serde::{Deserialize, Serialize};
@@ -271,6 +271,7 @@ impl Scenario {
     pub fn robot_config(&self, k: usize) -> RobotConfig {
         RobotConfig {
             robot: RobotSection { id: k as u16 + 1, name: self.robot_name(k) },
+            odometry: self.odometry_section(),
             fusion: self.fusion.clone(),
             classes: self.classes.clone(),
             tracker: self.tracker.clone(),
@@ -279,6 +280,25 @@ impl Scenario {
             comms: self.comms.clone(),
             persistence: self.persistence.clone(),
         }
+    }
+
+    /// A robot's `[odometry]`: internal with the default estimator told the `[imu]` it is
+    /// given; external (the synthetic odometry comes with each frame) otherwise.
+    pub fn odometry_section(&self) -> sgm_actors::config::OdometrySection {
+        use sgm_actors::config::{OdometrySection, OdometrySource};
+        let i = &self.imu;
+        let imu = sgm_model::odometry::propagation::ImuNoise {
+            gyro_noise: i.gyro_noise,
+            accel_noise: i.accel_noise,
+            gyro_bias_walk: i.gyro_bias_walk,
+            accel_bias_walk: i.accel_bias_walk,
+            gravity_mps2: i.gravity_mps2,
+        };
+        let source = match self.odometry.source {
+            OdometrySourceSpec::Synthetic => OdometrySource::External,
+            OdometrySourceSpec::Internal => OdometrySource::Internal,
+        };
+        OdometrySection { source, estimator: sgm_model::odometry::config::OdometryConfig { imu, ..Default::default() } }
     }
 
     /// Whether any robot crashes (the run then keeps snapshots).

@@ -123,9 +123,28 @@ impl Default for CameraSpec {
     }
 }
 
+/// Where each robot's odometry comes from in a scenario.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OdometrySourceSpec {
+    /// The truth plus the random walks below (`sim::odometry`), handed to the robot with each
+    /// frame: quick, and its drift is a model's.
+    #[default]
+    Synthetic,
+    /// Each robot runs SGM's LiDAR-inertial odometry (its Odometry actor) on the simulated
+    /// sweeps, one every `sweep_interval_s`, and the IMU (`imu.enabled` must be true), with
+    /// the default `odometry.estimator` told the scenario's `[imu]` noise.
+    Internal,
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OdometrySpec {
+    /// "synthetic" or "internal". Default "synthetic".
+    pub source: OdometrySourceSpec,
+    /// Internal: the LiDAR hands on a sweep this often, s; every `scenario.frame_interval_s`
+    /// one of them is also labelled and goes on to the map. Default 0.1 (a 10 Hz LiDAR).
+    pub sweep_interval_s: f64,
     /// Position random walk, m per √m travelled (each horizontal axis). Default 0.005.
     pub position_walk_m: f64,
     /// Yaw random walk, degrees per √m travelled. Default 0.03.
@@ -142,6 +161,8 @@ pub struct OdometrySpec {
 impl Default for OdometrySpec {
     fn default() -> Self {
         Self {
+            source: OdometrySourceSpec::Synthetic,
+            sweep_interval_s: 0.1,
             position_walk_m: 0.005,
             yaw_walk_deg: 0.03,
             height_walk_m: 0.002,

@@ -193,6 +193,7 @@ impl Scenario {
         ] {
             check(within(v, 0.0, 10.0), key, v, "0 ≤ x ≤ 10")?;
         }
+        self.validate_internal_odometry()?;
 
         let r = &self.radio;
         let is_robot = |name: &str| (0..self.robots.len()).any(|j| self.robot_name(j) == name);
@@ -300,6 +301,44 @@ impl Scenario {
 
     /// `[segmentation]`: rates and sizes in range; the confusion matrix names classes of
     /// `[fusion].classes`, with probabilities whose rows sum to 1.
+    /// `odometry.source = "internal"`: an IMU, sweeps that fit the frames, and no crashes (the
+    /// odometry's state is not in a snapshot yet).
+    fn validate_internal_odometry(&self) -> Result<(), Failure> {
+        let o = &self.odometry;
+        if o.source != super::OdometrySourceSpec::Internal {
+            return Ok(());
+        }
+        check(self.imu.enabled, "imu.enabled", self.imu.enabled, "true when odometry.source = \"internal\"")?;
+        let frame = self.scenario.frame_interval_s;
+        let per_frame = frame / o.sweep_interval_s;
+        check(
+            within(o.sweep_interval_s, 0.01, frame) && (per_frame - per_frame.round()).abs() < 1e-6,
+            "odometry.sweep_interval_s",
+            o.sweep_interval_s,
+            "0.01 ≤ x ≤ scenario.frame_interval_s, dividing it into a whole number of sweeps",
+        )?;
+        check(
+            self.lidar.sweep_s <= o.sweep_interval_s,
+            "lidar.sweep_s",
+            self.lidar.sweep_s,
+            "≤ odometry.sweep_interval_s when odometry.source = \"internal\"",
+        )?;
+        check(
+            self.imu.rate_hz * o.sweep_interval_s >= 1.0,
+            "imu.rate_hz",
+            self.imu.rate_hz,
+            "≥ 1 / odometry.sweep_interval_s when odometry.source = \"internal\"",
+        )?;
+        if let Some(k) = self.robots.iter().position(|r| r.crash_s.is_some()) {
+            return Err((
+                format!("robots[{k}].crash_s"),
+                format!("{:?}", self.robots[k].crash_s),
+                "unset when odometry.source = \"internal\" (the odometry's state is not in a snapshot yet)".into(),
+            ));
+        }
+        Ok(())
+    }
+
     fn validate_segmentation(&self) -> Result<(), Failure> {
         let g = &self.segmentation;
         check(within(g.edge_bleed_px, 0.0, 50.0), "segmentation.edge_bleed_px", g.edge_bleed_px, "0 ≤ x ≤ 50 px")?;

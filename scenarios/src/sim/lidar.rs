@@ -139,15 +139,26 @@ impl Lidar {
                 bins[b.rem_euclid(BINS as i64) as usize].push(k as u32);
             }
         }
+        let turns: Vec<(f64, f64)> = world.solids.iter().map(|s| s.primitive.turn()).collect();
         let noise = Normal::new(0.0, self.spec.range_noise_m.max(0.0)).ok();
         let directions = self.directions();
         let count = directions.len().div_ceil(rings).max(1);
         let mut frame = LidarFrame::default();
+        // The sensor's pose at the current column (every ring of a column fires at its time).
+        let mut column: Option<(usize, f64, Point3<f64>, nalgebra::UnitQuaternion<f64>)> = None;
         for (k, d) in directions.iter().enumerate() {
             let (tau, origin, rotation) = if sweep_s > 0.0 {
-                let tau = (k / rings) as f64 / count as f64 * sweep_s;
-                let pose = world_from_sensor_at(tau);
-                (tau, Point3::from(pose.translation.vector), pose.rotation)
+                let at = k / rings;
+                match column {
+                    Some((c, tau, origin, rotation)) if c == at => (tau, origin, rotation),
+                    _ => {
+                        let tau = at as f64 / count as f64 * sweep_s;
+                        let pose = world_from_sensor_at(tau);
+                        let posed = (tau, Point3::from(pose.translation.vector), pose.rotation);
+                        column = Some((at, posed.0, posed.1, posed.2));
+                        posed
+                    }
+                }
             } else {
                 (0.0, origin, rotation)
             };
@@ -160,7 +171,7 @@ impl Lidar {
             }
             for &k in &bins[bin] {
                 let solid = &world.solids[k as usize];
-                if let Some(t) = solid.primitive.intersect(&origin, &dw) {
+                if let Some(t) = solid.primitive.intersect_turned(&origin, &dw, turns[k as usize]) {
                     if t < best.0 {
                         best = (t, solid.label, solid.instance);
                     }

@@ -87,14 +87,7 @@ mod tests {
 
     #[test]
     fn noiseless_odometry_is_the_truth_in_the_start_frame() {
-        let spec = OdometrySpec {
-            position_walk_m: 0.0,
-            yaw_walk_deg: 0.0,
-            height_walk_m: 0.0,
-            roll_pitch_deg: 0.0,
-            tilt_walk_deg: 0.0,
-        };
-        let mut o = Odometry::new(&spec);
+        let mut o = Odometry::new(&still());
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         for k in 0..20 {
             let truth = pose_from_yaw_translation(0.3 + 0.1 * k as f64, Vector3::new(5.0 + k as f64, -2.0, 0.8));
@@ -120,18 +113,22 @@ mod tests {
             .collect()
     }
 
-    const STILL: OdometrySpec = OdometrySpec {
-        position_walk_m: 0.0,
-        yaw_walk_deg: 0.0,
-        height_walk_m: 0.0,
-        roll_pitch_deg: 0.0,
-        tilt_walk_deg: 0.0,
-    };
+    /// No noise at all.
+    fn still() -> OdometrySpec {
+        OdometrySpec {
+            position_walk_m: 0.0,
+            yaw_walk_deg: 0.0,
+            height_walk_m: 0.0,
+            roll_pitch_deg: 0.0,
+            tilt_walk_deg: 0.0,
+            ..OdometrySpec::default()
+        }
+    }
 
     #[test]
     fn the_yaw_walk_grows_with_the_square_root_of_distance() {
         // At 0.1°/√m the yaw error's spread is σ·√100 = 1°.
-        let ends = after_100_m(&OdometrySpec { yaw_walk_deg: 0.1, ..STILL }, 2);
+        let ends = after_100_m(&OdometrySpec { yaw_walk_deg: 0.1, ..still() }, 2);
         let sd = (ends.iter().map(|p| yaw_of(p).to_degrees().powi(2)).sum::<f64>() / 400.0).sqrt();
         assert!((sd - 1.0).abs() < 0.1, "{sd}");
     }
@@ -139,7 +136,7 @@ mod tests {
     #[test]
     fn without_a_gravity_reference_the_frame_tilts_with_the_square_root_of_distance() {
         // At 0.1°/√m roll and pitch spread 1° each.
-        let ends = after_100_m(&OdometrySpec { tilt_walk_deg: 0.1, ..STILL }, 3);
+        let ends = after_100_m(&OdometrySpec { tilt_walk_deg: 0.1, ..still() }, 3);
         let sum_sq: f64 = ends
             .iter()
             .map(|p| {
@@ -155,7 +152,7 @@ mod tests {
     fn heading_drift_on_a_slope_leaves_gravity_where_it_is() {
         // Climbing a 10° slope sideways-tilted by 5°, with a large heading walk: the reported
         // attitude's up stays the true up (an IMU-aided odometry drifts in yaw, not in tilt).
-        let spec = OdometrySpec { yaw_walk_deg: 0.5, ..STILL };
+        let spec = OdometrySpec { yaw_walk_deg: 0.5, ..still() };
         let mut o = Odometry::new(&spec);
         let mut rng = ChaCha8Rng::seed_from_u64(4);
         let attitude = UnitQuaternion::from_euler_angles(5f64.to_radians(), -10f64.to_radians(), 0.3);

@@ -55,9 +55,23 @@ impl Primitive {
     /// Distance along the ray `origin + t·direction` (|direction| = 1) to the first surface
     /// hit from outside, if any.
     pub fn intersect(&self, origin: &Point3<f64>, direction: &Vector3<f64>) -> Option<f64> {
+        self.intersect_turned(origin, direction, self.turn())
+    }
+
+    /// (sin, cos) of a box's yaw ((0, 1) for a cylinder): what [`Primitive::intersect_turned`]
+    /// takes, for a caller that casts many rays at one primitive.
+    pub fn turn(&self) -> (f64, f64) {
         match *self {
-            Primitive::Box { centre, half, yaw } => {
-                let (s, c) = yaw.sin_cos();
+            Primitive::Box { yaw, .. } => yaw.sin_cos(),
+            Primitive::Cylinder { .. } => (0.0, 1.0),
+        }
+    }
+
+    /// [`Primitive::intersect`] with the yaw's (sin, cos) given ([`Primitive::turn`]).
+    pub fn intersect_turned(&self, origin: &Point3<f64>, direction: &Vector3<f64>, turn: (f64, f64)) -> Option<f64> {
+        match *self {
+            Primitive::Box { centre, half, .. } => {
+                let (s, c) = turn;
                 let o = origin - centre;
                 // Into the box frame: rotate by −yaw.
                 let o = Vector3::new(c * o.x + s * o.y, -s * o.x + c * o.y, o.z);
