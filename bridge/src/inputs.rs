@@ -6,6 +6,7 @@ use crate::config::RosConfig;
 use crate::convert::cloud::{read_cloud, Scan};
 use crate::convert::geometry::{check_frame, pose_from_msg};
 use crate::convert::image::{read_camera_info, read_label_image, UnknownColours};
+use crate::convert::imu::{reading_from_msg, ImuReading};
 use crate::error::InputError;
 use crate::msg::{nav_msgs, sensor_msgs, tf2_msgs};
 use crate::tf::{TfBatch, TfTransform};
@@ -29,6 +30,9 @@ pub enum Payload {
     Clock(Time),
     /// A TFMessage from `/tf` or `/tf_static` (its own stamps; not checked by the timeline).
     Tf(TfBatch),
+    /// An IMU sample (`sensor_msgs/Imu` in the body frame), rates and specific force checked.
+    /// Read from bags for `sgm odometry --bag` only; the synchroniser does not use it yet.
+    Imu(Time, ImuReading),
 }
 
 impl Payload {
@@ -43,6 +47,7 @@ impl Payload {
             Payload::Clock(_) => "clock",
             Payload::Tf(batch) if batch.is_static => "tf_static",
             Payload::Tf(_) => "tf",
+            Payload::Imu(..) => "imu",
         }
     }
 }
@@ -162,6 +167,13 @@ impl Inputs {
     }
 
     /// A true pose (frames are the simulator's, not checked).
+    /// An IMU sample: its frame must be the body's (no IMU mount yet), its values finite and
+    /// within any IMU's range (`convert::imu::reading_from_msg`).
+    pub fn imu(&self, msg: &sensor_msgs::Imu) -> Result<Payload, InputError> {
+        check_frame(self.frame(&msg.header.frame_id), &self.body_frame)?;
+        Ok(Payload::Imu(msg.header.stamp, reading_from_msg(msg)?))
+    }
+
     pub fn ground_truth(&self, msg: &nav_msgs::Odometry) -> Result<Payload, InputError> {
         Ok(Payload::GroundTruth(msg.header.stamp, pose_from_msg(&msg.pose.pose)?))
     }

@@ -7,6 +7,7 @@
 //! observed), `bag_out`, [`front_end`] (the odometry alone on simulated sensors) → [`report`] (figures from a record), [`team`] (the robots stepped on
 //! the virtual clock) → `result_bag` → [`runner`], [`replay`].
 
+pub mod bag_odometry;
 pub mod bag_out;
 pub mod front_end;
 pub mod memory;

@@ -58,6 +58,18 @@ enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
         remappings: Vec<String>,
     },
+    /// SGM's LiDAR-inertial odometry alone on one robot's ROS 1 bag (its clouds, with their
+    /// points' times, and its IMU on ros.topics.imu); writes the trajectory as TUM.
+    Odometry {
+        #[command(flatten)]
+        robot: cli::ros_cmd::RobotArgs,
+        /// The robot's bag.
+        #[arg(long)]
+        bag: PathBuf,
+        /// Where the trajectory goes (TUM: stamp x y z qx qy qz qw, odom_from_body).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Replay recorded missions (one ROS 1 bag per robot) with no ROS master, and write the report.
     Replay {
         /// A robot's bag; give one per robot, in the order of the configuration's [[robots]].
@@ -381,6 +393,15 @@ fn main() -> ExitCode {
                 Ok(false) => ExitCode::from(1),
                 Err(e) => {
                     eprintln!("sgm doctor: {e:#}");
+                    ExitCode::from(2)
+                }
+            }
+        }
+        Command::Odometry { robot, bag, out } => {
+            match cli::odometry_cmd::execute(cli::odometry_cmd::Options { robot, bag, out }) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("sgm odometry: {e:#}");
                     ExitCode::from(2)
                 }
             }

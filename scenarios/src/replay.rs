@@ -109,7 +109,7 @@ impl BagRobot {
                 | Payload::Odometry(t, _)
                 | Payload::GroundTruth(t, _)
                 | Payload::Clock(t) => Some(*t),
-                Payload::CameraInfo(_) | Payload::Tf(_) => None,
+                Payload::CameraInfo(_) | Payload::Tf(_) | Payload::Imu(..) => None,
             };
             // Only a sensor's stamp sets the epoch (camera info has none; tf's may be anything).
             let epoch = match stamped {

@@ -22,7 +22,7 @@ const SCENARIOS: Layers = &[
     &["memory", "object_file", "observation", "output_error", "settings"],
     &["scenario"],
     &["sim"],
-    &["record", "bag_out"],
+    &["record", "bag_out", "bag_odometry"],
     &["report", "team", "front_end"],
     &["result_bag"],
     &["runner", "replay"],

@@ -54,6 +54,7 @@ enum Kind {
     GroundTruth,
     Tf,
     TfStatic,
+    Imu,
 }
 
 impl Kind {
@@ -66,6 +67,7 @@ impl Kind {
             Kind::GroundTruth => "ground_truth",
             Kind::Tf => "tf",
             Kind::TfStatic => "tf_static",
+            Kind::Imu => "imu",
         }
     }
 
@@ -76,6 +78,7 @@ impl Kind {
             Kind::CameraInfo => (sensor_msgs::CameraInfo::msg_type(), sensor_msgs::CameraInfo::md5sum()),
             Kind::Odometry | Kind::GroundTruth => (nav_msgs::Odometry::msg_type(), nav_msgs::Odometry::md5sum()),
             Kind::Tf | Kind::TfStatic => (tf2_msgs::TFMessage::msg_type(), tf2_msgs::TFMessage::md5sum()),
+            Kind::Imu => (sensor_msgs::Imu::msg_type(), sensor_msgs::Imu::md5sum()),
         }
     }
 }
@@ -130,6 +133,7 @@ impl Decoder {
             Kind::GroundTruth => self.inputs.ground_truth(&decode(data, self.max_bytes)?),
             Kind::Tf => self.inputs.tf(&decode(data, self.max_bytes)?, false),
             Kind::TfStatic => self.inputs.tf(&decode(data, self.max_bytes)?, true),
+            Kind::Imu => self.inputs.imu(&decode(data, self.max_bytes)?),
         }
     }
 
@@ -174,7 +178,7 @@ impl Decoder {
 /// each item to `out` until it returns false; a bag that cannot be read ends with one
 /// [`BagItem::Failed`] (`name` names the bag in it). What [`read_bag`]'s thread runs.
 pub fn decode_bag(bag: impl Read, len: u64, name: &str, source: &BagSource, mut out: impl FnMut(BagItem) -> bool) {
-    let BagSource { config, robot, id, colours } = source;
+    let BagSource { config, robot, id, colours, imu } = source;
     let (robot, id) = (robot.as_str(), *id);
     let t = &config.topics;
     let mut topics = vec![
@@ -184,6 +188,9 @@ pub fn decode_bag(bag: impl Read, len: u64, name: &str, source: &BagSource, mut 
         (RosConfig::resolve(&t.odometry, robot, id), Kind::Odometry),
         (RosConfig::resolve(&t.ground_truth, robot, id), Kind::GroundTruth),
     ];
+    if *imu {
+        topics.push((RosConfig::resolve(&t.imu, robot, id), Kind::Imu));
+    }
     if config.tf.listen {
         topics.push((RosConfig::resolve(&config.tf.static_topic, robot, id), Kind::TfStatic));
         topics.push((RosConfig::resolve(&config.tf.topic, robot, id), Kind::Tf));
@@ -207,18 +214,26 @@ pub fn decode_bag(bag: impl Read, len: u64, name: &str, source: &BagSource, mut 
 }
 
 /// Whose bag it is: the `[ros]` section, the robot's name and id (`{robot}`, `{id}` in its
-/// topics and frames), and its palette for colour label images (refused without).
+/// topics and frames), its palette for colour label images (refused without), and whether its
+/// IMU topic (`ros.topics.imu`) is read.
 #[derive(Clone, Debug)]
 pub struct BagSource {
     pub config: RosConfig,
     pub robot: String,
     pub id: u16,
     pub colours: Option<ColourIds>,
+    pub imu: bool,
 }
 
 impl BagSource {
     pub fn new(config: &RosConfig, robot: &str, id: u16) -> Self {
-        Self { config: config.clone(), robot: robot.into(), id, colours: None }
+        Self { config: config.clone(), robot: robot.into(), id, colours: None, imu: false }
+    }
+
+    /// Also read `sensor_msgs/Imu` on `ros.topics.imu` ([`Payload::Imu`]).
+    pub fn with_imu(mut self) -> Self {
+        self.imu = true;
+        self
     }
 
     pub fn with_colours(mut self, colours: ColourIds) -> Self {

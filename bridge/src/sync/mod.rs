@@ -223,6 +223,8 @@ impl Synchroniser {
             Payload::GroundTruth(t, pose) => {
                 return Some((epoch.stamp(self.timeline.to_mission(*t)), *pose));
             }
+            // Not used by the synchroniser yet (a bag source reads it only when asked).
+            Payload::Imu(..) => return None,
             // tf carries its own stamps (static ones are often 0): not the timeline's business.
             Payload::Tf(_) => {
                 let Payload::Tf(batch) = payload else { return None };
@@ -262,7 +264,7 @@ impl Synchroniser {
                 let t = epoch.stamp(t);
                 self.clock = Some(self.clock.map_or(t, |c: Stamp| c.max(t)));
             }
-            Payload::GroundTruth(..) | Payload::Tf(_) => {}
+            Payload::GroundTruth(..) | Payload::Tf(_) | Payload::Imu(..) => {}
         }
     }
 
@@ -293,6 +295,7 @@ fn with_stamp(payload: Payload, t: rosrust::Time) -> Payload {
         Payload::Clock(_) => Payload::Clock(t),
         Payload::CameraInfo(c) => Payload::CameraInfo(c),
         Payload::Tf(batch) => Payload::Tf(batch),
+        Payload::Imu(_, reading) => Payload::Imu(t, reading),
     }
 }
 
