@@ -20,6 +20,7 @@ use sgm_bridge::tf::mounts::Mount;
 use sgm_model::geometry::Pose3;
 use sgm_model::odometry::config::OdometryConfigError;
 use sgm_model::odometry::estimator::{LidarInertialOdometry, OdometryCounts};
+use sgm_model::perception::deskew::sweep_end_s;
 use sgm_model::perception::imu::ImuSample;
 use sgm_model::scene_graph::Stamp;
 use std::collections::{BTreeMap, VecDeque};
@@ -72,7 +73,8 @@ struct Run {
     estimator: LidarInertialOdometry,
     epoch: Option<Epoch>,
     lidar: TfListener,
-    waiting: VecDeque<(Stamp, Scan)>,
+    /// Clouds waiting for the IMU, with the stamp their sweep ends at.
+    waiting: VecDeque<(Stamp, Stamp, Scan)>,
     newest_imu: Option<Stamp>,
     out: BagOdometry,
     spent: Duration,
@@ -83,10 +85,8 @@ struct Run {
 impl Run {
     /// Registers the waiting clouds whose sweeps the IMU has passed (all of them at the end).
     fn register_ready(&mut self, all: bool) {
-        while let Some((stamp, scan)) = self.waiting.front() {
-            let stamp = *stamp;
-            let sweep_end = scan.times.as_ref().map_or(0.0, |t| t.iter().fold(0.0f64, |m, &x| m.max(f64::from(x))));
-            let covered = self.newest_imu.is_some_and(|n| n >= stamp + sweep_end);
+        while let Some(&(_, end, _)) = self.waiting.front() {
+            let covered = self.newest_imu.is_some_and(|n| n >= end);
             let crowded = self.waiting.len() > MAX_WAITING_CLOUDS;
             if !(covered || all || crowded) {
                 return;
@@ -94,7 +94,7 @@ impl Run {
             if !covered {
                 self.out.registered_early += 1;
             }
-            let Some((stamp, scan)) = self.waiting.pop_front() else { return };
+            let Some((stamp, _, scan)) = self.waiting.pop_front() else { return };
             self.register(stamp, scan);
         }
     }
@@ -153,7 +153,8 @@ pub fn odometry_on_bag(path: &Path, config: &NodeConfig) -> Result<BagOdometry, 
         match item {
             BagItem::Message { payload: Payload::Cloud(time, scan), .. } => {
                 let epoch = *run.epoch.get_or_insert_with(|| Epoch::at(time));
-                run.waiting.push_back((epoch.stamp(time), scan));
+                let stamp = epoch.stamp(time);
+                run.waiting.push_back((stamp, stamp + sweep_end_s(scan.times.as_deref()), scan));
             }
             BagItem::Message { payload: Payload::Imu(time, reading), .. } => {
                 let epoch = *run.epoch.get_or_insert_with(|| Epoch::at(time));

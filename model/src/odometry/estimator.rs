@@ -40,7 +40,7 @@ use super::threshold::AdaptiveThreshold;
 use super::update::{apply_pose_update, pose_covariance, pose_of, prior_information, scan_information, UpdateError};
 use crate::geometry::lie::Matrix6;
 use crate::geometry::Pose3;
-use crate::perception::deskew::{deskew_with, DeskewRefusal};
+use crate::perception::deskew::{deskew_with, sweep_end_s, DeskewRefusal};
 use crate::perception::imu::ImuSample;
 use crate::spatial::voxel::downsample_first;
 use nalgebra::{Point3, Vector3};
@@ -316,7 +316,7 @@ impl LidarInertialOdometry {
             },
         };
         // The motion from the last scan through this sweep's end, for deskewing.
-        let sweep_end = times.map_or(0.0, |t| t.iter().fold(0.0f64, |m, &x| m.max(f64::from(x))).min(1.0));
+        let sweep_end = sweep_end_s(times);
         let track_from = match &self.filter {
             Some(f) => (f.time, f.propagator.state),
             None => (stamp, predicted.state),
