@@ -4,14 +4,19 @@
 //! an unlabelled one ([`FrameLabels::Unlabelled`]) is registered and goes no further. A frame the
 //! odometry refuses (before the IMU has found gravity, a stamp that does not advance) is not
 //! handed on, and is counted; coasting and resets are counted and logged, the first of each kind
-//! at `warn`.
+//! at `warn`. Whoever attached an output ([`AttachOdometryOutput`]: the ROS node, which publishes
+//! `nav_msgs/Odometry` and the world → body tf) gets every estimate as an [`OdometryPose`].
 
 use crate::containment::contained;
 use crate::messages::{FrameLabels, SensorFrame};
 use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervised};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
+use sgm_model::geometry::lie::Matrix6;
+use sgm_model::geometry::Pose3;
 use sgm_model::odometry::config::{OdometryConfig, OdometryConfigError};
 use sgm_model::odometry::estimator::{LidarInertialOdometry, OdometryCounts, ScanOutcome, ScanRefusal};
+use sgm_model::scene_graph::Stamp;
 
 /// What the odometry has done since the robot started (not part of a snapshot).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -24,6 +29,36 @@ pub struct OdometryStatus {
     /// levelled, yaw zero (`model::odometry::estimator`).
     pub origin_stamp: Option<f64>,
 }
+
+/// Odometry → an attached output: the estimate at one scan (registered or coasted).
+#[derive(Message, Clone, Debug, PartialEq)]
+#[rtype(result = "()")]
+pub struct OdometryPose {
+    pub stamp: Stamp,
+    pub odom_from_body: Pose3,
+    /// m/s, in the odometry frame.
+    pub velocity: Vector3<f64>,
+    /// rad/s, in the body frame: the mean of the sweep's gyro samples, the estimated bias
+    /// removed (`None` when the frame brought no sample).
+    pub angular_velocity: Option<Vector3<f64>>,
+    /// Covariance of e = Log(T̂⁻¹ T), ordered (ω, v), in the body frame.
+    pub covariance: Matrix6,
+}
+
+impl OdometryPose {
+    /// Every value finite: only such a pose leaves the actor.
+    pub fn is_finite(&self) -> bool {
+        let p = &self.odom_from_body;
+        p.translation.vector.iter().chain(p.rotation.coords.iter()).chain(self.velocity.iter()).all(|v| v.is_finite())
+            && self.angular_velocity.is_none_or(|w| w.iter().all(|v| v.is_finite()))
+            && self.covariance.iter().all(|v| v.is_finite())
+    }
+}
+
+/// Sends every later estimate to `0` as well.
+#[derive(Message)]
+#[rtype(result = "()")]
+pub struct AttachOdometryOutput(pub Recipient<OdometryPose>);
 
 /// What became of a frame.
 #[derive(Debug)]
@@ -43,6 +78,8 @@ pub struct OdometryStage {
     origin_stamp: Option<f64>,
     /// Which kinds of event were already logged at `warn` (the rest are counted).
     warned: Warned,
+    /// The estimate at the latest frame that produced one.
+    latest: Option<OdometryPose>,
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -58,11 +95,17 @@ impl OdometryStage {
             handed_on: 0,
             origin_stamp: None,
             warned: Warned::default(),
+            latest: None,
         })
     }
 
     pub fn status(&self) -> OdometryStatus {
         OdometryStatus { counts: self.estimator.counts(), handed_on: self.handed_on, origin_stamp: self.origin_stamp }
+    }
+
+    /// The estimate at the latest frame that produced one.
+    pub fn latest(&self) -> Option<&OdometryPose> {
+        self.latest.as_ref()
     }
 
     /// Registers `frame`'s sweep after its IMU samples; a labelled frame comes back with the
@@ -80,6 +123,17 @@ impl OdometryStage {
                 return StageOutput::Refused(refusal);
             }
         };
+        let angular_velocity = (!frame.imu.is_empty()).then(|| {
+            let sum: Vector3<f64> = frame.imu.iter().map(|s| s.angular_velocity).sum();
+            sum / frame.imu.len() as f64 - estimate.gyro_bias
+        });
+        self.latest = Some(OdometryPose {
+            stamp: frame.stamp,
+            odom_from_body: estimate.odom_from_body,
+            velocity: estimate.velocity,
+            angular_velocity,
+            covariance: estimate.covariance,
+        });
         match &estimate.outcome {
             ScanOutcome::First => self.origin_stamp = Some(frame.stamp),
             ScanOutcome::Coasted(reason) if !self.warned.coasted => {
@@ -109,11 +163,12 @@ impl OdometryStage {
 pub struct Odometry {
     stage: OdometryStage,
     fusion: Recipient<SensorFrame>,
+    output: Option<Recipient<OdometryPose>>,
 }
 
 impl Odometry {
     pub fn new(stage: OdometryStage, fusion: Recipient<SensorFrame>) -> Self {
-        Self { stage, fusion }
+        Self { stage, fusion, output: None }
     }
 }
 
@@ -132,10 +187,23 @@ impl Handler<SensorFrame> for Odometry {
     type Result = ();
     fn handle(&mut self, frame: SensorFrame, ctx: &mut Context<Self>) {
         contained(ctx, "odometry", || {
-            if let StageOutput::HandOn(frame) = self.stage.frame(frame) {
+            let output = self.stage.frame(frame);
+            if let (Some(to), false) = (&self.output, matches!(output, StageOutput::Refused(_))) {
+                if let Some(pose) = self.stage.latest().filter(|p| p.is_finite()) {
+                    to.do_send(pose.clone());
+                }
+            }
+            if let StageOutput::HandOn(frame) = output {
                 self.fusion.do_send(*frame);
             }
         });
+    }
+}
+
+impl Handler<AttachOdometryOutput> for Odometry {
+    type Result = ();
+    fn handle(&mut self, AttachOdometryOutput(to): AttachOdometryOutput, _: &mut Context<Self>) {
+        self.output = Some(to);
     }
 }
 
@@ -247,6 +315,13 @@ mod tests {
         assert_eq!(status.counts.scans, 21);
         assert_eq!(status.counts.resets, 0);
         assert_eq!(status.origin_stamp, Some(1.0));
+        // What an attached output gets: the last frame's estimate, still, finite, with the
+        // sweep's rate (zero, bias removed) and a covariance.
+        let latest = stage.latest().expect("an estimate");
+        assert!(latest.is_finite() && (latest.stamp - 3.0).abs() < 1e-12);
+        assert!(latest.velocity.norm() < 0.05, "{latest:?}");
+        assert!(latest.angular_velocity.is_some_and(|w| w.norm() < 1e-3), "{latest:?}");
+        assert!((0..6).all(|k| latest.covariance[(k, k)] > 0.0), "{latest:?}");
     }
 
     /// A frame whose stamp does not advance is refused; nothing already estimated moves.

@@ -30,8 +30,8 @@ pub enum Payload {
     Clock(Time),
     /// A TFMessage from `/tf` or `/tf_static` (its own stamps; not checked by the timeline).
     Tf(TfBatch),
-    /// An IMU sample (`sensor_msgs/Imu` in the body frame), rates and specific force checked.
-    /// Read from bags for `sgm odometry --bag` only; the synchroniser does not use it yet.
+    /// An IMU sample (`sensor_msgs/Imu`, in the IMU's frame), rates and specific force checked.
+    /// The robot's own odometry's input (`odometry.source = "internal"`).
     Imu(Time, ImuReading),
 }
 
@@ -59,6 +59,7 @@ pub struct Inputs {
     body_frame: String,
     lidar_frame: String,
     camera_frame: String,
+    imu_frame: String,
     label_field: String,
     max_cloud_points: usize,
     max_image_pixels: usize,
@@ -76,6 +77,7 @@ impl Inputs {
             body_frame: frame(&config.frames.body),
             lidar_frame: frame(&config.frames.lidar),
             camera_frame: frame(&config.frames.camera),
+            imu_frame: frame(&config.frames.imu),
             label_field: if config.labels == crate::config::LabelSource::Cloud {
                 config.label_field.clone()
             } else {
@@ -166,14 +168,15 @@ impl Inputs {
         Ok(Payload::Tf(batch))
     }
 
-    /// A true pose (frames are the simulator's, not checked).
-    /// An IMU sample: its frame must be the body's (no IMU mount yet), its values finite and
-    /// within any IMU's range (`convert::imu::reading_from_msg`).
+    /// An IMU sample: its frame must be `frames.imu`, its values finite and within any IMU's
+    /// range (`convert::imu::reading_from_msg`). It stays in the IMU's frame; the
+    /// synchroniser brings it to the body through the IMU's mount.
     pub fn imu(&self, msg: &sensor_msgs::Imu) -> Result<Payload, InputError> {
-        check_frame(self.frame(&msg.header.frame_id), &self.body_frame)?;
+        check_frame(self.frame(&msg.header.frame_id), &self.imu_frame)?;
         Ok(Payload::Imu(msg.header.stamp, reading_from_msg(msg)?))
     }
 
+    /// A true pose (frames are the simulator's, not checked).
     pub fn ground_truth(&self, msg: &nav_msgs::Odometry) -> Result<Payload, InputError> {
         Ok(Payload::GroundTruth(msg.header.stamp, pose_from_msg(&msg.pose.pose)?))
     }
@@ -192,5 +195,9 @@ impl Inputs {
 
     pub fn camera_frame(&self) -> &str {
         &self.camera_frame
+    }
+
+    pub fn imu_frame(&self) -> &str {
+        &self.imu_frame
     }
 }

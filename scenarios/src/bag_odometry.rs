@@ -1,9 +1,11 @@
 //! `sgm odometry --bag FILE`: SGM's LiDAR-inertial odometry alone on one robot's ROS 1 bag.
 //!
 //! The bag's clouds (`ros.topics.points`, with their points' times when the cloud has a time
-//! field) and IMU samples (`ros.topics.imu`, in the body frame) are read by the replay's reader
-//! and checks; the clouds come into the body frame through the LiDAR's mount (pinned by
-//! `ros.body_from_lidar`, or from the bag's tf). A cloud is registered once the IMU has passed
+//! field) and IMU samples (`ros.topics.imu`, in `ros.frames.imu`) are read by the replay's
+//! reader and checks; the clouds come into the body frame through the LiDAR's mount (pinned by
+//! `ros.body_from_lidar`, or from the bag's tf), the samples through the IMU's
+//! (`ros.body_from_imu`, or tf; `convert::imu::sample_in_body`). Samples wait, in the IMU's
+//! frame, until its mount is known. A cloud is registered once the IMU has passed
 //! the end of its sweep (its stamp plus its latest point's time), or at the end of the bag: the
 //! IMU samples of the whole sweep are in the filter when it deskews. Stamps are mission time,
 //! seconds after the whole second of the bag's first message, as in `sgm replay`; the
@@ -12,9 +14,11 @@
 use sgm_bridge::bag::reader::{read_bag, BagError, BagItem, BagSource};
 use sgm_bridge::config::RosConfigError;
 use sgm_bridge::convert::cloud::Scan;
+use sgm_bridge::convert::imu::{sample_in_body, ImuReading};
 use sgm_bridge::convert::time::Epoch;
 use sgm_bridge::inputs::{Inputs, Payload};
 use sgm_bridge::node::NodeConfig;
+use sgm_bridge::sync::MAX_IMU_BUFFERED;
 use sgm_bridge::tf::listener::TfListener;
 use sgm_bridge::tf::mounts::Mount;
 use sgm_model::geometry::Pose3;
@@ -65,6 +69,8 @@ pub struct BagOdometry {
     pub registered_early: u64,
     /// Clouds left out: the LiDAR's mount was neither pinned nor in the bag's tf (yet).
     pub no_lidar_mount: u64,
+    /// IMU samples left out: the IMU's mount was neither pinned nor in the bag's tf (yet).
+    pub no_imu_mount: u64,
     /// The estimator's time per cloud.
     pub time_per_cloud: Duration,
 }
@@ -72,7 +78,10 @@ pub struct BagOdometry {
 struct Run {
     estimator: LidarInertialOdometry,
     epoch: Option<Epoch>,
-    lidar: TfListener,
+    /// The LiDAR's and the IMU's mounts.
+    mounts: TfListener,
+    /// IMU samples waiting for the IMU's mount, in its frame (bounded as the synchroniser's).
+    imu_waiting: VecDeque<(Stamp, ImuReading)>,
     /// Clouds waiting for the IMU, with the stamp their sweep ends at.
     waiting: VecDeque<(Stamp, Stamp, Scan)>,
     newest_imu: Option<Stamp>,
@@ -100,7 +109,7 @@ impl Run {
     }
 
     fn register(&mut self, stamp: Stamp, scan: Scan) {
-        let Some(body_from_lidar) = self.lidar.body_from_lidar() else {
+        let Some(body_from_lidar) = self.mounts.body_from_lidar() else {
             self.out.no_lidar_mount += 1;
             return;
         };
@@ -118,14 +127,25 @@ impl Run {
         }
     }
 
-    fn imu(&mut self, stamp: Stamp, reading: sgm_bridge::convert::imu::ImuReading) {
+    fn imu(&mut self, stamp: Stamp, reading: ImuReading) {
         self.imu_samples += 1;
-        self.newest_imu = Some(self.newest_imu.map_or(stamp, |n| n.max(stamp)));
-        self.estimator.push_imu(&[ImuSample {
-            stamp,
-            angular_velocity: reading.angular_velocity,
-            specific_force: reading.linear_acceleration,
-        }]);
+        if self.imu_waiting.len() == MAX_IMU_BUFFERED {
+            self.imu_waiting.pop_front();
+            self.out.no_imu_mount += 1;
+        }
+        self.imu_waiting.push_back((stamp, reading));
+        self.pass_imu();
+    }
+
+    /// The waiting IMU samples into the estimator, once the IMU's mount is known.
+    fn pass_imu(&mut self) {
+        let Some(body_from_imu) = self.mounts.body_from_imu() else { return };
+        let samples: Vec<ImuSample> =
+            self.imu_waiting.drain(..).map(|(t, reading)| sample_in_body(t, &reading, &body_from_imu)).collect();
+        if let Some(last) = samples.last() {
+            self.newest_imu = Some(self.newest_imu.map_or(last.stamp, |n| n.max(last.stamp)));
+        }
+        self.estimator.push_imu(&samples);
     }
 }
 
@@ -137,10 +157,12 @@ pub fn odometry_on_bag(path: &Path, config: &NodeConfig) -> Result<BagOdometry, 
     let body = inputs.body_frame().to_string();
     let lidar = Mount::new("lidar", "ros.body_from_lidar", &body, inputs.lidar_frame(), config.ros.lidar_pin()?);
     let camera = Mount::new("camera", "ros.body_from_camera", &body, inputs.camera_frame(), config.ros.camera_pin()?);
+    let imu = Mount::new("imu", "ros.body_from_imu", &body, inputs.imu_frame(), config.ros.imu_pin()?);
     let mut run = Run {
         estimator: LidarInertialOdometry::new(config.robot.odometry.estimator.clone())?,
         epoch: None,
-        lidar: TfListener::new(config.ros.tf.clone(), inputs.world_frame(), &body, camera, lidar),
+        mounts: TfListener::new(config.ros.tf.clone(), inputs.world_frame(), &body, camera, lidar).with_imu(imu),
+        imu_waiting: VecDeque::new(),
         waiting: VecDeque::new(),
         newest_imu: None,
         out: BagOdometry::default(),
@@ -162,7 +184,8 @@ pub fn odometry_on_bag(path: &Path, config: &NodeConfig) -> Result<BagOdometry, 
             }
             BagItem::Message { payload: Payload::Tf(batch), .. } => {
                 let epoch = run.epoch.unwrap_or(Epoch { sec: 0 });
-                run.lidar.feed(batch, |t| epoch.stamp(t));
+                run.mounts.feed(batch, |t| epoch.stamp(t));
+                run.pass_imu();
             }
             BagItem::Message { .. } => {}
             BagItem::Refused { input, error, .. } => {
@@ -174,6 +197,7 @@ pub fn odometry_on_bag(path: &Path, config: &NodeConfig) -> Result<BagOdometry, 
         run.register_ready(false);
     }
     run.register_ready(true);
+    run.out.no_imu_mount += run.imu_waiting.len() as u64;
     let topics = &config.ros.topics;
     if run.clouds == 0 && run.out.no_lidar_mount == 0 && !run.out.refused.contains_key("points") {
         return Err(BagOdometryError::NoClouds {

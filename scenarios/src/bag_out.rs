@@ -154,13 +154,7 @@ impl BagRecorder {
             w.write(info_topic, time, &camera_info_msg(header.clone(), shot.camera)).map_err(&e)?;
             w.write(labels_topic, time, &label_image_msg(header, shot.image)).map_err(&e)?;
         }
-        for sample in frame.imu {
-            let time = SCENARIO_EPOCH.time(sample.stamp);
-            let header = Header { seq: 0, stamp: time, frame_id: body.to_string() };
-            let reading =
-                ImuReading { angular_velocity: sample.angular_velocity, linear_acceleration: sample.specific_force };
-            w.write(imu_topic, time, &imu_msg(header, &reading, gyro_variance, accel_variance)).map_err(&e)?;
-        }
+        write_imu(w, imu_topic, body, frame.imu, [gyro_variance, accel_variance]).map_err(&e)?;
         w.write(odometry_topic, time, &odometry_msg(header(world), body, frame.odometry)).map_err(&e)?;
         w.write(truth_topic, time, &odometry_msg(header("truth"), body, frame.truth)).map_err(&e)?;
         let points: Vec<nalgebra::Point3<f32>> = frame.points.iter().map(|p| p.map(|v| v as f32)).collect();
@@ -170,6 +164,34 @@ impl BagRecorder {
         }
         w.write(points_topic, time, &cloud).map_err(&e)?;
         Ok(())
+    }
+
+    /// An unlabelled sweep between two frames (the internal odometry's, `odometry.source =
+    /// "internal"`): the IMU's samples since the last record, then the cloud, with its points'
+    /// times and no label field. A replay hands it to the odometry alone, as the run did.
+    pub fn record_sweep(
+        &mut self,
+        k: usize,
+        t: f64,
+        points: &[nalgebra::Point3<f64>],
+        times: Option<&[f32]>,
+        imu: &[ImuSample],
+    ) -> Result<(), OutputError> {
+        let path = self.dir.join(format!("{}.bag", self.names[k]));
+        let [gyro_variance, accel_variance] = self.imu_variances;
+        let bag = self.bag(k)?;
+        let e = OutputError::at(&path);
+        let [_, body, lidar, _] = &bag.frames;
+        let [points_topic, .., imu_topic] = &bag.topics;
+        write_imu(&mut bag.writer, imu_topic, body, imu, [gyro_variance, accel_variance]).map_err(&e)?;
+        let time = SCENARIO_EPOCH.time(t);
+        let header = Header { seq: 0, stamp: time, frame_id: lidar.to_string() };
+        let points: Vec<nalgebra::Point3<f32>> = points.iter().map(|p| p.map(|v| v as f32)).collect();
+        let mut cloud = cloud_msg(header, &points, None, |_| [200, 200, 200]);
+        if let Some(times) = times {
+            cloud = with_times(cloud, times);
+        }
+        bag.writer.write(points_topic, time, &cloud).map_err(&e)
     }
 
     /// Closes every bag; returns their paths.
@@ -184,6 +206,25 @@ impl BagRecorder {
         }
         Ok(paths)
     }
+}
+
+/// IMU samples as `sensor_msgs/Imu` in the body frame, each at its own stamp, with the
+/// variances `[gyro, accel]` per sample on its covariances' diagonals.
+fn write_imu(
+    w: &mut BagWriter,
+    topic: &str,
+    body: &str,
+    samples: &[ImuSample],
+    [gyro_variance, accel_variance]: [f64; 2],
+) -> std::io::Result<()> {
+    for sample in samples {
+        let time = SCENARIO_EPOCH.time(sample.stamp);
+        let header = Header { seq: 0, stamp: time, frame_id: body.to_string() };
+        let reading =
+            ImuReading { angular_velocity: sample.angular_velocity, linear_acceleration: sample.specific_force };
+        w.write(topic, time, &imu_msg(header, &reading, gyro_variance, accel_variance))?;
+    }
+    Ok(())
 }
 
 /// The simulated sensors' mounts as tf gives them (`header` names the body frame): the LiDAR at

@@ -15,6 +15,8 @@ use crate::sim::world::World;
 use crate::team::{RunError, Team};
 use indicatif::ProgressBar;
 use serde::Serialize;
+use sgm_actors::config::OdometrySource;
+use sgm_actors::messages::FrameLabels;
 use sgm_actors::transport::InProcessRadio;
 use sgm_bridge::bag::reader::{read_bag, BagItem, BagSource, Payload};
 use sgm_bridge::config::LabelSource;
@@ -55,6 +57,8 @@ pub struct ReplayOutcome {
 struct BagRobot {
     stream: Peekable<IntoIter<BagItem>>,
     sync: Synchroniser,
+    /// The robot runs its own odometry: its world frame is where that started.
+    internal: bool,
     truth: Vec<(Stamp, Pose3)>,
     first_odometry: Option<(Stamp, Pose3)>,
     stats: BagStats,
@@ -108,8 +112,9 @@ impl BagRobot {
                 | Payload::Image(t, ..)
                 | Payload::Odometry(t, _)
                 | Payload::GroundTruth(t, _)
+                | Payload::Imu(t, _)
                 | Payload::Clock(t) => Some(*t),
-                Payload::CameraInfo(_) | Payload::Tf(_) | Payload::Imu(..) => None,
+                Payload::CameraInfo(_) | Payload::Tf(_) => None,
             };
             // Only a sensor's stamp sets the epoch (camera info has none; tf's may be anything).
             let epoch = match stamped {
@@ -117,6 +122,8 @@ impl BagRobot {
                 None => epoch.unwrap_or(Epoch { sec: 0 }),
             };
             match &payload {
+                // The robot's own odometry: raw bytes are counted per labelled frame, as a run does.
+                Payload::Cloud(..) if self.internal => {}
                 Payload::Cloud(_, scan) => {
                     let raw = scan.points.len() as u64 * crate::record::RAW_BYTES_PER_POINT;
                     self.raw_bytes += raw;
@@ -177,10 +184,18 @@ pub async fn replay_with(
     for (k, path) in bags.iter().enumerate() {
         let id = k as u16 + 1;
         let inputs = sgm_bridge::inputs::Inputs::new(&ros, &names[k], id);
-        let colours = scenario.robot_config(k).colour_ids().map_err(|e| RunError::Input(e.to_string()))?;
+        let config = scenario.robot_config(k);
+        let colours = config.colour_ids().map_err(|e| RunError::Input(e.to_string()))?;
+        // The robot's own odometry reads the IMU; an external one the odometry topic.
+        let source = config.odometry.source;
+        let mut reading = BagSource::new(&ros, &names[k], id).with_colours(colours);
+        if source == OdometrySource::Internal {
+            reading = reading.with_imu();
+        }
         robots.push(BagRobot {
-            stream: read_bag(path, BagSource::new(&ros, &names[k], id).with_colours(colours)).into_iter().peekable(),
-            sync: Synchroniser::for_robot(&ros, &inputs).map_err(|e| RunError::Input(format!("[ros]: {e}")))?,
+            stream: read_bag(path, reading).into_iter().peekable(),
+            sync: Synchroniser::for_robot(&ros, &inputs, source).map_err(|e| RunError::Input(format!("[ros]: {e}")))?,
+            internal: source == OdometrySource::Internal,
             truth: Vec::new(),
             first_odometry: None,
             stats: BagStats { robot: names[k].clone(), bag: path.display().to_string(), ..BagStats::default() },
@@ -239,7 +254,15 @@ pub async fn replay_with(
                 robot.sync.ready()
             };
             for frame in ready {
-                robot.frames += 1;
+                // A sweep for the robot's own odometry alone is no frame of the map's.
+                if !matches!(frame.labels, FrameLabels::Unlabelled) {
+                    robot.frames += 1;
+                    if robot.internal {
+                        let raw = frame.points_in_body.len() as u64 * crate::record::RAW_BYTES_PER_POINT;
+                        robot.raw_bytes += raw;
+                        robot.raw_max_bytes = robot.raw_max_bytes.max(raw);
+                    }
+                }
                 frames.push((k, frame));
             }
         }
@@ -293,6 +316,7 @@ pub async fn replay_with(
         observations.push(team.observe(last_t).await?);
     }
     let maps = team.maps().await?;
+    let odometry = team.odometry_statuses().await?;
     let bounds = bounds(&robots, &maps);
     let mut bag_stats = Vec::new();
     let mut truths = Vec::new();
@@ -300,10 +324,13 @@ pub async fn replay_with(
         let truth = TruthTrack::Samples(r.truth);
         // Where the robot's world frame sits in the truth frame: truth · odometry⁻¹ at the first
         // odometry pose that has a true pose beside it.
-        let truth_from_world = r
-            .first_odometry
-            .and_then(|(t, odometry)| Some(truth.pose_at(t)? * odometry.inverse()))
-            .unwrap_or_else(Pose3::identity);
+        // With its own odometry: the body's true pose where that started, levelled.
+        let origin = odometry.get(k).copied().flatten().and_then(|status| status.origin_stamp);
+        let truth_from_world = match origin {
+            Some(origin) if r.internal => truth.odometry_origin(origin),
+            _ => r.first_odometry.and_then(|(t, odometry)| Some(truth.pose_at(t)? * odometry.inverse())),
+        }
+        .unwrap_or_else(Pose3::identity);
         truths.push(RobotTruth {
             name: names[k].clone(),
             truth_from_world,
@@ -361,7 +388,7 @@ pub async fn replay_with(
         false_factors: Vec::new(),
         optimisers: team.optimiser_statuses().await?,
         deskew: team.deskew_counts().await?,
-        odometry: team.odometry_statuses().await?,
+        odometry,
     };
     let timing = Timing::measure(wall, sim_s, decoding, memory);
     Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing }, bags: bag_stats })

@@ -39,7 +39,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_actors::transport::InProcessRadio;
-use sgm_model::geometry::{pose_from_yaw_translation, yaw_of, Pose3};
+use sgm_model::geometry::Pose3;
 use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, LabelId, RobotId, Stamp};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -200,7 +200,6 @@ pub async fn run_with(
             }
             let route = &robot.route;
             // The sweeps between the last frame and this one, for the internal odometry.
-            let mut between_imu = Vec::new();
             for j in 1..sweeps_per_frame {
                 let s = stamp_from_nanos((step as i64 - 1) * dt_nanos + j * sweep_nanos);
                 let Some(truth_s) = route.pose_at(s) else { continue };
@@ -210,18 +209,21 @@ pub async fn run_with(
                 };
                 let mount = robot.lidar_mount;
                 let sweep = sweep_in_body(&mut robot.lidar, &mount, &world, route, s, &truth_s, &mut robot.sweep_rng);
-                let told = mount.as_told(&sweep.points);
+                let told = mount.as_told(&sweep.points).unwrap_or(sweep.points);
+                let point_times = (!sweep.times.is_empty()).then_some(sweep.times);
+                if let Some(recorder) = recorder.as_mut() {
+                    recorder.record_sweep(k, s, &told, point_times.as_deref(), &samples)?;
+                }
                 let sweep_frame = SensorFrame {
                     stamp: s,
                     odom_from_body: Pose3::identity(),
-                    points_in_body: told.unwrap_or(sweep.points),
-                    point_times: (!sweep.times.is_empty()).then_some(sweep.times),
+                    points_in_body: told,
+                    point_times,
                     points_deskewed: false,
                     labels: FrameLabels::Unlabelled,
-                    imu: samples.clone(),
+                    imu: samples,
                 };
                 team.frame(k, || scenario.robot_config(k), sweep_frame)?;
-                between_imu.extend(samples);
             }
             // A driver hands on a sweep once it ends: the IMU has sampled it by then.
             let imu_samples = match robot.imu.as_mut() {
@@ -259,7 +261,6 @@ pub async fn run_with(
             robot.raw_bytes += raw;
             robot.raw_max_bytes = robot.raw_max_bytes.max(raw);
             if let Some(recorder) = recorder.as_mut() {
-                between_imu.extend_from_slice(&imu_samples);
                 let image = match &labels {
                     FrameLabels::Image { image, camera, camera_from_body, image_offset_s } => Some(RecordedImage {
                         image,
@@ -277,7 +278,7 @@ pub async fn run_with(
                     labels: recorded_labels.as_deref(),
                     image,
                     times: (!frame.times.is_empty()).then_some(&frame.times[..]),
-                    imu: &between_imu,
+                    imu: &imu_samples,
                 };
                 recorder.record(k, recorded)?;
             }
@@ -315,12 +316,12 @@ pub async fn run_with(
                 false => Vec::new(),
             };
             for (k, (truth, robot)) in truths.iter_mut().zip(&robots).enumerate() {
-                truth.truth_from_world = match origins.get(k).copied().flatten() {
-                    Some(origin) => robot.route.pose_at(origin).map_or(robot.odometry.truth_from_world, |p| {
-                        pose_from_yaw_translation(yaw_of(&p), p.translation.vector)
-                    }),
-                    None => robot.odometry.truth_from_world,
-                };
+                truth.truth_from_world = origins
+                    .get(k)
+                    .copied()
+                    .flatten()
+                    .and_then(|origin| truth.truth.odometry_origin(origin))
+                    .unwrap_or(robot.odometry.truth_from_world);
             }
             series.push(series_point(&last, &truths));
             crate::memory::release_free_pages();

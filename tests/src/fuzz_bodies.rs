@@ -110,11 +110,12 @@ fn bounded<M: RosMsg + Layout>(framed: &[u8]) -> Option<M> {
 
 /// The node's subscriptions: the bytes of a received message (after TCPROS's length prefix) as
 /// each subscribed type — PointCloud2, Image (ids or a palette's colours), CameraInfo,
-/// Odometry, TFMessage, the team's Envelope — through `bounded::Bounded` (the layout and size
+/// Odometry, Imu, TFMessage, the team's Envelope — through `bounded::Bounded` (the layout and size
 /// check, then rosrust's decoder) and, when that accepts them, through the same checks and
 /// conversions as the live node (`Inputs`; a TFMessage into a robot's tf tree and mounts).
 /// The same bytes as a request to the node's Deliver service (`bounded_deliver`).
 pub fn ros_messages(data: &[u8]) {
+    use sgm_actors::config::OdometrySource::Internal;
     let mut framed = (data.len() as u32).to_le_bytes().to_vec();
     framed.extend_from_slice(data);
     let config = RosConfig { labels: LabelSource::Cloud, ..RosConfig::default() };
@@ -126,7 +127,7 @@ pub fn ros_messages(data: &[u8]) {
     if let Some(m) = bounded::<sgm_bridge::msg::tf2_msgs::TFMessage>(&framed) {
         // Every transform into a robot's tf tree, and its mounts resolved.
         if let (Ok(payload), Ok(mut sync)) =
-            (inputs.tf(&m, true), sgm_bridge::sync::Synchroniser::for_robot(&config, &inputs))
+            (inputs.tf(&m, true), sgm_bridge::sync::Synchroniser::for_robot(&config, &inputs, Internal))
         {
             sync.feed(sgm_bridge::convert::time::Epoch { sec: 0 }, payload);
             let _ = sync.tf();
@@ -143,6 +144,15 @@ pub fn ros_messages(data: &[u8]) {
     }
     if let Some(m) = bounded::<nav_msgs::Odometry>(&framed) {
         let _ = inputs.odometry(&m);
+    }
+    if let Some(m) = bounded::<sensor_msgs::Imu>(&framed) {
+        // A sample into the internal odometry's IMU stream, and a frame assembled with it.
+        if let (Ok(payload), Ok(mut sync)) =
+            (inputs.imu(&m), sgm_bridge::sync::Synchroniser::for_robot(&config, &inputs, Internal))
+        {
+            sync.feed(sgm_bridge::convert::time::Epoch { sec: 0 }, payload);
+            let _ = sync.finish(sgm_bridge::convert::time::Epoch { sec: 0 });
+        }
     }
     let _ = bounded::<sgm_msgs::Envelope>(&framed);
     let _ = BoundedDeliverReq::decode_slice(&framed);

@@ -53,6 +53,12 @@ pub struct RosConfig {
     /// frame, `p_body = body_from_lidar · p_lidar`. Unset: tf's transform between
     /// `frames.body` and `frames.lidar` (the identity when they are one frame).
     pub body_from_lidar: Option<[f64; 7]>,
+    /// The IMU's mounting, as tf and a URDF give it: the IMU messages' frame's pose in the body
+    /// frame. Its rotation turns the rates and specific force into the body's axes, its
+    /// translation (the lever arm) takes the centripetal acceleration out of the specific
+    /// force. Unset: tf's transform between `frames.body` and `frames.imu` (the identity when
+    /// they are one frame). Read only with `odometry.source = "internal"`.
+    pub body_from_imu: Option<[f64; 7]>,
     pub sync: SyncConfig,
     /// Publish the odometry's `frames.world` → `frames.body` on `topics.tf` (10 Hz at most), for
     /// robots whose odometry's own tf is remapped away or names frames every robot shares.
@@ -93,6 +99,7 @@ impl Default for RosConfig {
             camera_from_body: None,
             body_from_camera: None,
             body_from_lidar: None,
+            body_from_imu: None,
             sync: SyncConfig::default(),
             publish_body_tf: false,
             publish_interval_s: 1.0,
@@ -173,6 +180,7 @@ impl RosConfig {
             ("topics.camera_info", &t.camera_info),
             ("topics.odometry", &t.odometry),
             ("topics.imu", &t.imu),
+            ("topics.odometry_out", &t.odometry_out),
             ("topics.markers", &t.markers),
             ("topics.path", &t.path),
             ("topics.map", &t.map),
@@ -200,6 +208,7 @@ impl RosConfig {
             }
         }
         self.camera_pin()?;
+        self.imu_pin()?;
         self.lidar_pin().map(|_| ())
     }
 }

@@ -1,5 +1,5 @@
 //! The sensors' mountings pinned in `[ros]` (`camera_from_body` or `body_from_camera`,
-//! `body_from_lidar`), checked; unpinned ones are read from tf.
+//! `body_from_lidar`, `body_from_imu`), checked; unpinned ones are read from tf.
 
 use super::{RosConfig, RosConfigError};
 use sgm_model::geometry::Pose3;
@@ -29,6 +29,11 @@ impl RosConfig {
     /// The LiDAR mounting pinned by configuration (`body_from_lidar`); `None`: from tf.
     pub fn lidar_pin(&self) -> Result<Option<Pose3>, RosConfigError> {
         self.body_from_lidar.map(|values| pose_key(values, "body_from_lidar")).transpose()
+    }
+
+    /// The IMU mounting pinned by configuration (`body_from_imu`); `None`: from tf.
+    pub fn imu_pin(&self) -> Result<Option<Pose3>, RosConfigError> {
+        self.body_from_imu.map(|values| pose_key(values, "body_from_imu")).transpose()
     }
 }
 

@@ -12,11 +12,14 @@ pub struct RosTopics {
     pub labels: String,
     /// sensor_msgs/CameraInfo in. Default `camera_info`.
     pub camera_info: String,
-    /// nav_msgs/Odometry in. Default `odometry`.
+    /// nav_msgs/Odometry in (with `odometry.source = "external"`). Default `odometry`.
     pub odometry: String,
-    /// sensor_msgs/Imu: written into bags from scenarios with an IMU (`[imu]`); the
-    /// LiDAR-inertial odometry's input. Default `imu`.
+    /// sensor_msgs/Imu in (with `odometry.source = "internal"`): the robot's own odometry's
+    /// input; also written into bags from scenarios with an IMU (`[imu]`). Default `imu`.
     pub imu: String,
+    /// nav_msgs/Odometry out (with `odometry.source = "internal"`): the robot's own odometry at
+    /// every sweep, its world → body also on `tf`. Default `sgm/odometry`.
+    pub odometry_out: String,
     /// nav_msgs/Odometry of the true pose, in bags written from scenarios (replay's ATE).
     /// Default `ground_truth`.
     pub ground_truth: String,
@@ -48,6 +51,7 @@ impl Default for RosTopics {
             camera_info: "camera_info".into(),
             odometry: "odometry".into(),
             imu: "imu".into(),
+            odometry_out: "sgm/odometry".into(),
             ground_truth: "ground_truth".into(),
             markers: "sgm/markers".into(),
             path: "sgm/path".into(),
@@ -73,6 +77,9 @@ pub struct RosFrames {
     pub lidar: String,
     /// The label image's and camera info's frame. Default `{robot}/camera`.
     pub camera: String,
+    /// The IMU messages' frame (with `odometry.source = "internal"`). Default
+    /// `{robot}/base_link`: the IMU at the body origin, its axes the body's.
+    pub imu: String,
     /// Frame ids renamed as they come in (messages' headers and tf), before any check: input
     /// name → SGM's name (`{robot}` and `{id}` allowed). For odometry with hard-coded frames on a
     /// one-master fleet: `camera_init = "{robot}/odom"`, `body = "{robot}/base_link"`. The keys
@@ -87,6 +94,7 @@ impl Default for RosFrames {
             body: "{robot}/base_link".into(),
             lidar: "{robot}/base_link".into(),
             camera: "{robot}/camera".into(),
+            imu: "{robot}/base_link".into(),
             aliases: BTreeMap::new(),
         }
     }

@@ -7,4 +7,5 @@ pub mod geometry;
 pub mod image;
 pub mod imu;
 pub mod markers;
+pub mod odometry;
 pub mod time;

@@ -21,6 +21,7 @@ use crate::health::{judge_whole_stream, HealthConfig, TopicTally};
 use crate::inputs::{Inputs, Payload};
 use crate::node::NodeConfig;
 use crate::sync::Synchroniser;
+use sgm_actors::config::OdometrySource;
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::perception::label_map::{LabelMap, Mapped};
 use sgm_model::perception::projection::CameraModel;
@@ -105,7 +106,9 @@ impl Doctor {
         let (classes, map) = config.robot.class_tables()?;
         let colours = config.robot.colour_ids()?;
         let inputs = Inputs::new(&config.ros, &robot, id).with_colours(colours);
-        let sync = Synchroniser::for_robot(&config.ros, &inputs)?;
+        // The doctor judges the external odometry's inputs (clouds meet the odometry topic);
+        // the IMU stream of an internal odometry is not among its checks yet.
+        let sync = Synchroniser::for_robot(&config.ros, &inputs, OdometrySource::External)?;
         let mut tallies = BTreeMap::new();
         let mut expected = vec!["points", "odometry"];
         if config.ros.labels == LabelSource::Image {

@@ -16,6 +16,7 @@
 
 mod config;
 mod error;
+mod odometry_out;
 mod outputs;
 mod sensors;
 mod team_key;
@@ -38,16 +39,20 @@ use crate::sync::Synchroniser;
 use crate::team_frames::{team_transform, WorldFrames};
 use crate::transport::peers::MasterLocator;
 use crate::transport::{RosTransport, TransportCounts};
+use actix::Actor;
 use error::ros_error;
+use odometry_out::{OdometryOutCounts, OdometryPublisher};
 use outputs::{PublishFailures, Publishers};
 use sensors::{subscribe, InputCounts, SensorSide};
 use sgm_actors::clock::Clock;
 use sgm_actors::comms::AttachJournal;
 use sgm_actors::comms::GetCommsStatus;
+use sgm_actors::config::OdometrySource;
 use sgm_actors::fusion::GetFusionStatus;
 use sgm_actors::journal::JournalFile;
 use sgm_actors::matcher::GetNeighbours;
 use sgm_actors::messages::Tick;
+use sgm_actors::odometry::{AttachOdometryOutput, GetOdometryStatus};
 use sgm_actors::snapshot::SnapshotStore;
 use sgm_actors::supervisor::start_robot_restored;
 use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
@@ -167,10 +172,14 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                  the first; set it in [classes.palette] to choose");
         }
         let inputs = Inputs::new(&ros, &robot_name, id).with_colours(colours);
+        // The robot's own odometry reads the IMU instead of an odometry topic.
+        let source = config.robot.odometry.source;
+        let internal = source == OdometrySource::Internal;
+        let motion = if internal { "imu" } else { "odometry" };
         let side = Arc::new(SensorSide {
-            sync: Mutex::new(Synchroniser::for_robot(&ros, &inputs).map_err(NodeError::Ros)?),
+            sync: Mutex::new(Synchroniser::for_robot(&ros, &inputs, source).map_err(NodeError::Ros)?),
             inputs,
-            counts: InputCounts::new(&["points", "labels", "camera_info", "odometry", "clock", "tf", "tf_static"]),
+            counts: InputCounts::new(&["points", "labels", "camera_info", motion, "clock", "tf", "tf_static"]),
             intake: intake.clone(),
             epoch: Epoch { sec: 0 },
         });
@@ -179,7 +188,12 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         let points = subscribe(&t.points, q, &side, "points", Inputs::cloud)?;
         let labels = subscribe(&t.labels, q, &side, "labels", Inputs::image)?;
         let camera_info = subscribe(&t.camera_info, q, &side, "camera_info", Inputs::camera_info)?;
-        let odometry = subscribe(&t.odometry, q, &side, "odometry", Inputs::odometry)?;
+        let motion = if internal {
+            // 200 Hz and more: a queue of at least a second's samples.
+            subscribe(&t.imu, q.max(400), &side, "imu", Inputs::imu)?
+        } else {
+            subscribe(&t.odometry, q, &side, "odometry", Inputs::odometry)?
+        };
         // tf: the sensors' mounts when [ros] does not pin them, and tf's view of the odometry.
         let tf = if ros.tf.listen {
             let dynamic = subscribe(&ros.tf.topic, q.max(100), &side, "tf", |i, m| i.tf(m, false))?;
@@ -199,6 +213,19 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         };
 
         let publishers = Publishers::advertise(&ros).map_err(ros_error)?;
+        // The robot's own odometry out: nav_msgs/Odometry and world → body on tf.
+        let odometry_out = Arc::new(OdometryOutCounts::default());
+        if let Some(odometry) = &handle.odometry {
+            let publisher = OdometryPublisher {
+                side: side.clone(),
+                odometry: rosrust::publish(&t.odometry_out, q.max(100)).map_err(ros_error)?,
+                tf: rosrust::publish(&t.tf, q.max(100)).map_err(ros_error)?,
+                world_frame: side.inputs.world_frame().to_string(),
+                body_frame: side.inputs.body_frame().to_string(),
+                counts: odometry_out.clone(),
+            };
+            odometry.do_send(AttachOdometryOutput(publisher.start().recipient()));
+        }
         let world_frames = WorldFrames::new(&ros);
         register_world_frame(id, side.inputs.world_frame(), world_frames.clone());
         tracing::info!(robot = %robot_name, id, service = %deliver_name, "sgm node up");
@@ -243,6 +270,10 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             seq = seq.wrapping_add(1);
             let header =
                 std_msgs::Header { seq, stamp: side.ros_time(handle.clock.now()), frame_id: world_frame.clone() };
+            let odometry_status = match &handle.odometry {
+                Some(odometry) => odometry.send(GetOdometryStatus).await.ok(),
+                None => None,
+            };
             let (Ok(map), Ok(neighbours), Ok(comms_status), Ok(fusion_status), Ok(pose_graph)) = (
                 handle.tracker.send(GetMapSummary).await,
                 handle.matcher.send(GetNeighbours).await,
@@ -299,6 +330,8 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 "publish_failures": &failures.0,
                 "comms": comms_status,
                 "fusion": fusion_status,
+                "odometry": odometry_status,
+                "odometry_out": internal.then(|| odometry_out.snapshot()),
                 "pose_graph": pose_graph,
                 "neighbours": neighbours.iter().map(|n| serde_json::json!({
                     "robot": n.robot.0,
@@ -314,7 +347,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             });
             failures.check("status", publishers.status.send(std_msgs::String { data: status.to_string() }));
         }
-        drop((team_in, deliver, points, labels, camera_info, odometry, clock, tf));
+        drop((team_in, deliver, points, labels, camera_info, motion, clock, tf));
         // Shutdown (SIGINT, rosnode kill): one last snapshot.
         if let Some(snapshots) = &mut snapshots {
             snapshots.take(&handle, &intake).await;

@@ -2,11 +2,14 @@
 //! [`SensorFrame`]: the pose stamped exactly at the cloud's stamp, else interpolated between
 //! the two bracketing poses if they are at most `max_odometry_gap_s` apart. A cloud waits while
 //! its partners may still come, and once the streams are `max_wait_s` past it (or the input has
-//! ended) takes what there is or is dropped and counted.
+//! ended) takes what there is or is dropped and counted. With the robot's own odometry a cloud
+//! waits for the IMU to pass its sweep's end instead of a pose, takes the samples since the
+//! previous frame, and reaches the odometry even when no label does (a sweep).
 
-use super::{with_stamp, Outcome, Synchroniser};
+use super::{with_stamp, Outcome, Synchroniser, Waiting};
 use crate::convert::time::Epoch;
-use sgm_actors::messages::SensorFrame;
+use sgm_actors::config::OdometrySource;
+use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_model::geometry::Pose3;
 use sgm_model::scene_graph::Stamp;
 
@@ -26,18 +29,25 @@ impl Synchroniser {
 
     /// The frames that can be assembled now, oldest first; stale clouds are dropped.
     pub fn ready(&mut self) -> Vec<SensorFrame> {
+        let internal = self.source == OdometrySource::Internal;
         let mut frames = Vec::new();
-        while let Some((t, _)) = self.clouds.front() {
-            let t = *t;
+        while let Some((t, waiting)) = self.clouds.front() {
+            let (t, sweep_end) = (*t, waiting.sweep_end);
             let stale = self.ended || self.latest - t > self.config.max_wait_s;
-            let pose = match self.pose_at(t) {
-                Outcome::Ready(pose) => pose,
-                Outcome::Wait if !stale => break,
-                _ => {
-                    self.counts.no_odometry += 1;
-                    self.clouds.pop_front();
-                    continue;
-                }
+            // The robot's own odometry sets the pose: the cloud waits for its sweep's IMU samples.
+            let imu_covered = self.imu.covers(sweep_end);
+            let pose = match internal {
+                true if !imu_covered && !stale => break,
+                true => Pose3::identity(),
+                false => match self.pose_at(t) {
+                    Outcome::Ready(pose) => pose,
+                    Outcome::Wait if !stale => break,
+                    _ => {
+                        self.counts.no_odometry += 1;
+                        self.clouds.pop_front();
+                        continue;
+                    }
+                },
             };
             let Some(body_from_lidar) = self.tf.body_from_lidar() else {
                 if !stale {
@@ -47,39 +57,59 @@ impl Synchroniser {
                 self.clouds.pop_front();
                 continue;
             };
-            let Some((_, mut scan)) = self.clouds.pop_front() else { break };
-            match self.labels_for(t, &pose, &scan, &body_from_lidar, stale) {
-                Outcome::Ready(labels) => {
-                    self.counts.frames += 1;
-                    // Points into the body frame (the labels stay with their points).
-                    if body_from_lidar != Pose3::identity() {
-                        for p in &mut scan.points {
-                            *p = body_from_lidar * *p;
-                        }
-                    }
-                    frames.push(SensorFrame {
-                        stamp: t,
-                        odom_from_body: pose,
-                        points_in_body: scan.points,
-                        point_times: scan.times,
-                        points_deskewed: false,
-                        labels,
-                        imu: Vec::new(),
-                    });
+            let body_from_imu = match self.tf.body_from_imu() {
+                Some(mount) => Some(mount),
+                None if !internal => None,
+                None if !stale => break,
+                None => {
+                    self.counts.no_imu_mount += 1;
+                    self.clouds.pop_front();
+                    continue;
                 }
+            };
+            let Some((_, Waiting { mut scan, .. })) = self.clouds.pop_front() else { break };
+            let labels = match self.labels_for(t, &pose, &scan, &body_from_lidar, stale) {
+                Outcome::Ready(labels) => labels,
                 Outcome::Wait if !stale => {
-                    self.clouds.push_front((t, scan));
+                    self.clouds.push_front((t, Waiting { scan, sweep_end }));
                     break;
                 }
+                // The odometry still registers a sweep whose labels never came.
+                Outcome::Wait | Outcome::Drop if internal => FrameLabels::Unlabelled,
                 Outcome::Wait => {
                     if self.camera.is_none() {
                         self.counts.no_camera_info += 1;
                     } else {
                         self.counts.no_image += 1;
                     }
+                    continue;
                 }
-                Outcome::Drop => {}
+                Outcome::Drop => continue,
+            };
+            if matches!(labels, FrameLabels::Unlabelled) {
+                self.counts.sweeps += 1;
+            } else {
+                self.counts.frames += 1;
             }
+            if internal && !imu_covered {
+                self.counts.imu_short += 1;
+            }
+            // Points into the body frame (the labels stay with their points).
+            if body_from_lidar != Pose3::identity() {
+                for p in &mut scan.points {
+                    *p = body_from_lidar * *p;
+                }
+            }
+            let imu = body_from_imu.map(|mount| self.imu.take_until(sweep_end, &mount)).unwrap_or_default();
+            frames.push(SensorFrame {
+                stamp: t,
+                odom_from_body: pose,
+                points_in_body: scan.points,
+                point_times: scan.times,
+                points_deskewed: false,
+                labels,
+                imu,
+            });
         }
         self.prune();
         frames

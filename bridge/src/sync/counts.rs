@@ -38,4 +38,20 @@ pub struct SyncCounts {
     /// colour (`#rrggbb`, the first 32 colours seen).
     pub unknown_colour_pixels: u64,
     pub unknown_colours: BTreeMap<String, u64>,
+    /// With the robot's own odometry: clouds handed to it alone, without labels (no label
+    /// field, no label image in time with `unlabelled = "drop"`, no camera info); registered,
+    /// not mapped.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub sweeps: u64,
+    /// With the robot's own odometry: clouds handed on before the IMU reached their sweep's end
+    /// (it lagged by more than `max_wait_s`, or stopped): the odometry coasted over the gap.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub imu_short: u64,
+    /// With the robot's own odometry: clouds dropped because the IMU's mount is unknown.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub no_imu_mount: u64,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }

@@ -1,12 +1,15 @@
 //! A cloud's labels: its own label field (`labels = "cloud"`), or the label image nearest its
 //! stamp. An image within `image_tolerance_s` labels it with the skew left to Fusion (which
 //! compensates it at the odometry's velocity); one farther but within `max_label_skew_s` labels
-//! it with the body's motion in between compensated here (the odometry at both stamps); a cloud no image reaches is kept without labels or dropped
-//! (`unlabelled`). The share of a labelled frame's points that lands in the image is sampled.
+//! it with the body's motion in between compensated here (the odometry at both stamps), or by
+//! Fusion at the odometry's velocity with the robot's own odometry (no poses here); a cloud no
+//! image reaches is kept without labels or dropped (`unlabelled`), or with the robot's own
+//! odometry handed to it alone as a sweep. The share of a labelled frame's points that lands in the image is sampled.
 
 use super::{Outcome, Synchroniser};
 use crate::config::{LabelSource, Unlabelled};
 use crate::convert::cloud::{Scan, NO_LABEL};
+use sgm_actors::config::OdometrySource;
 use sgm_actors::messages::FrameLabels;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::projection::LabelImage;
@@ -46,6 +49,8 @@ impl Synchroniser {
                 self.counts.unlabelled += 1;
                 Outcome::Ready(FrameLabels::PerPoint(vec![None; scan.points.len()]))
             }
+            // The robot's own odometry still registers it (counted as a sweep).
+            Unlabelled::Drop if self.source == OdometrySource::Internal => Outcome::Ready(FrameLabels::Unlabelled),
             Unlabelled::Drop => {
                 self.counts.no_image += 1;
                 Outcome::Drop
@@ -67,6 +72,7 @@ impl Synchroniser {
                 Some(labels) => Outcome::Ready(FrameLabels::PerPoint(
                     labels.iter().map(|&l| (l != NO_LABEL).then_some(LabelId(l))).collect(),
                 )),
+                None if self.source == OdometrySource::Internal => Outcome::Ready(FrameLabels::Unlabelled),
                 None => {
                     self.counts.no_label_field += 1;
                     Outcome::Drop
@@ -88,8 +94,10 @@ impl Synchroniser {
                     return self.without_image(scan);
                 };
                 let skew = (t_image - t).abs();
-                // Within the tolerance Fusion compensates the skew at the odometry's velocity.
-                let (camera_from_body, image_offset_s) = if skew <= self.config.image_tolerance_s {
+                // Within the tolerance Fusion compensates the skew at the odometry's velocity; so
+                // it does beyond it with the robot's own odometry, whose poses are not here.
+                let internal = self.source == OdometrySource::Internal;
+                let (camera_from_body, image_offset_s) = if skew <= self.config.image_tolerance_s || internal {
                     (mounted, t_image - t)
                 } else {
                     match self.pose_at(t_image) {
@@ -194,7 +202,7 @@ mod tests {
         let mut ros = RosConfig::default();
         ros.timeline.confirm_messages = 1;
         let inputs = Inputs::new(&ros, "alpha", 1);
-        let mut s = Synchroniser::for_robot(&ros, &inputs).unwrap();
+        let mut s = Synchroniser::for_robot(&ros, &inputs, OdometrySource::External).unwrap();
         let epoch = Epoch { sec: 100 };
         let at = |t: f64| epoch.time(t);
         // Sampled: the 1st and the 17th point, one ahead and one behind.

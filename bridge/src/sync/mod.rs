@@ -21,6 +21,16 @@
 //! confirm it (a jump: the timeline restarts, the buffers start afresh and mission time goes on) or
 //! is dropped as an outlier (a glitch), so one bad stamp never stops the streams.
 //!
+//! With the robot's own odometry (`odometry.source = "internal"`) there is no odometry stream:
+//! the IMU's is kept instead (`imu.rs`), and a cloud waits for the IMU to pass the end of its
+//! sweep (its stamp plus its latest point's time), not for a pose. Each frame carries the IMU's
+//! samples since the previous frame, in the body frame; its pose is left for the Odometry actor
+//! to set. Every cloud then reaches the odometry: one that no label reaches (no label field, no
+//! image in time with `unlabelled = "drop"`) goes as a sweep for the odometry alone
+//! ([`FrameLabels::Unlabelled`](sgm_actors::messages::FrameLabels), counted as `sweeps`), and an
+//! image beyond `image_tolerance_s` is handed on with its offset for Fusion to compensate at the
+//! odometry's velocity (there are no odometry poses here to compensate with).
+//!
 //! [`Synchroniser`] (here) takes the streams in and owns their buffers; a cloud meets its
 //! odometry pose and is assembled in `assemble.rs`, and finds its labels (from the cloud, or the
 //! nearest image, motion-compensated) in `labels.rs`; what became of the clouds is counted in
@@ -28,21 +38,27 @@
 
 mod assemble;
 mod counts;
+mod imu;
 mod labels;
 
 pub use counts::SyncCounts;
+pub use imu::MAX_IMU_BUFFERED;
 pub use labels::PROJECTION_SAMPLE;
 
 use crate::config::{LabelSource, RosConfig, RosConfigError, SyncConfig};
 use crate::convert::cloud::Scan;
 use crate::convert::image::UnknownColours;
+use crate::convert::imu::ImuReading;
 use crate::convert::time::Epoch;
 use crate::inputs::{Inputs, Payload};
 use crate::tf::listener::{TfListener, TfStatus};
 use crate::tf::mounts::Mount;
 use crate::timeline::{Timeline, TimelineConfig, TimelineCounts};
+use imu::{ImuStream, Pushed};
+use sgm_actors::config::OdometrySource;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::colour_ids::hex;
+use sgm_model::perception::deskew::sweep_end_s;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
 use sgm_model::scene_graph::Stamp;
 use std::collections::VecDeque;
@@ -58,7 +74,11 @@ pub struct Synchroniser {
     odometry: VecDeque<(Stamp, Pose3)>,
     images: VecDeque<(Stamp, LabelImage)>,
     camera: Option<CameraModel>,
-    clouds: VecDeque<(Stamp, Scan)>,
+    clouds: VecDeque<(Stamp, Waiting)>,
+    /// Where the frames' poses come from: the odometry stream, or the robot's own odometry
+    /// (then the IMU stream is kept, and clouds wait for it instead).
+    source: OdometrySource,
+    imu: ImuStream,
     latest: Stamp,
     /// No more input will come (a bag's end): nothing waits for a partner any longer.
     ended: bool,
@@ -66,6 +86,13 @@ pub struct Synchroniser {
     /// Newest `/clock` time passed by the timeline (mission time).
     clock: Option<Stamp>,
     pub counts: SyncCounts,
+}
+
+/// A cloud waiting for its partners.
+struct Waiting {
+    scan: Scan,
+    /// The stamp its sweep ends at: its own plus its latest point's time.
+    sweep_end: Stamp,
 }
 
 /// What a cloud's partner lookup gives: found, not yet (it may still come), or never.
@@ -94,13 +121,19 @@ impl Synchroniser {
     }
 
     /// A robot's synchroniser as its `[ros]` section says: mounts pinned there or read from tf
-    /// between the frames `inputs` resolved, stamps checked by `ros.timeline`.
-    pub fn for_robot(ros: &RosConfig, inputs: &Inputs) -> Result<Self, RosConfigError> {
+    /// between the frames `inputs` resolved, stamps checked by `ros.timeline`; the IMU stream
+    /// and its mount kept when `source` is the robot's own odometry.
+    pub fn for_robot(ros: &RosConfig, inputs: &Inputs, source: OdometrySource) -> Result<Self, RosConfigError> {
         let body = inputs.body_frame();
         let camera = Mount::new("camera", "ros.body_from_camera", body, inputs.camera_frame(), ros.camera_pin()?);
         let lidar = Mount::new("lidar", "ros.body_from_lidar", body, inputs.lidar_frame(), ros.lidar_pin()?);
-        let tf = TfListener::new(ros.tf.clone(), inputs.world_frame(), body, camera, lidar);
-        Ok(Self::with_mounts(ros.sync.clone(), ros.labels, tf).with_timeline(ros.timeline.clone()))
+        let mut tf = TfListener::new(ros.tf.clone(), inputs.world_frame(), body, camera, lidar);
+        if source == OdometrySource::Internal {
+            tf = tf.with_imu(Mount::new("imu", "ros.body_from_imu", body, inputs.imu_frame(), ros.imu_pin()?));
+        }
+        let mut sync = Self::with_mounts(ros.sync.clone(), ros.labels, tf).with_timeline(ros.timeline.clone());
+        sync.source = source;
+        Ok(sync)
     }
 
     fn with_mounts(config: SyncConfig, labels: LabelSource, tf: TfListener) -> Self {
@@ -112,6 +145,8 @@ impl Synchroniser {
             images: VecDeque::new(),
             camera: None,
             clouds: VecDeque::new(),
+            source: OdometrySource::External,
+            imu: ImuStream::default(),
             latest: f64::NEG_INFINITY,
             ended: false,
             timeline: Timeline::new(TimelineConfig::default()),
@@ -152,6 +187,7 @@ impl Synchroniser {
         self.clouds.clear();
         self.odometry.clear();
         self.images.clear();
+        self.imu.clear();
         self.latest = f64::NEG_INFINITY;
         self.clock = None;
     }
@@ -206,8 +242,22 @@ impl Synchroniser {
 
     pub fn cloud(&mut self, t: Stamp, scan: Scan) {
         self.saw(t);
-        if !push_bounded(&mut self.clouds, t, scan, &mut self.counts.overflow) {
+        let sweep_end = t + sweep_end_s(scan.times.as_deref());
+        if !push_bounded(&mut self.clouds, t, Waiting { scan, sweep_end }, &mut self.counts.overflow) {
             self.counts.out_of_order += 1;
+        }
+    }
+
+    /// An IMU sample in the IMU's frame (kept only for the robot's own odometry).
+    pub fn imu(&mut self, t: Stamp, reading: ImuReading) {
+        if self.source != OdometrySource::Internal {
+            return;
+        }
+        self.saw(t);
+        match self.imu.push(t, reading) {
+            Pushed::Kept => {}
+            Pushed::KeptOverflowing => self.counts.overflow += 1,
+            Pushed::OutOfOrder => self.counts.out_of_order += 1,
         }
     }
 
@@ -216,6 +266,7 @@ impl Synchroniser {
     pub fn feed(&mut self, epoch: Epoch, payload: Payload) -> Option<(Stamp, Pose3)> {
         let stamp = match &payload {
             Payload::Cloud(t, _) | Payload::Image(t, ..) | Payload::Odometry(t, _) | Payload::Clock(t) => *t,
+            Payload::Imu(t, _) if self.source == OdometrySource::Internal => *t,
             Payload::CameraInfo(_) => {
                 self.feed_checked(epoch, payload);
                 return None;
@@ -223,7 +274,7 @@ impl Synchroniser {
             Payload::GroundTruth(t, pose) => {
                 return Some((epoch.stamp(self.timeline.to_mission(*t)), *pose));
             }
-            // Not used by the synchroniser yet (a bag source reads it only when asked).
+            // Only the robot's own odometry uses the IMU.
             Payload::Imu(..) => return None,
             // tf carries its own stamps (static ones are often 0): not the timeline's business.
             Payload::Tf(_) => {
@@ -260,11 +311,12 @@ impl Synchroniser {
             }
             Payload::CameraInfo(camera) => self.camera_info(camera),
             Payload::Odometry(t, pose) => self.odometry(epoch.stamp(t), pose),
+            Payload::Imu(t, reading) => self.imu(epoch.stamp(t), reading),
             Payload::Clock(t) => {
                 let t = epoch.stamp(t);
                 self.clock = Some(self.clock.map_or(t, |c: Stamp| c.max(t)));
             }
-            Payload::GroundTruth(..) | Payload::Tf(_) | Payload::Imu(..) => {}
+            Payload::GroundTruth(..) | Payload::Tf(_) => {}
         }
     }
 
@@ -368,7 +420,7 @@ mod tests {
         ros.frames.lidar = "{robot}/velodyne".into();
         ros.timeline.confirm_messages = 1;
         let inputs = Inputs::new(&ros, "alpha", 1);
-        let mut s = Synchroniser::for_robot(&ros, &inputs).unwrap();
+        let mut s = Synchroniser::for_robot(&ros, &inputs, OdometrySource::External).unwrap();
         let epoch = Epoch { sec: 100 };
         let at = |t: f64| epoch.time(t);
         s.feed(epoch, Payload::Odometry(at(0.0), Pose3::identity()));
@@ -390,7 +442,7 @@ mod tests {
         assert_eq!(s.missing_mount(), None);
 
         // No tf at all: dropped once stale, counted, the reason kept.
-        let mut s = Synchroniser::for_robot(&ros, &inputs).unwrap();
+        let mut s = Synchroniser::for_robot(&ros, &inputs, OdometrySource::External).unwrap();
         s.feed(epoch, Payload::Odometry(at(0.0), Pose3::identity()));
         s.feed(epoch, Payload::Cloud(at(0.0), scan(2)));
         s.feed(epoch, Payload::Odometry(at(2.0), Pose3::identity()));

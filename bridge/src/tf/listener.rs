@@ -1,4 +1,5 @@
-//! What a robot keeps of tf: the tree, the camera's and the LiDAR's mounts resolved from it,
+//! What a robot keeps of tf: the tree, the camera's and the LiDAR's mounts (and the IMU's, for
+//! the internal odometry) resolved from it,
 //! what was refused, and tf's own view of the odometry (the transform between the configured
 //! world and body frames, when something publishes it) for the synchroniser to compare with
 //! the odometry topic. Plain state fed by the synchroniser; nothing here reads a clock.
@@ -53,6 +54,8 @@ pub struct TfListener {
     tree: TfTree,
     camera: Mount,
     lidar: Mount,
+    /// Only when the robot runs its own odometry on the IMU.
+    imu: Option<Mount>,
     world_frame: String,
     body_frame: String,
     pub counts: TfCounts,
@@ -68,6 +71,7 @@ impl TfListener {
             tree: TfTree::new(),
             camera,
             lidar,
+            imu: None,
             world_frame: frame_name(world_frame).into(),
             body_frame: frame_name(body_frame).into(),
             counts: TfCounts::default(),
@@ -82,6 +86,17 @@ impl TfListener {
         let camera = Mount::new("camera", "ros.body_from_camera", "body", "camera", Some(camera_from_body.inverse()));
         let lidar = Mount::new("lidar", "ros.body_from_lidar", "body", "body", None);
         Self::new(config, "world", "body", camera, lidar)
+    }
+
+    /// Also resolves the IMU's mount (the internal odometry's input).
+    pub fn with_imu(mut self, imu: Mount) -> Self {
+        self.imu = Some(imu);
+        self.resolve();
+        self
+    }
+
+    fn mounts(&self) -> impl Iterator<Item = &Mount> {
+        [&self.lidar, &self.camera].into_iter().chain(self.imu.as_ref())
     }
 
     fn say_once(&mut self, reason: &str) {
@@ -126,7 +141,7 @@ impl TfListener {
 
     fn resolve(&mut self) {
         let (max_m, max_deg) = (self.config.max_mount_disagreement_m, self.config.max_mount_disagreement_deg);
-        for mount in [&mut self.camera, &mut self.lidar] {
+        for mount in [&mut self.camera, &mut self.lidar].into_iter().chain(self.imu.as_mut()) {
             let before = (mount.source(), mount.body_from_sensor());
             mount.update(&self.tree);
             let (body, sensor) = mount.frames();
@@ -159,9 +174,20 @@ impl TfListener {
         self.lidar.body_from_sensor()
     }
 
+    /// `body_from_imu`, once known (`None` as well when no IMU mount is kept).
+    pub fn body_from_imu(&self) -> Option<Pose3> {
+        self.imu.as_ref().and_then(Mount::body_from_sensor)
+    }
+
     /// Why a mount the frames need is unknown (the camera's only when `camera` is needed).
     pub fn missing(&self, camera: bool) -> Option<String> {
-        self.lidar.missing_reason().or_else(|| if camera { self.camera.missing_reason() } else { None })
+        self.lidar.missing_reason().or_else(|| self.imu.as_ref().and_then(Mount::missing_reason)).or_else(|| {
+            if camera {
+                self.camera.missing_reason()
+            } else {
+                None
+            }
+        })
     }
 
     /// tf's world → body samples stamped at or before `t`, oldest first (taken out).
@@ -197,9 +223,9 @@ impl TfListener {
             counts: self.counts.clone(),
             world_frame: self.world_frame.clone(),
             body_frame: self.body_frame.clone(),
-            mounts: vec![self.lidar.status(), self.camera.status()],
-            mounts_disagreeing: [&self.lidar, &self.camera]
-                .into_iter()
+            mounts: self.mounts().map(Mount::status).collect(),
+            mounts_disagreeing: self
+                .mounts()
                 .filter(|m| m.disagreement().is_some_and(|d| d.exceeds(max_m, max_deg)))
                 .map(|m| m.key)
                 .collect(),

@@ -38,14 +38,14 @@ pub enum DeskewRefusal {
 /// Point times farther from the stamp than this are refused (a sweep is ~0.1 s), s.
 pub const MAX_SWEEP_S: f64 = 1.0;
 
-/// `points` measured at `times` (s after the stamp), moved into the body frame at the stamp
-/// under the constant twist `twist`.
 /// When a sweep ends: its latest point's time after the stamp, s, at most 1 s (0 without
 /// times, or when none is positive).
 pub fn sweep_end_s(times: Option<&[f32]>) -> f64 {
     times.map_or(0.0, |t| t.iter().fold(0.0f64, |m, &x| m.max(f64::from(x))).min(1.0))
 }
 
+/// `points` measured at `times` (s after the stamp), moved into the body frame at the stamp
+/// under the constant twist `twist`.
 pub fn deskew(points: &[Point3<f64>], times: &[f32], twist: &Tangent3) -> Result<Vec<Point3<f64>>, DeskewRefusal> {
     deskew_with(points, times, |t| se3_exp(&(twist * f64::from(t))))
 }

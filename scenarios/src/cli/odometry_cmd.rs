@@ -42,6 +42,9 @@ pub fn execute(options: Options) -> Result<()> {
     if run.no_lidar_mount > 0 {
         eprintln!("{} clouds left out: no LiDAR mount (pin ros.body_from_lidar, or record tf)", run.no_lidar_mount);
     }
+    if run.no_imu_mount > 0 {
+        eprintln!("{} IMU samples left out: no IMU mount (pin ros.body_from_imu, or record tf)", run.no_imu_mount);
+    }
     for (input, (count, last)) in &run.refused {
         eprintln!("{count} {input} messages refused; the last: {last}");
     }

@@ -1,5 +1,7 @@
-//! What the tests that start `sgm ros` processes share: polling, and an embedded ROS master
-//! (`ros-core-rs`: no ROS installation needed).
+//! What the tests that start `sgm ros` processes share: polling, an embedded ROS master
+//! (`ros-core-rs`: no ROS installation needed), and the nodes and topics (`nodes.rs`).
+
+pub mod nodes;
 
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::time::{Duration, Instant};
