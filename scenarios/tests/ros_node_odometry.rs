@@ -32,8 +32,10 @@ use std::time::{Duration, Instant};
 /// Bag time runs this many times faster than the wall clock.
 const RATE: f64 = 3.0;
 
-/// What the node is told besides quickstart: the scenario's changes below, as settings.
-const SETTINGS: [(&str, &str); 5] = [
+/// What the node is told besides quickstart: the scenario's changes below, as settings, and
+/// no resuming from snapshots (refused with the internal odometry, whose state they lack).
+const SETTINGS: [(&str, &str); 6] = [
+    ("SGM__PERSISTENCE__RESUME", "false"),
     ("SGM__ODOMETRY__SOURCE", "internal"),
     ("SGM__IMU__ENABLED", "true"),
     ("SGM__LIDAR__SWEEP_S", "0.1"),

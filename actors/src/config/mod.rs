@@ -171,7 +171,21 @@ impl RobotConfig {
         self.matcher.validate()?;
         self.optimiser.validate()?;
         self.comms.validate()?;
-        self.persistence.validate()
+        self.persistence.validate()?;
+        // A snapshot holds the map in the odometry's frame, but not the internal odometry's own
+        // state: a restored robot would start a new odometry frame under the old map.
+        let p = &self.persistence;
+        if self.odometry.source == OdometrySource::Internal && !p.directory.is_empty() && p.resume {
+            return Err(ConfigError::Invalid {
+                key: "persistence.resume".into(),
+                value: "true".into(),
+                allowed: "false with odometry.source = \"internal\": the odometry's own state is not in snapshots \
+                          yet, so a resumed map would not fit the new odometry's frame (snapshots are still taken; \
+                          with resume = false a restart begins a new map and overwrites them)"
+                    .into(),
+            });
+        }
+        Ok(())
     }
 }
 
@@ -211,5 +225,19 @@ mod tests {
         writeln!(file, "[comms.limits]\nbogus = 1").unwrap();
         let e = RobotConfig::load_with_env(Some(file.path()), "SGM_TEST_D").unwrap_err();
         assert!(e.to_string().contains("bogus"), "{e}");
+    }
+
+    /// The internal odometry's state is not in snapshots: resuming a map under it is refused by
+    /// key; snapshots without resuming, or no snapshots, are accepted.
+    #[test]
+    fn resuming_a_snapshot_under_the_internal_odometry_is_refused() {
+        let mut c = RobotConfig::default();
+        c.odometry.source = OdometrySource::Internal;
+        c.validate().unwrap();
+        c.persistence.directory = "/var/lib/sgm".into();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.starts_with("persistence.resume = true: allowed false with odometry.source = \"internal\""), "{e}");
+        c.persistence.resume = false;
+        c.validate().unwrap();
     }
 }
