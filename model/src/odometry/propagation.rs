@@ -145,11 +145,13 @@ pub struct Propagator {
     pub state: NavState,
     pub covariance: Matrix15,
     pub noise: ImuNoise,
+    /// The pose at a marked scan, carried along for the motion's covariance since (`clone`).
+    pub clone: Option<super::clone::PoseClone>,
 }
 
 impl Propagator {
     pub fn new(state: NavState, covariance: Matrix15, noise: ImuNoise) -> Self {
-        Self { state, covariance, noise }
+        Self { state, covariance, noise, clone: None }
     }
 
     /// One sample held for `dt` s. Non-finite samples and non-positive or non-finite `dt` are
@@ -168,6 +170,9 @@ impl Propagator {
         }
         let f = transition(&self.state, sample, dt);
         self.covariance = f * self.covariance * f.transpose() + process_noise(noise, dt);
+        if let Some(clone) = &mut self.clone {
+            clone.propagate(&f);
+        }
         self.state = self.state.propagated(sample, dt, self.noise.gravity_mps2);
         true
     }

@@ -40,7 +40,7 @@ pub fn pose_of(state: &NavState) -> Pose3 {
 }
 
 /// N of the module notes at rotation `r`: e = N a.
-fn n_matrix(r: &Matrix3<f64>) -> Matrix6 {
+pub(super) fn n_matrix(r: &Matrix3<f64>) -> Matrix6 {
     let mut n = Matrix6::identity();
     n.fixed_view_mut::<3, 3>(3, 3).copy_from(&r.transpose());
     n
