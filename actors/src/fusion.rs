@@ -216,6 +216,7 @@ impl Handler<SensorFrame> for Fusion {
                 points_in_body: fused.points_in_body,
                 labels: fused.labels,
                 candidates: fused.candidates,
+                motion_covariance: frame.motion_covariance,
             });
         });
     }

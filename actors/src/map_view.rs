@@ -139,6 +139,7 @@ mod tests {
                 points_in_body: &points,
                 labels: &labels,
                 candidates: &candidates,
+                motion_covariance: None,
             };
             map.add_keyframe(input, &classes, &config).expect("a keyframe on a fresh map");
         }

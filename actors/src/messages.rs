@@ -54,6 +54,10 @@ pub struct SensorFrame {
     /// The IMU's samples since the previous frame, up to the end of this one's sweep (empty
     /// without an IMU): Fusion deskews with the gyro's rotation where they cover the sweep.
     pub imu: Vec<ImuSample>,
+    /// Cov of the odometry's motion since the previous frame handed on, (ω, v) in the body
+    /// frame: set by the robot's own odometry (`odometry::clone`); `None`: the Tracker's
+    /// odometry factors take the configured noise.
+    pub motion_covariance: Option<Matrix6<f64>>,
 }
 
 /// Fusion → Tracker: a labelled scan and its object candidates (body frame).
@@ -66,6 +70,8 @@ pub struct LabelledScan {
     pub points_in_body: Vec<Point3<f64>>,
     pub labels: Vec<Option<LabelId>>,
     pub candidates: Vec<ObjectCandidate>,
+    /// The frame's [`SensorFrame::motion_covariance`].
+    pub motion_covariance: Option<Matrix6<f64>>,
 }
 
 /// Tracker → Optimiser: a new keyframe and the edges it brings (odometry, loops).

@@ -153,6 +153,9 @@ impl OdometryStage {
             return StageOutput::Kept;
         }
         self.handed_on += 1;
+        // The next frame handed on carries the motion's covariance from this one.
+        frame.motion_covariance = estimate.motion_covariance;
+        self.estimator.mark();
         frame.odom_from_body = estimate.odom_from_body;
         frame.points_deskewed = estimate.deskew.is_ok();
         frame.points_in_body = estimate.points_in_body;
@@ -277,6 +280,7 @@ mod tests {
             points_deskewed: false,
             labels,
             imu: still_imu(stamp - 0.1, stamp),
+            motion_covariance: None,
         }
     }
 

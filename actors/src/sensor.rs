@@ -124,6 +124,7 @@ mod tests {
             points_deskewed: false,
             labels: FrameLabels::PerPoint(vec![Some(LabelId(1)); labels]),
             imu: Vec::new(),
+            motion_covariance: None,
         }
     }
 

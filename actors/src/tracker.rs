@@ -156,6 +156,7 @@ impl Tracker {
             next_keyframe: epoch.saturating_mul(KEYFRAME_ID_EPOCH),
             last_odometry: state.last_odometry,
             last_loop_attempt: state.last_loop_attempt,
+            motion: None,
         };
         self.covariances = state.covariances.iter().map(|(k, m)| (*k, pack_covariance(m))).collect();
         self
@@ -170,6 +171,7 @@ impl Tracker {
             points_in_body: &scan.points_in_body,
             labels: &scan.labels,
             candidates: &scan.candidates,
+            motion_covariance: scan.motion_covariance.as_ref(),
         };
         let moving_before = self.map.objects.moving_count();
         let added = self.map.add_keyframe(input, &self.classes, &self.config)?;
@@ -263,6 +265,14 @@ impl Handler<LabelledScan> for Tracker {
     type Result = ();
     fn handle(&mut self, scan: LabelledScan, ctx: &mut Context<Self>) {
         contained(ctx, "tracker", || {
+            self.map.note_scan(&ScanInput {
+                stamp: scan.stamp,
+                odom_from_body: &scan.odom_from_body,
+                points_in_body: &[],
+                labels: &[],
+                candidates: &[],
+                motion_covariance: scan.motion_covariance.as_ref(),
+            });
             if self.map.wants(&scan.odom_from_body, &self.config) {
                 match self.add_keyframe(&scan) {
                     Ok(_) => self.publish_map(),

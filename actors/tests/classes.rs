@@ -89,6 +89,7 @@ fn fusion_maps_ade_ids_and_counts_an_unknown_one() {
             points_deskewed: false,
             labels: FrameLabels::PerPoint(labels),
             imu: Vec::new(),
+            motion_covariance: None,
         };
         fusion.send(frame.clone()).await.unwrap();
         fusion.send(frame).await.unwrap();

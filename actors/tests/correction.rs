@@ -60,6 +60,7 @@ async fn map_of_a_loop(loop_closure: bool) -> SceneGraph {
             points_deskewed: false,
             labels: FrameLabels::PerPoint(labels),
             imu: Vec::new(),
+            motion_covariance: None,
         });
         settle().await;
         robot.supervisor.do_send(Tick { now: t });

@@ -89,6 +89,7 @@ async fn run_team_with(
                 points_deskewed: false,
                 labels: FrameLabels::PerPoint(labels),
                 imu: Vec::new(),
+                motion_covariance: None,
             });
         }
         settle().await;
@@ -312,6 +313,7 @@ async fn foreign_replayed_truncated_and_oversized_envelopes_are_refused_and_coun
             points_deskewed: false,
             labels: FrameLabels::PerPoint(labels),
             imu: Vec::new(),
+            motion_covariance: None,
         });
         settle().await;
         handle.supervisor.do_send(Tick { now: t });

@@ -222,6 +222,7 @@ pub async fn run_with(
                     points_deskewed: false,
                     labels: FrameLabels::Unlabelled,
                     imu: samples,
+                    motion_covariance: None,
                 };
                 team.frame(k, || scenario.robot_config(k), sweep_frame)?;
             }
@@ -291,6 +292,7 @@ pub async fn run_with(
                 points_deskewed: false,
                 labels,
                 imu: imu_samples,
+                motion_covariance: None,
             };
             team.frame(k, || scenario.robot_config(k), sensor_frame)?;
         }

@@ -19,7 +19,7 @@
 
 mod ros_common;
 
-use ros_common::nodes::{bag_messages, team_key_file, Feed, Latest, Nodes, Statuses};
+use ros_common::nodes::{bag_messages, play, team_key_file, Feed, Latest, Nodes, Statuses};
 use ros_common::{embedded_master, poll};
 use rosrust::RosMsg;
 use serde_json::Value;
@@ -29,7 +29,7 @@ use sgm_model::perception::classes::ClassTable;
 use sgm_scenarios::runner::run_recording;
 use sgm_scenarios::scenario::Scenario;
 use std::collections::BTreeMap;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const ROBOTS: [&str; 2] = ["alpha", "bravo"];
 /// Bag time runs this many times faster than the wall clock.
@@ -155,20 +155,14 @@ fn two_nodes_align_through_an_embedded_master_and_refuse_bad_input() {
 
     // Play the bags at RATE until both robots are aligned, stopping after a frame's cloud.
     let mut published: BTreeMap<&str, u64> = BTreeMap::new();
-    let (t0, wall0) = (messages[0].0, Instant::now());
-    for (time, topic, data) in &messages {
-        let Some(feed) = feeds.get(topic) else { continue };
-        let due = wall0 + Duration::from_secs_f64((time - t0) as f64 * 1e-9 / RATE);
-        std::thread::sleep(due.saturating_duration_since(Instant::now()));
-        feed.send(data);
-        if topic.ends_with("/points") {
-            let robot = ROBOTS.iter().find(|r| topic.starts_with(&format!("/{r}/"))).unwrap();
-            *published.entry(robot).or_default() += 1;
-            if ROBOTS.iter().all(|r| statuses.of(r).is_some_and(|s| Statuses::aligned(&s))) {
-                break;
-            }
+    play(&messages, &feeds, RATE, |topic| {
+        if !topic.ends_with("/points") {
+            return false;
         }
-    }
+        let robot = ROBOTS.iter().find(|r| topic.starts_with(&format!("/{r}/"))).unwrap();
+        *published.entry(robot).or_default() += 1;
+        ROBOTS.iter().all(|r| statuses.of(r).is_some_and(|s| Statuses::aligned(&s)))
+    });
     for robot in ROBOTS {
         let sent = published[robot];
         let s = statuses.wait_for(robot, 60, "every frame", |s| count(s, "sync", "frames") == sent);

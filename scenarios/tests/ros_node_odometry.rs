@@ -16,7 +16,7 @@
 
 mod ros_common;
 
-use ros_common::nodes::{bag_messages, team_key_file, Feed, Nodes, Statuses};
+use ros_common::nodes::{bag_messages, play, team_key_file, Feed, Nodes, Statuses};
 use ros_common::{embedded_master, poll};
 use sgm_actors::config::OdometrySource;
 use sgm_bridge::config::Unlabelled;
@@ -27,7 +27,6 @@ use sgm_scenarios::runner::run_recording;
 use sgm_scenarios::scenario::Scenario;
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
 
 /// Bag time runs this many times faster than the wall clock.
 const RATE: f64 = 3.0;
@@ -113,15 +112,11 @@ fn a_robot_on_its_own_odometry_reads_the_imu_and_publishes_its_poses() {
         || rosrust::topics().ok()?.iter().any(|t| t.name == "/alpha/sgm/odometry").then_some(()),
     );
 
-    let mut sent: BTreeMap<&str, u64> = BTreeMap::new();
-    let (t0, wall0) = (messages[0].0, Instant::now());
-    for (time, topic, data) in &messages {
-        let Some(feed) = feeds.get(topic) else { continue };
-        let due = wall0 + Duration::from_secs_f64((time - t0) as f64 * 1e-9 / RATE);
-        std::thread::sleep(due.saturating_duration_since(Instant::now()));
-        feed.send(data);
-        *sent.entry(topic.rsplit('/').next().unwrap_or_default()).or_default() += 1;
-    }
+    let mut sent: BTreeMap<String, u64> = BTreeMap::new();
+    play(&messages, &feeds, RATE, |topic| {
+        *sent.entry(topic.rsplit('/').next().unwrap_or_default().to_string()).or_default() += 1;
+        false
+    });
     let count = |s: &serde_json::Value, group: &str, key: &str| s[group][key].as_u64().unwrap_or(0);
     let clouds = sent["points"];
     let s = statuses.wait_for("alpha", 60, "every cloud settled", |s| {

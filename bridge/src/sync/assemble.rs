@@ -109,6 +109,7 @@ impl Synchroniser {
                 points_deskewed: false,
                 labels,
                 imu,
+                motion_covariance: None,
             });
         }
         self.prune();

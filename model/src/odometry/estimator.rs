@@ -533,14 +533,19 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_legged_robot_in_a_room_is_tracked_to_centimetres() {
-        let imu = ImuErrors {
+    /// ADIS16448's white noise, and biases of 0.002 rad/s and 0.05 m/s².
+    fn biased_imu() -> ImuErrors {
+        ImuErrors {
             gyro_white: 1.7e-4,
             accel_white: 2e-3,
             gyro_bias: Vector3::new(0.002, -0.001, 0.0015),
             accel_bias: Vector3::new(0.05, -0.03, 0.02),
-        };
+        }
+    }
+
+    #[test]
+    fn a_legged_robot_in_a_room_is_tracked_to_centimetres() {
+        let imu = biased_imu();
         let mut sensors = Sensors::new(false, imu, 1);
         let r = run(&mut sensors, OdometryConfig::default(), 20.0, true);
         let (length, worst) = (r.length(), r.worst());
@@ -565,12 +570,7 @@ mod tests {
     /// is printed (`--nocapture`).
     #[test]
     fn the_motion_covariance_since_a_mark_is_honest() {
-        let imu = ImuErrors {
-            gyro_white: 1.7e-4,
-            accel_white: 2e-3,
-            gyro_bias: Vector3::new(0.002, -0.001, 0.0015),
-            accel_bias: Vector3::new(0.05, -0.03, 0.02),
-        };
+        let imu = biased_imu();
         let mut sensors = Sensors::new(false, imu, 1);
         let mut odometry = LidarInertialOdometry::new(OdometryConfig::default()).expect("valid");
         let (mut marked, mut nees, mut n) = (None, 0.0, 0);

@@ -7,8 +7,14 @@
 //!
 //!   Δ = odom_from_body(p)⁻¹ · odom_from_body(k),   world_from_body(k) = world_from_body(p) · Δ
 //!
-//! and the odometry edge p → k measures Δ with the configured odometry information. The first
-//! keyframe takes its odometry pose as is. Then the object layer is updated (Hungarian LAP
+//! and the odometry edge p → k measures Δ. Its information is the inverse of Cov(e_Δ) when the
+//! odometry gives each scan's motion covariance since the scan before (the robot's own odometry,
+//! `odometry::clone`), composed scan by scan from p to k as independent steps:
+//!
+//!   Σ_{p→s} = Ad(δ⁻¹) Σ_{p→s−1} Ad(δ⁻¹)ᵀ + Σ_{s−1→s},   δ = odom_from_body(s−1)⁻¹ · odom_from_body(s)
+//!
+//! and the configured odometry information otherwise. The first keyframe takes its odometry
+//! pose as is. Then the object layer is updated (Hungarian LAP
 //! against nearby map objects, [`ObjectTracker`]), a loop closure is looked for at most once per
 //! `loop_closure.min_interval_s` ([`loop_closure::detect`]), and the semantic layer is fitted
 //! to `cloud_store` (old scans compacted, then evicted).
@@ -19,6 +25,7 @@ use super::keyframes::{is_keyframe, KeyframeConfig};
 use super::loop_closure::{self, LoopClosureConfig};
 use super::object_cloud::UNLABELLED;
 use super::tracker::{ObjectTracker, TrackerConfig};
+use crate::geometry::lie::se3_adjoint;
 use crate::geometry::Pose3;
 use crate::scene_graph::cloud_store::{CloudChange, CloudStoreConfig};
 use crate::scene_graph::{
@@ -46,6 +53,17 @@ pub struct ScanInput<'a> {
     pub points_in_body: &'a [Point3<f64>],
     pub labels: &'a [Option<LabelId>],
     pub candidates: &'a [ObjectCandidate],
+    /// Cov(e_Δ) of the odometry's motion since the scan before, (ω, v) in the body frame, when the
+    /// odometry gives it.
+    pub motion_covariance: Option<&'a Matrix6<f64>>,
+}
+
+/// The odometry's motion since the latest keyframe: the latest scan's odometry pose and the
+/// motion's covariance up to it (`None` once a scan came without one).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MotionSinceKeyframe {
+    pub odom_from_body: Pose3,
+    pub covariance: Option<Matrix6<f64>>,
 }
 
 /// A keyframe the map took, and what changed with it.
@@ -73,6 +91,8 @@ pub struct Mapper {
     pub last_odometry: Option<(KeyframeId, Pose3)>,
     /// Stamp of the latest loop-closure attempt.
     pub last_loop_attempt: Option<Stamp>,
+    /// Since the latest keyframe (none before the first; not in snapshots).
+    pub motion: Option<MotionSinceKeyframe>,
 }
 
 impl Mapper {
@@ -81,6 +101,32 @@ impl Mapper {
     pub fn wants(&self, odom_from_body: &Pose3, config: &MapperConfig) -> bool {
         let last = self.last_odometry.map(|(_, p)| p);
         is_keyframe(last.as_ref(), odom_from_body, &config.keyframes)
+    }
+
+    /// Composes `scan`'s motion covariance onto the motion since the latest keyframe (the
+    /// module's equations). Every scan goes through here, a keyframe or not, before
+    /// [`Self::add_keyframe`].
+    pub fn note_scan(&mut self, scan: &ScanInput<'_>) {
+        let Some(motion) = &mut self.motion else { return };
+        let step = motion.odom_from_body.inverse() * scan.odom_from_body;
+        motion.covariance = match (motion.covariance, scan.motion_covariance) {
+            (Some(before), Some(step_covariance)) => {
+                let ad = se3_adjoint(&step.inverse());
+                Some(ad * before * ad.transpose() + step_covariance)
+            }
+            _ => None,
+        };
+        motion.odom_from_body = *scan.odom_from_body;
+    }
+
+    /// The odometry edge's information: the inverse of the composed motion covariance, or the
+    /// configured information when there is none (or it is not positive definite).
+    fn odometry_information(&self, config: &MapperConfig) -> Matrix6<f64> {
+        self.motion
+            .as_ref()
+            .and_then(|m| m.covariance)
+            .and_then(|c| c.cholesky())
+            .map_or(config.odometry_information, |c| c.inverse())
     }
 
     /// Adds `scan` as the next keyframe (see the module's equations). On an error the steps
@@ -103,7 +149,7 @@ impl Mapper {
                     from: previous,
                     to: KeyframeRef::Local(id),
                     from_from_to: increment,
-                    information: config.odometry_information,
+                    information: self.odometry_information(config),
                 };
                 (optimised * increment, Some(edge))
             }
@@ -112,6 +158,8 @@ impl Mapper {
         self.graph.add_keyframe(keyframe.clone())?;
         self.next_keyframe += 1;
         self.last_odometry = Some((id, *scan.odom_from_body));
+        self.motion =
+            Some(MotionSinceKeyframe { odom_from_body: *scan.odom_from_body, covariance: Some(Matrix6::zeros()) });
         let semantic = SemanticScan {
             points_in_body: scan.points_in_body.iter().map(|p| p.cast::<f32>()).collect(),
             labels: scan.labels.iter().map(|l| l.unwrap_or(UNLABELLED)).collect(),
@@ -170,7 +218,44 @@ mod tests {
     }
 
     fn scan_at<'a>(stamp: Stamp, pose: &'a Pose3, points: &'a [Point3<f64>]) -> ScanInput<'a> {
-        ScanInput { stamp, odom_from_body: pose, points_in_body: points, labels: &[], candidates: &[] }
+        ScanInput {
+            stamp,
+            odom_from_body: pose,
+            points_in_body: points,
+            labels: &[],
+            candidates: &[],
+            motion_covariance: None,
+        }
+    }
+
+    /// Closed form: two steps of 1 m along x, each known to variance a about each axis and b
+    /// along each axis. Composed, the first step's yaw swings the second's end sideways by its
+    /// lever of 1 m: the motion's y variance is 2b + a (likewise z: 2b + a), x only 2b, and
+    /// each rotation 2a. Its inverse is the odometry edge's information; a scan without a
+    /// covariance (an external odometry) gives the configured information.
+    #[test]
+    fn the_odometry_edge_carries_the_composed_motion_covariance() {
+        let (config, classes) = (config(), ClassTable::default());
+        let (a, b) = (1e-4, 4e-4);
+        let step = Matrix6::from_diagonal(&nalgebra::Vector6::new(a, a, a, b, b, b));
+        let poses: Vec<Pose3> = (0..3).map(|k| Pose3::translation(f64::from(k), 0.0, 0.0)).collect();
+        let mut mapper = Mapper::default();
+        let scan =
+            |k: usize, covariance| ScanInput { motion_covariance: covariance, ..scan_at(k as f64, &poses[k], &[]) };
+        mapper.note_scan(&scan(0, None));
+        mapper.add_keyframe(scan(0, None), &classes, &config).expect("first");
+        mapper.note_scan(&scan(1, Some(&step)));
+        mapper.note_scan(&scan(2, Some(&step)));
+        let added = mapper.add_keyframe(scan(2, Some(&step)), &classes, &config).expect("second");
+        let covariance = added.edges[0].information.try_inverse().expect("invertible");
+        let expected = nalgebra::Vector6::new(2.0 * a, 2.0 * a, 2.0 * a, 2.0 * b, 2.0 * b + a, 2.0 * b + a);
+        assert!((covariance.diagonal() - expected).norm() < 1e-12, "{}", covariance.diagonal());
+        // The yaw and the sideways swing move together: y and yaw correlated by the lever.
+        assert!((covariance[(2, 4)] - a).abs() < 1e-12 && (covariance[(1, 5)] + a).abs() < 1e-12, "{covariance}");
+        let later = ScanInput { stamp: 3.0, ..scan(1, None) };
+        mapper.note_scan(&later);
+        let third = mapper.add_keyframe(later, &classes, &config).expect("third");
+        assert_eq!(third.edges[0].information, config.odometry_information);
     }
 
     #[test]

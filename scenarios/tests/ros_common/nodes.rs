@@ -202,6 +202,27 @@ impl Feed {
     }
 }
 
+/// Publishes `messages` (from [`bag_messages`]) on their feeds, `rate` times faster than they
+/// were recorded; after each, `after(topic)` may stop the playback by returning true.
+pub fn play(
+    messages: &[(u64, String, Vec<u8>)],
+    feeds: &BTreeMap<String, Feed>,
+    rate: f64,
+    mut after: impl FnMut(&str) -> bool,
+) {
+    let Some((t0, _, _)) = messages.first() else { return };
+    let wall0 = std::time::Instant::now();
+    for (time, topic, data) in messages {
+        let Some(feed) = feeds.get(topic) else { continue };
+        let due = wall0 + std::time::Duration::from_secs_f64((time - t0) as f64 * 1e-9 / rate);
+        std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
+        feed.send(data);
+        if after(topic) {
+            break;
+        }
+    }
+}
+
 /// Every message of `bags` as (record time ns, topic, bytes), in record-time order.
 pub fn bag_messages(bags: &[PathBuf]) -> Vec<(u64, String, Vec<u8>)> {
     let mut all = Vec::new();
