@@ -55,8 +55,8 @@ pub enum ScanRefusal {
     #[error("the scan's stamp {stamp} is not after the last scan's {previous}")]
     NotAfterPrevious { stamp: f64, previous: f64 },
     #[error(
-        "waiting for the IMU to find gravity: it needs {window_s} s of samples (at least {needed}) before the \
-         first scan, and has {samples}"
+        "waiting for the IMU to find gravity: it needs samples over the {window_s} s before the first scan (at \
+         least {needed} of them, spanning 90 % of the window, steady enough to level on); {samples} are waiting"
     )]
     WaitingForImu { samples: usize, needed: usize, window_s: f64 },
 }
