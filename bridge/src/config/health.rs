@@ -12,7 +12,8 @@ pub struct HealthConfig {
     /// finding (`no_labels`). Default 0.5.
     pub max_unlabelled_share: f64,
     /// A window in which more than this share of the clouds found no odometry pose is a
-    /// finding (`no_odometry`). Default 0.5.
+    /// finding (`no_odometry`), and so is one with that share short of the IMU with the robot's
+    /// own odometry (`imu_short`). Default 0.5.
     pub max_no_odometry_share: f64,
     /// Frames flowing and still no confirmed object in the map (none seen often enough to be
     /// shared) after this much mission time is a finding (`no_objects`), s. Default 60.

@@ -15,6 +15,8 @@ pub enum Check {
     MountDisagrees,
     /// Most clouds found no odometry pose.
     NoOdometry,
+    /// With the robot's own odometry: most clouds came before the IMU covered their sweep.
+    ImuShort,
     /// The odometry topic and tf give different poses for the same world and body frames.
     OdometryDisagreesWithTf,
     /// Most clouds had no label image near them.
@@ -44,6 +46,10 @@ impl Check {
             Check::NoOdometry => {
                 "the odometry lags the clouds by more than ros.sync.max_wait_s, has gaps above \
                  ros.sync.max_odometry_gap_s, or is stamped by another clock"
+            }
+            Check::ImuShort => {
+                "the IMU is silent on ros.topics.imu, lags the clouds by more than ros.sync.max_wait_s, or is \
+                 stamped by another clock; the robot's own odometry coasts over what it lacks"
             }
             Check::OdometryDisagreesWithTf => {
                 "two sources publish the same frames (another odometry or localisation on tf), or the odometry \

@@ -20,7 +20,15 @@ pub(super) struct WindowStart {
 
 /// Clouds the synchroniser settled (assembled or dropped for any reason).
 pub(super) fn settled(c: &SyncCounts) -> u64 {
-    c.frames + c.no_odometry + c.no_image + c.no_camera_info + c.no_label_field + c.at_restart + c.no_lidar_mount
+    c.frames
+        + c.sweeps
+        + c.no_odometry
+        + c.no_image
+        + c.no_camera_info
+        + c.no_label_field
+        + c.at_restart
+        + c.no_lidar_mount
+        + c.no_imu_mount
 }
 
 fn share(part: u64, whole: u64) -> f64 {
@@ -50,7 +58,8 @@ impl Health {
             }
         }
         let no_mount = sync.no_lidar_mount.saturating_sub(w.no_lidar_mount)
-            + sync.no_camera_mount.saturating_sub(w.no_camera_mount);
+            + sync.no_camera_mount.saturating_sub(w.no_camera_mount)
+            + sync.no_imu_mount.saturating_sub(w.no_imu_mount);
         if no_mount > 0 {
             out.push(Finding::new(
                 Check::NoMount,
@@ -65,6 +74,13 @@ impl Health {
             out.push(Finding::new(
                 Check::NoOdometry,
                 format!("{no_odometry} of the last {clouds} clouds found no odometry pose"),
+            ));
+        }
+        let imu_short = sync.imu_short.saturating_sub(w.imu_short);
+        if share(imu_short, clouds) > self.config.max_no_odometry_share {
+            out.push(Finding::new(
+                Check::ImuShort,
+                format!("{imu_short} of the last {clouds} clouds came before the IMU covered their sweep"),
             ));
         }
         let (tf, tf0) = (&observed.tf.counts, &self.window_start.tf);
@@ -150,6 +166,23 @@ mod tests {
         let f = update(&mut h, 5.0, &counts(10, 0, 40), 1);
         assert_eq!(checks(&f), vec![Check::NoOdometry]);
         assert!(f[0].detail.contains("40 of the last 50 clouds"), "{}", f[0].detail);
+    }
+
+    /// The robot's own odometry with a silent IMU: the clouds come short of it (each a sweep or a
+    /// frame), and an unknown IMU mount drops them; both are findings, and both count as
+    /// clouds in the window.
+    #[test]
+    fn clouds_short_of_the_imu_or_its_mount_are_findings() {
+        let mut h = Health::new(HealthConfig::default());
+        let sync = SyncCounts { frames: 10, sweeps: 40, imu_short: 45, ..Default::default() };
+        let f = update(&mut h, 5.0, &sync, 1);
+        assert_eq!(checks(&f), vec![Check::ImuShort]);
+        assert!(f[0].detail.contains("45 of the last 50 clouds"), "{}", f[0].detail);
+        assert!(f[0].likely_cause.contains("ros.topics.imu"));
+        let sync = SyncCounts { no_imu_mount: 100, ..sync };
+        let f = update(&mut h, 6.0, &sync, 1);
+        assert_eq!(checks(&f), vec![Check::NoMount], "{f:?}");
+        assert!(f[0].detail.starts_with("100 of the last 100 clouds without a sensor mount"), "{}", f[0].detail);
     }
 
     /// An odometry whose frames the configuration does not expect: every message refused, said

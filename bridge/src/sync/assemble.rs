@@ -62,6 +62,10 @@ impl Synchroniser {
                 None if !internal => None,
                 None if !stale => break,
                 None => {
+                    if self.counts.no_imu_mount == 0 {
+                        let why = self.tf.missing(false).unwrap_or_default();
+                        tracing::warn!(stamp = t, "a cloud dropped: {why} (counted in the status's sync.no_imu_mount)");
+                    }
                     self.counts.no_imu_mount += 1;
                     self.clouds.pop_front();
                     continue;
@@ -92,6 +96,13 @@ impl Synchroniser {
                 self.counts.frames += 1;
             }
             if internal && !imu_covered {
+                if self.counts.imu_short == 0 {
+                    tracing::warn!(
+                        stamp = t,
+                        "a cloud went to the odometry before the IMU covered its sweep: the \
+                        IMU is silent, late or on another clock (counted in the status's sync.imu_short)"
+                    );
+                }
                 self.counts.imu_short += 1;
             }
             // Points into the body frame (the labels stay with their points).
