@@ -265,14 +265,7 @@ impl Handler<LabelledScan> for Tracker {
     type Result = ();
     fn handle(&mut self, scan: LabelledScan, ctx: &mut Context<Self>) {
         contained(ctx, "tracker", || {
-            self.map.note_scan(&ScanInput {
-                stamp: scan.stamp,
-                odom_from_body: &scan.odom_from_body,
-                points_in_body: &[],
-                labels: &[],
-                candidates: &[],
-                motion_covariance: scan.motion_covariance.as_ref(),
-            });
+            self.map.note_scan(&scan.odom_from_body, scan.motion_covariance.as_ref());
             if self.map.wants(&scan.odom_from_body, &self.config) {
                 match self.add_keyframe(&scan) {
                     Ok(_) => self.publish_map(),

@@ -129,6 +129,12 @@ impl Run {
 
     fn imu(&mut self, stamp: Stamp, reading: ImuReading) {
         self.imu_samples += 1;
+        // The mount known and nothing waiting (the usual case): straight into the estimator.
+        if let (true, Some(body_from_imu)) = (self.imu_waiting.is_empty(), self.mounts.body_from_imu()) {
+            self.newest_imu = Some(self.newest_imu.map_or(stamp, |n| n.max(stamp)));
+            self.estimator.push_imu(&[sample_in_body(stamp, &reading, &body_from_imu)]);
+            return;
+        }
         if self.imu_waiting.len() == MAX_IMU_BUFFERED {
             self.imu_waiting.pop_front();
             self.out.no_imu_mount += 1;

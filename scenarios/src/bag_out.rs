@@ -157,11 +157,7 @@ impl BagRecorder {
         write_imu(w, imu_topic, body, frame.imu, [gyro_variance, accel_variance]).map_err(&e)?;
         w.write(odometry_topic, time, &odometry_msg(header(world), body, frame.odometry)).map_err(&e)?;
         w.write(truth_topic, time, &odometry_msg(header("truth"), body, frame.truth)).map_err(&e)?;
-        let points: Vec<nalgebra::Point3<f32>> = frame.points.iter().map(|p| p.map(|v| v as f32)).collect();
-        let mut cloud = cloud_msg(header(lidar), &points, frame.labels, |_| [200, 200, 200]);
-        if let Some(times) = frame.times {
-            cloud = with_times(cloud, times);
-        }
+        let cloud = sweep_msg(header(lidar), frame.points, frame.labels, frame.times);
         w.write(points_topic, time, &cloud).map_err(&e)?;
         Ok(())
     }
@@ -186,12 +182,7 @@ impl BagRecorder {
         write_imu(&mut bag.writer, imu_topic, body, imu, [gyro_variance, accel_variance]).map_err(&e)?;
         let time = SCENARIO_EPOCH.time(t);
         let header = Header { seq: 0, stamp: time, frame_id: lidar.to_string() };
-        let points: Vec<nalgebra::Point3<f32>> = points.iter().map(|p| p.map(|v| v as f32)).collect();
-        let mut cloud = cloud_msg(header, &points, None, |_| [200, 200, 200]);
-        if let Some(times) = times {
-            cloud = with_times(cloud, times);
-        }
-        bag.writer.write(points_topic, time, &cloud).map_err(&e)
+        bag.writer.write(points_topic, time, &sweep_msg(header, points, None, times)).map_err(&e)
     }
 
     /// Closes every bag; returns their paths.
@@ -205,6 +196,22 @@ impl BagRecorder {
             }
         }
         Ok(paths)
+    }
+}
+
+/// A sweep's cloud as the driver publishes it: float32 points, a label field when labelled, a
+/// `time` field when its points carry their times.
+fn sweep_msg(
+    header: Header,
+    points: &[nalgebra::Point3<f64>],
+    labels: Option<&[u16]>,
+    times: Option<&[f32]>,
+) -> sgm_bridge::msg::sensor_msgs::PointCloud2 {
+    let points: Vec<nalgebra::Point3<f32>> = points.iter().map(|p| p.map(|v| v as f32)).collect();
+    let cloud = cloud_msg(header, &points, labels, |_| [200, 200, 200]);
+    match times {
+        Some(times) => with_times(cloud, times),
+        None => cloud,
     }
 }
 

@@ -103,20 +103,20 @@ impl Mapper {
         is_keyframe(last.as_ref(), odom_from_body, &config.keyframes)
     }
 
-    /// Composes `scan`'s motion covariance onto the motion since the latest keyframe (the
-    /// module's equations). Every scan goes through here, a keyframe or not, before
-    /// [`Self::add_keyframe`].
-    pub fn note_scan(&mut self, scan: &ScanInput<'_>) {
+    /// Composes a scan's motion covariance (since the scan before; at `odom_from_body`) onto the
+    /// motion since the latest keyframe (the module's equations). Every scan goes through here,
+    /// a keyframe or not, before [`Self::add_keyframe`].
+    pub fn note_scan(&mut self, odom_from_body: &Pose3, motion_covariance: Option<&Matrix6<f64>>) {
         let Some(motion) = &mut self.motion else { return };
-        let step = motion.odom_from_body.inverse() * scan.odom_from_body;
-        motion.covariance = match (motion.covariance, scan.motion_covariance) {
+        let step = motion.odom_from_body.inverse() * odom_from_body;
+        motion.covariance = match (motion.covariance, motion_covariance) {
             (Some(before), Some(step_covariance)) => {
                 let ad = se3_adjoint(&step.inverse());
                 Some(ad * before * ad.transpose() + step_covariance)
             }
             _ => None,
         };
-        motion.odom_from_body = *scan.odom_from_body;
+        motion.odom_from_body = *odom_from_body;
     }
 
     /// The odometry edge's information: the inverse of the composed motion covariance, or the
@@ -242,10 +242,10 @@ mod tests {
         let mut mapper = Mapper::default();
         let scan =
             |k: usize, covariance| ScanInput { motion_covariance: covariance, ..scan_at(k as f64, &poses[k], &[]) };
-        mapper.note_scan(&scan(0, None));
+        mapper.note_scan(&poses[0], None);
         mapper.add_keyframe(scan(0, None), &classes, &config).expect("first");
-        mapper.note_scan(&scan(1, Some(&step)));
-        mapper.note_scan(&scan(2, Some(&step)));
+        mapper.note_scan(&poses[1], Some(&step));
+        mapper.note_scan(&poses[2], Some(&step));
         let added = mapper.add_keyframe(scan(2, Some(&step)), &classes, &config).expect("second");
         let covariance = added.edges[0].information.try_inverse().expect("invertible");
         let expected = nalgebra::Vector6::new(2.0 * a, 2.0 * a, 2.0 * a, 2.0 * b, 2.0 * b + a, 2.0 * b + a);
@@ -253,7 +253,7 @@ mod tests {
         // The yaw and the sideways swing move together: y and yaw correlated by the lever.
         assert!((covariance[(2, 4)] - a).abs() < 1e-12 && (covariance[(1, 5)] + a).abs() < 1e-12, "{covariance}");
         let later = ScanInput { stamp: 3.0, ..scan(1, None) };
-        mapper.note_scan(&later);
+        mapper.note_scan(later.odom_from_body, None);
         let third = mapper.add_keyframe(later, &classes, &config).expect("third");
         assert_eq!(third.edges[0].information, config.odometry_information);
     }
