@@ -112,6 +112,16 @@ impl Health {
                 ),
             ));
         }
+        // With the robot's own odometry a cloud without labels is a sweep, and many are by design
+        // (a LiDAR faster than its segmenter): only a window without any labelled frame says the
+        // labels stopped.
+        let sweeps = sync.sweeps.saturating_sub(w.sweeps);
+        if frames == 0 && sweeps > 0 && !out.iter().any(|f| f.check == Check::NoLabels) {
+            out.push(Finding::new(
+                Check::NoLabels,
+                format!("none of the last {clouds} clouds was labelled: {sweeps} went to the odometry alone"),
+            ));
+        }
         let points = sync.sampled_points.saturating_sub(w.sampled_points);
         let in_image = sync.sampled_in_image.saturating_sub(w.sampled_in_image);
         if points > 0 && share(in_image, points) < self.config.min_points_in_image_share {
@@ -170,7 +180,7 @@ mod tests {
 
     /// The robot's own odometry with a silent IMU: the clouds come short of it (each a sweep or a
     /// frame), and an unknown IMU mount drops them; both are findings, and both count as
-    /// clouds in the window.
+    /// clouds in the window. A window of sweeps and no labelled frame says the labels stopped.
     #[test]
     fn clouds_short_of_the_imu_or_its_mount_are_findings() {
         let mut h = Health::new(HealthConfig::default());
@@ -183,6 +193,11 @@ mod tests {
         let f = update(&mut h, 6.0, &sync, 1);
         assert_eq!(checks(&f), vec![Check::NoMount], "{f:?}");
         assert!(f[0].detail.starts_with("100 of the last 100 clouds without a sensor mount"), "{}", f[0].detail);
+        // The segmenter stops: every cloud a sweep, none labelled.
+        let sync = SyncCounts { sweeps: sync.sweeps + 50, ..sync };
+        let f = update(&mut h, 7.0, &sync, 1);
+        assert_eq!(checks(&f), vec![Check::NoLabels], "{f:?}");
+        assert!(f[0].detail.starts_with("none of the last 50 clouds was labelled: 50 went to"), "{}", f[0].detail);
     }
 
     /// An odometry whose frames the configuration does not expect: every message refused, said
