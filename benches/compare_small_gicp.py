@@ -1,9 +1,10 @@
 """small_gicp vs `sgm icp`: same clouds, same run, one thread, same downsampling and
 correspondence distance; point-to-plane (small_gicp PLANE_ICP) and point-to-point (ICP).
 
-Clouds: the Stanford bunny scans bun0 (target) / bun4 (source), the two Kinect frames, and a
-synthetic 20k-point room pair with a known transform (errors reported against the truth).
-Time: best of 5 of the whole registration (downsampling, normals, kd-tree, iterations) —
+Clouds: the Stanford bunny scans bun0 (target) / bun4 (source), the two Kinect frames, and
+three synthetic 20k-point room pairs with known transforms (errors reported against the truth): room A,
+the pair the ICP was tuned on, and rooms B and C, held out.
+Time: best of 9 of the whole registration (downsampling, normals, kd-tree, iterations) —
 `time_ms` from `sgm icp`, and around `small_gicp.align` in Python. small_gicp reports the
 0-based index of its last iteration; SGM reports the count of correspondence passes.
 
@@ -111,7 +112,7 @@ def reference_solution(target, source, voxel, max_dist, T, elementwise):
 
 def run_small_gicp(target, source, kind, voxel, max_dist):
     best = None
-    for _ in range(5):
+    for _ in range(9):
         t = time.perf_counter()
         r = small_gicp.align(target, source, registration_type=kind, downsampling_resolution=voxel,
                              max_correspondence_distance=max_dist, num_threads=1)
@@ -123,7 +124,7 @@ def run_small_gicp(target, source, kind, voxel, max_dist):
 
 def run_sgm(source_path, target_path, method, voxel, max_dist):
     best = None
-    for _ in range(5):
+    for _ in range(9):
         out = subprocess.run([str(SGM), "icp", str(source_path), str(target_path), "--method", method, "--voxel", str(voxel),
                               "--max-distance", str(max_dist), "--rotation-epsilon", str(np.radians(0.1)), "--translation-epsilon", "0.001"],
                              capture_output=True, text=True, check=True)
@@ -135,15 +136,23 @@ def run_sgm(source_path, target_path, method, voxel, max_dist):
 
 def main():
     tmp = Path(tempfile.mkdtemp())
-    truth = np.eye(4)
-    truth[:3, :3] = Rotation.from_euler("xyz", [2.0, -1.5, 5.0], degrees=True).as_matrix()
-    truth[:3, 3] = [0.3, -0.2, 0.1]
-    room_target = room(20000, 1)
-    room_source = (np.linalg.inv(truth) @ np.c_[room(20000, 2), np.ones(20000)].T).T[:, :3]
-    write_pcd(tmp / "room_target.pcd", room_target)
-    write_pcd(tmp / "room_source.pcd", room_source)
-    cases = [
-        ("room 20k+20k", tmp / "room_source.pcd", tmp / "room_target.pcd", room_source, room_target, 0.1, 1.0, truth),
+    # Room A is the pair SGM's ICP was tuned on; B and C are held out: other samples of the room
+    # (seeds), other transforms, never looked at while tuning.
+    rooms = [("room A 20k+20k", (1, 2), [2.0, -1.5, 5.0], [0.3, -0.2, 0.1]),
+             ("room B 20k+20k (held out)", (3, 4), [-1.0, 2.0, -8.0], [-0.4, 0.3, 0.05]),
+             ("room C 20k+20k (held out)", (5, 6), [0.5, 0.5, 3.0], [0.2, 0.2, 0.0])]
+    cases = []
+    for name, (seed_t, seed_s), euler, t in rooms:
+        truth = np.eye(4)
+        truth[:3, :3] = Rotation.from_euler("xyz", euler, degrees=True).as_matrix()
+        truth[:3, 3] = t
+        room_target = room(20000, seed_t)
+        room_source = (np.linalg.inv(truth) @ np.c_[room(20000, seed_s), np.ones(20000)].T).T[:, :3]
+        src_path, tgt_path = tmp / f"room_{seed_s}.pcd", tmp / f"room_{seed_t}.pcd"
+        write_pcd(tgt_path, room_target)
+        write_pcd(src_path, room_source)
+        cases.append((name, src_path, tgt_path, room_source, room_target, 0.1, 1.0, truth))
+    cases += [
         ("bunny bun4→bun0", CLOUDS / "bun4.pcd", CLOUDS / "bun0.pcd", None, None, 0.002, 0.05, None),
         ("kinect frames", CLOUDS / "kinect_frame_20121214T142256.068683.pcd", CLOUDS / "kinect_frame_20121214T142255.814212.pcd", None, None, 0.02, 0.1, None),
     ]

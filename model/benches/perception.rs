@@ -1,6 +1,6 @@
 //! Semantic fusion + clustering of a 20k-point scan (issue [perception] target ≤ 5 ms): a
 //! synthetic scene of 40 objects of 6 classes on a ground plane, seen by a 640 × 480 camera
-//! looking along the LiDAR's x axis.
+//! looking along the LiDAR's x axis. And ICP on a 20k + 20k room, as `sgm icp` runs it.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::{Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
@@ -8,6 +8,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::clustering::{cluster, ClusterConfig};
+use sgm_model::perception::icp::{register, IcpConfig, IcpMethod};
 use sgm_model::perception::label_vote::{vote, LabelVote};
 use sgm_model::perception::projection::{label_points, CameraModel, LabelImage};
 use sgm_model::scene_graph::LabelId;
@@ -75,5 +76,50 @@ fn fusion_and_clustering(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, fusion_and_clustering);
+/// The box room of `benches/compare_small_gicp.py` (floor, three walls, a table), `n` points.
+fn room(n: usize, seed: u64) -> Vec<Point3<f64>> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..n)
+        .map(|k| {
+            let (a, b): (f64, f64) = (rng.random_range(0.0..1.0), rng.random_range(0.0..1.0));
+            match k % 6 {
+                0 => Point3::new(8.0 * a, 6.0 * b, 0.0),
+                1 => Point3::new(8.0 * a, 0.0, 3.0 * b),
+                2 => Point3::new(0.0, 6.0 * a, 3.0 * b),
+                3 => Point3::new(8.0 * a, 6.0, 3.0 * b),
+                4 => Point3::new(2.0 + 1.5 * a, 2.0 + 0.8 * b, 0.75),
+                _ => Point3::new(2.0, 2.0 + 0.8 * a, 0.75 * b),
+            }
+        })
+        .collect()
+}
+
+/// ICP as `sgm icp` runs it on a 20k + 20k room (issue [odometry]: ≤ 0.8× small_gicp's time,
+/// measured against it by `benches/compare_small_gicp.sh`): 0.1 m voxels, 1 m correspondences,
+/// small_gicp's convergence (0.1°, 1 mm), from identity to a 5° / 0.37 m offset.
+fn icp_room(c: &mut Criterion) {
+    let truth = Pose3::from_parts(
+        Translation3::new(0.3, -0.2, 0.1),
+        UnitQuaternion::from_euler_angles(2f64.to_radians(), -1.5f64.to_radians(), 5f64.to_radians()),
+    );
+    let target = room(20_000, 1);
+    let source: Vec<Point3<f64>> = room(20_000, 2).iter().map(|q| truth.inverse() * q).collect();
+    for method in [IcpMethod::PointToPlane, IcpMethod::PointToPoint] {
+        let config = IcpConfig {
+            method,
+            voxel_m: 0.1,
+            max_correspondence_distance_m: 1.0,
+            convergence_rotation_rad: 0.1f64.to_radians(),
+            convergence_translation_m: 1e-3,
+            ..IcpConfig::default()
+        };
+        let name = format!(
+            "icp_room_20k_{}",
+            if method == IcpMethod::PointToPlane { "point_to_plane" } else { "point_to_point" }
+        );
+        c.bench_function(&name, |b| b.iter(|| register(black_box(&source), &target, &Pose3::identity(), &config)));
+    }
+}
+
+criterion_group!(benches, fusion_and_clustering, icp_room);
 criterion_main!(benches);

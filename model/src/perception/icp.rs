@@ -17,7 +17,7 @@
 use super::normals;
 use crate::geometry::lie::{se3_adjoint, se3_exp, Matrix6, Tangent3};
 use crate::geometry::Pose3;
-use crate::spatial::point_tree::PointTree;
+use crate::spatial::neighbour_graph::NeighbourGraph;
 use crate::spatial::voxel::downsample;
 use nalgebra::{Matrix3, Point3, Vector3};
 
@@ -118,13 +118,15 @@ pub fn register(
     if target.len() < 3 {
         return Err(IcpError::TooFewPoints("target"));
     }
-    let tree = PointTree::new(&target);
-    let target_normals = match config.method {
-        IcpMethod::PointToPlane => {
-            normals::estimate(&target, &tree, config.normal_neighbours, config.max_correspondence_distance_m)
-        }
+    // Target normals from each point's k nearest within the correspondence distance, fitted
+    // when a source point first pairs with it; the same lists start each pass's searches from
+    // the last pass's answers.
+    let mut graph = NeighbourGraph::new(&target, config.normal_neighbours.max(3), config.max_correspondence_distance_m);
+    let mut target_normals: Vec<Option<Option<Vector3<f64>>>> = match config.method {
+        IcpMethod::PointToPlane => vec![None; target.len()],
         IcpMethod::PointToPoint => Vec::new(),
     };
+    let mut last_match: Vec<Option<usize>> = vec![None; source.len()];
     let max_d2 = config.max_correspondence_distance_m.powi(2);
     let mut pose = *initial;
     let mut iterations = 0;
@@ -140,9 +142,13 @@ pub fn register(
         let mut g = Tangent3::zeros();
         let mut pairs = 0;
         (inliers, sum2, unweighted) = (0, 0.0, Moments::default());
-        for s in &source {
+        for (s, last) in source.iter().zip(last_match.iter_mut()) {
             let p = pose * s;
-            let Some((d2, item)) = tree.nearest(&p).filter(|(d2, _)| *d2 <= max_d2) else { continue };
+            let Some((d2, item)) = graph.nearest(&p, *last) else { continue };
+            *last = Some(item);
+            if d2 > max_d2 {
+                continue;
+            }
             let q = target[item];
             let e = p - q;
             inliers += 1;
@@ -150,7 +156,10 @@ pub fn register(
             unweighted.add(1.0, &p.coords);
             match config.method {
                 IcpMethod::PointToPlane => {
-                    let Some(n) = target_normals[item] else { continue };
+                    let normal = *target_normals[item].get_or_insert_with(|| {
+                        normals::of_neighbours(&target, graph.neighbours(item).iter().map(|&j| j as usize))
+                    });
+                    let Some(n) = normal else { continue };
                     let r = n.dot(&e);
                     let pn = p.coords.cross(&n);
                     let jn = Tangent3::new(pn.x, pn.y, pn.z, n.x, n.y, n.z);

@@ -8,23 +8,26 @@ use nalgebra::{Matrix3, Point3, Vector3};
 /// Normal of every point (`None` where undetermined) from its `k` nearest neighbours within
 /// `radius` (m), using `tree` built over `points`.
 pub fn estimate(points: &[Point3<f64>], tree: &PointTree, k: usize, radius: f64) -> Vec<Option<Vector3<f64>>> {
-    points
-        .iter()
-        .map(|p| {
-            let nearest = tree.nearest_k_within(p, k.max(3), radius);
-            if nearest.len() < 3 {
-                return None;
-            }
-            let n = nearest.len() as f64;
-            let mean = nearest.iter().fold(Vector3::zeros(), |acc, &i| acc + points[i].coords) / n;
-            let mut cov = Matrix3::zeros();
-            for &i in &nearest {
-                let d = points[i].coords - mean;
-                cov += d * d.transpose();
-            }
-            smallest_eigenvector(&cov)
-        })
-        .collect()
+    points.iter().map(|p| of_neighbours(points, tree.nearest_k_within(p, k.max(3), radius))).collect()
+}
+
+/// The normal of the surface through `points[i]` for each i of `neighbours` (at least 3).
+pub fn of_neighbours(
+    points: &[Point3<f64>],
+    neighbours: impl IntoIterator<Item = usize> + Clone,
+) -> Option<Vector3<f64>> {
+    let (n, sum) =
+        neighbours.clone().into_iter().fold((0usize, Vector3::zeros()), |(n, acc), i| (n + 1, acc + points[i].coords));
+    if n < 3 {
+        return None;
+    }
+    let mean = sum / n as f64;
+    let mut cov = Matrix3::zeros();
+    for i in neighbours {
+        let d = points[i].coords - mean;
+        cov += d * d.transpose();
+    }
+    smallest_eigenvector(&cov)
 }
 
 /// Unit eigenvector of the smallest eigenvalue of a symmetric positive semi-definite 3 × 3

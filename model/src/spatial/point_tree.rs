@@ -15,14 +15,24 @@ pub struct PointTree {
     tree: ImmutableKdTree<f32, u32, 3, LEAF>,
 }
 
-fn key(p: &Point3<f64>) -> [f32; 3] {
-    [p.x as f32, p.y as f32, p.z as f32]
+/// The squared distance between two keys exactly as the tree measures it (single precision,
+/// summed x, y, z), so a search beside the tree can return the tree's bits.
+#[inline]
+pub fn squared_distance(a: &[f32; 3], b: &[f32; 3]) -> f32 {
+    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
 }
 
 impl PointTree {
+    /// A point as the tree holds it.
+    #[inline]
+    pub fn key(p: &Point3<f64>) -> [f32; 3] {
+        [p.x as f32, p.y as f32, p.z as f32]
+    }
+
     /// Builds the tree; `points` must hold fewer than 2³² points.
     pub fn new(points: &[Point3<f64>]) -> Self {
-        let keys: Vec<[f32; 3]> = points.iter().map(key).collect();
+        let keys: Vec<[f32; 3]> = points.iter().map(Self::key).collect();
         Self { tree: ImmutableKdTree::new_from_slice(&keys) }
     }
 
@@ -31,7 +41,7 @@ impl PointTree {
         if self.tree.size() == 0 {
             return None;
         }
-        let nn = self.tree.nearest_one::<SquaredEuclidean>(&key(p));
+        let nn = self.tree.nearest_one::<SquaredEuclidean>(&Self::key(p));
         Some((nn.distance as f64, nn.item as usize))
     }
 
@@ -39,7 +49,22 @@ impl PointTree {
     pub fn nearest_k_within(&self, p: &Point3<f64>, k: usize, radius: f64) -> Vec<usize> {
         let Some(k) = NonZero::new(k) else { return Vec::new() };
         let r2 = (radius * radius) as f32;
-        self.tree.nearest_n_within::<SquaredEuclidean>(&key(p), r2, k, false).iter().map(|n| n.item as usize).collect()
+        self.tree
+            .nearest_n_within::<SquaredEuclidean>(&Self::key(p), r2, k, false)
+            .iter()
+            .map(|n| n.item as usize)
+            .collect()
+    }
+
+    /// [`PointTree::nearest_k_within`] with each point's squared distance (single precision).
+    pub fn nearest_k_within_distances(&self, p: &Point3<f64>, k: usize, radius: f64) -> Vec<(u32, f32)> {
+        let Some(k) = NonZero::new(k) else { return Vec::new() };
+        let r2 = (radius * radius) as f32;
+        self.tree
+            .nearest_n_within::<SquaredEuclidean>(&Self::key(p), r2, k, false)
+            .iter()
+            .map(|n| (n.item, n.distance))
+            .collect()
     }
 }
 
