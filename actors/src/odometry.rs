@@ -16,6 +16,7 @@ use sgm_model::geometry::lie::Matrix6;
 use sgm_model::geometry::Pose3;
 use sgm_model::odometry::config::{OdometryConfig, OdometryConfigError};
 use sgm_model::odometry::estimator::{LidarInertialOdometry, OdometryCounts, ScanOutcome, ScanRefusal};
+use sgm_model::odometry::local_map::LocalMapSize;
 use sgm_model::scene_graph::Stamp;
 
 /// What the odometry has done since the robot started (not part of a snapshot).
@@ -28,6 +29,9 @@ pub struct OdometryStatus {
     /// The stamp of the scan at which the odometry started: its frame is the body's pose then,
     /// levelled, yaw zero (`model::odometry::estimator`).
     pub origin_stamp: Option<f64>,
+    /// The local map's points and voxels now, its peak and its budget.
+    #[serde(default)]
+    pub local_map: LocalMapSize,
 }
 
 /// Odometry → an attached output: the estimate at one scan (registered or coasted).
@@ -100,7 +104,12 @@ impl OdometryStage {
     }
 
     pub fn status(&self) -> OdometryStatus {
-        OdometryStatus { counts: self.estimator.counts(), handed_on: self.handed_on, origin_stamp: self.origin_stamp }
+        OdometryStatus {
+            counts: self.estimator.counts(),
+            handed_on: self.handed_on,
+            origin_stamp: self.origin_stamp,
+            local_map: self.estimator.local_map().size(),
+        }
     }
 
     /// The estimate at the latest frame that produced one.

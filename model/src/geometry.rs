@@ -12,6 +12,7 @@
 //!   H = U Σ Vᵀ, R = V diag(1, 1, det(V Uᵀ)) Uᵀ, t = p̄ − R q̄.
 
 pub mod lie;
+pub mod point_to_plane;
 
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 

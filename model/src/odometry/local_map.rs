@@ -50,6 +50,16 @@ impl Default for LocalMapConfig {
     }
 }
 
+/// What a local map holds: points and voxels now, the most points it has held after an
+/// insertion, and the most it may hold (`max_voxels · max_points_per_voxel`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LocalMapSize {
+    pub points: u64,
+    pub voxels: u64,
+    pub peak_points: u64,
+    pub budget_points: u64,
+}
+
 /// A parameter out of range: its name, its value, what is allowed.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("odometry.local_map.{key} = {value}: must be {allowed}")]
@@ -111,6 +121,8 @@ pub struct LocalMap {
     voxels: FxHashMap<Key, Voxel>,
     insertions: u64,
     points: usize,
+    /// The most points held after any insertion.
+    peak_points: usize,
     /// The parameters the kept plane fits were made with (none: fits are not kept).
     plane_params: Option<PlaneParams>,
 }
@@ -125,6 +137,7 @@ impl LocalMap {
             voxels: FxHashMap::default(),
             insertions: 0,
             points: 0,
+            peak_points: 0,
             plane_params: None,
         })
     }
@@ -171,6 +184,16 @@ impl LocalMap {
         self.points
     }
 
+    /// What the map holds, its peak and its budget (for a status).
+    pub fn size(&self) -> LocalMapSize {
+        LocalMapSize {
+            points: self.points as u64,
+            voxels: self.voxels.len() as u64,
+            peak_points: self.peak_points as u64,
+            budget_points: (self.config.max_voxels as u64).saturating_mul(self.config.max_points_per_voxel as u64),
+        }
+    }
+
     pub fn is_empty(&self) -> bool {
         self.points == 0
     }
@@ -207,6 +230,7 @@ impl LocalMap {
             }
         }
         changed.extend(self.prune(sensor));
+        self.peak_points = self.peak_points.max(self.points);
         if self.plane_params.is_some() && !changed.is_empty() {
             self.forget_planes_around(&changed);
         }
@@ -480,11 +504,15 @@ mod tests {
         fn the_budget_holds(scans in prop::collection::vec(prop::collection::vec((-50.0f64..50.0, -50.0f64..50.0, -5.0f64..5.0), 0..100), 1..10)) {
             let config = LocalMapConfig { max_voxels: 40, max_points_per_voxel: 3, ..Default::default() };
             let mut m = map(config);
+            let mut peak = 0;
             for scan in &scans {
                 let points: Vec<Point3<f64>> = scan.iter().map(|&(x, y, z)| Point3::new(x, y, z)).collect();
                 m.insert(&points, &Point3::origin());
                 prop_assert!(m.voxels() <= 40 && m.len() <= 120);
                 prop_assert_eq!(m.len(), m.points().len());
+                peak = peak.max(m.len() as u64);
+                let size = m.size();
+                prop_assert_eq!((size.points, size.voxels, size.peak_points, size.budget_points), (m.len() as u64, m.voxels() as u64, peak, 120));
             }
         }
     }

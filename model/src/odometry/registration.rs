@@ -13,6 +13,8 @@
 //! r = nᵀ(p − q),   ∂r/∂δ = [(p × n)ᵀ, nᵀ]
 //! ```
 //!
+//! (`geometry::point_to_plane`: the residual and normal equations `sgm icp` solves too)
+//!
 //! kept when |r| ≤ τ: the threshold bounds the pose error's effect along the surface normal,
 //! which is what the residual measures.
 //!
@@ -50,9 +52,10 @@
 //! converged Hessian.
 
 use super::local_map::{LocalMap, PlaneParams};
-use crate::geometry::lie::{hat, se3_adjoint, se3_exp, se3_log, se3_right_jacobian_inverse, Matrix6, Tangent3};
+use crate::geometry::lie::{hat, se3_adjoint, se3_exp, se3_log, se3_right_jacobian_inverse, Matrix6};
+use crate::geometry::point_to_plane::{self, NormalEquations};
 use crate::geometry::Pose3;
-use nalgebra::{Matrix3, Point3, SMatrix, SymmetricEigen, Vector3};
+use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
 use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
 
@@ -243,7 +246,7 @@ pub fn register_scan(
     let mut h_scan = Matrix6::zeros();
     while iterations < config.max_iterations {
         iterations += 1;
-        let (mut h, mut b) = (Matrix6::zeros(), Tangent3::zeros());
+        let mut equations = NormalEquations::new();
         correspondences = 0;
         for s in points_in_body.iter().filter(|s| finite(s)) {
             let p = pose * s;
@@ -253,15 +256,12 @@ pub fn register_scan(
                 false => *planes.entry([q.x.to_bits(), q.y.to_bits(), q.z.to_bits()]).or_insert_with(|| fit(&q)),
             };
             let Some(n) = normal else { continue };
-            let r = n.dot(&(p - q));
+            let (r, j) = point_to_plane::residual(&p, &q, &n);
             if r.abs() > threshold_m {
                 continue;
             }
             correspondences += 1;
-            let j = SMatrix::<f64, 1, 6>::from_iterator(p.coords.cross(&n).iter().chain(n.iter()).copied());
-            let w = weight(r * r);
-            h += w * j.transpose() * j;
-            b += w * j.transpose() * r;
+            equations.add(weight(r * r), r, &j);
         }
         if correspondences < config.min_correspondences {
             return Err(RegistrationError::TooFewCorrespondences {
@@ -270,17 +270,14 @@ pub fn register_scan(
                 threshold_m,
             });
         }
-        h_scan = h;
+        h_scan = equations.hessian;
         if let Some(prior) = prior {
             let e0 = se3_log(&(prior.map_from_body.inverse() * pose));
             let j = se3_right_jacobian_inverse(&e0) * se3_adjoint(&pose.inverse());
-            h += j.transpose() * prior.information * j;
-            b += j.transpose() * prior.information * e0;
+            equations.hessian += j.transpose() * prior.information * j;
+            equations.gradient += j.transpose() * prior.information * e0;
         }
-        let Some(step) = h.cholesky().map(|c| c.solve(&(-b))) else { return Err(RegistrationError::Singular) };
-        if step.iter().any(|v| !v.is_finite()) {
-            return Err(RegistrationError::Singular);
-        }
+        let Some(step) = equations.step() else { return Err(RegistrationError::Singular) };
         pose = se3_exp(&step) * pose;
         let (rotation, translation) = (step.fixed_rows::<3>(0).norm(), step.fixed_rows::<3>(3).norm());
         if rotation < config.convergence_rad && translation < config.convergence_m {
@@ -295,6 +292,7 @@ pub fn register_scan(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::lie::Tangent3;
     use crate::geometry::pose_from_rpy_translation;
     use crate::odometry::local_map::LocalMapConfig;
 

@@ -5,7 +5,8 @@
 //! q (kd-tree) within `max_correspondence_distance_m`, then solves a Gauss–Newton step for a left
 //! perturbation T ← Exp(δ) T, δ = (ω, v):
 //! * point-to-point: r = p − q, ∂r/∂δ = [−p^, I];
-//! * point-to-plane: r = nᵀ(p − q) with n the target normal, ∂r/∂δ = [(p × n)ᵀ, nᵀ];
+//! * point-to-plane: r = nᵀ(p − q) with n the target normal, ∂r/∂δ = [(p × n)ᵀ, nᵀ]
+//!   (`geometry::point_to_plane`, the step the odometry's registration takes too);
 //!
 //! weighted by a Huber kernel on |r| (scale `huber_m`). Stops when the step is below
 //! `convergence_rotation_rad` and `convergence_translation_m`, or after `max_iterations`.
@@ -16,6 +17,7 @@
 
 use super::normals;
 use crate::geometry::lie::{se3_adjoint, se3_exp, Matrix6, Tangent3};
+use crate::geometry::point_to_plane::{self, NormalEquations};
 use crate::geometry::Pose3;
 use crate::spatial::neighbour_graph::NeighbourGraph;
 use crate::spatial::voxel::downsample;
@@ -138,8 +140,7 @@ pub fn register(
     while iterations < config.max_iterations {
         iterations += 1;
         let mut weighted = Moments::default();
-        let mut h = Matrix6::zeros();
-        let mut g = Tangent3::zeros();
+        let mut equations = NormalEquations::new();
         let mut pairs = 0;
         (inliers, sum2, unweighted) = (0, 0.0, Moments::default());
         for (s, last) in source.iter().zip(last_match.iter_mut()) {
@@ -160,29 +161,25 @@ pub fn register(
                         normals::of_neighbours(&target, graph.neighbours(item).iter().map(|&j| j as usize))
                     });
                     let Some(n) = normal else { continue };
-                    let r = n.dot(&e);
-                    let pn = p.coords.cross(&n);
-                    let jn = Tangent3::new(pn.x, pn.y, pn.z, n.x, n.y, n.z);
-                    let w = huber(r);
-                    h.ger(w, &jn, &jn, 1.0);
-                    g.axpy(w * r, &jn, 1.0);
+                    let (r, j) = point_to_plane::residual(&p, &q, &n);
+                    equations.add(huber(r), r, &j);
                 }
                 IcpMethod::PointToPoint => {
                     let w = huber(e.norm());
                     weighted.add(w, &p.coords);
                     let (gw, gv) = (w * p.coords.cross(&e), w * e);
-                    g += Tangent3::new(gw.x, gw.y, gw.z, gv.x, gv.y, gv.z);
+                    equations.gradient += Tangent3::new(gw.x, gw.y, gw.z, gv.x, gv.y, gv.z);
                 }
             }
             pairs += 1;
         }
         if config.method == IcpMethod::PointToPoint {
-            h = weighted.gram();
+            equations.hessian = weighted.gram();
         }
         if pairs < 6 {
             break;
         }
-        let Some(delta) = h.cholesky().map(|c| -c.solve(&g)) else { break };
+        let Some(delta) = equations.step() else { break };
         pose = se3_exp(&delta) * pose;
         let (w, v) = (delta.fixed_rows::<3>(0).norm(), delta.fixed_rows::<3>(3).norm());
         if w < config.convergence_rotation_rad && v < config.convergence_translation_m {

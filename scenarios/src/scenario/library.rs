@@ -19,6 +19,7 @@ const LIBRARY: &[(&str, &str)] = &[
     ("field/fleet_four", include_str!("../../library/field/fleet_four.toml")),
     ("field/fleet_sixteen", include_str!("../../library/field/fleet_sixteen.toml")),
     ("endurance/team_of_eight_1h", include_str!("../../library/endurance/team_of_eight_1h.toml")),
+    ("endurance/odometry_1h", include_str!("../../library/endurance/odometry_1h.toml")),
 ];
 
 /// The TOML text of a library scenario.
