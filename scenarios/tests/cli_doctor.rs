@@ -64,3 +64,37 @@ fn the_doctor_passes_good_bags_and_names_what_is_wrong() {
     assert_eq!(code, Some(2), "{text}");
     assert!(text.contains("alpha.missing"), "{text}");
 }
+
+/// A robot on its own odometry: the doctor reads the IMU (not an odometry topic) and judges it
+/// as the odometry would take it. A run's own bags pass; an `imu_limits.max_gap_s` below the
+/// IMU's interval makes every interval a gap the odometry would coast across, named on `imu`.
+#[test]
+fn the_doctor_checks_the_imu_of_a_robot_on_its_own_odometry() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = sgm_scenarios::scenario::library::get("quickstart").unwrap();
+    let text = format!("{text}\n[odometry]\nsource = \"internal\"\n[imu]\nenabled = true\n[lidar]\nsweep_s = 0.1\n");
+    let mut scenario = Scenario::from_toml(&text, "internal.toml", "SGM_DOCTOR_INTERNAL_TEST").unwrap();
+    scenario.scenario.duration_s = 20.0;
+    actix_rt::System::new().block_on(run_recording(&scenario, None, Some(dir.path()))).unwrap();
+    let bag = dir.path().join("alpha.bag");
+    let bag = bag.to_str().unwrap();
+    let good = "[odometry]\nsource = \"internal\"\n[ros.sync]\nmax_label_skew_s = 0.05\nunlabelled = \"drop\"\n";
+    let config = |name: &str, toml: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, toml).unwrap();
+        path.to_str().unwrap().to_string()
+    };
+
+    let (code, text) = doctor(&["--robot", "alpha", "--config", &config("good.toml", good), "--bag", bag]);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(text.contains("verdict: OK"), "{text}");
+    assert!(!text.lines().any(|l| l.trim_start().starts_with("odometry")), "no odometry topic is read:\n{text}");
+    assert!(line(&text, "imu").contains("samples on imu, 200.0 Hz"), "{text}");
+    assert!(line(&text, "frames").contains("of them sweeps for the odometry alone"), "{text}");
+
+    let tight = format!("{good}[odometry.estimator.imu_limits]\nmax_gap_s = 0.004\n");
+    let (code, text) = doctor(&["--robot", "alpha", "--config", &config("tight.toml", &tight), "--bag", bag]);
+    assert_eq!(code, Some(0), "a warning, not a failure:\n{text}");
+    assert!(line(&text, "imu").contains("WARN"), "{text}");
+    assert!(text.contains("intervals longer than 0.004 s (the longest 0.005 s): the odometry coasts"), "{text}");
+}

@@ -10,6 +10,7 @@ use crate::error::InputError;
 use crate::inputs::{Inputs, Payload};
 use crate::msg::{nav_msgs, sensor_msgs, tf2_msgs};
 use crate::node::NodeConfig;
+use sgm_actors::config::OdometrySource;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
@@ -45,13 +46,19 @@ pub fn examine_live(config: &NodeConfig, duration: Duration) -> Result<DoctorRep
     let first = Doctor::new(config)?.live();
     let topics = first.topics().clone();
     let doctor: Shared = Arc::new(Mutex::new(Some(first)));
-    let mut subscribers = vec![
-        ("points", "sensor_msgs/PointCloud2", listen(&doctor, &topics.points, "points", Inputs::cloud)?),
-        (
+    let pose_input = match config.robot.odometry.source {
+        OdometrySource::External => (
             "odometry",
             "nav_msgs/Odometry",
             listen::<nav_msgs::Odometry>(&doctor, &topics.odometry, "odometry", Inputs::odometry)?,
         ),
+        OdometrySource::Internal => {
+            ("imu", "sensor_msgs/Imu", listen::<sensor_msgs::Imu>(&doctor, &topics.imu, "imu", Inputs::imu)?)
+        }
+    };
+    let mut subscribers = vec![
+        ("points", "sensor_msgs/PointCloud2", listen(&doctor, &topics.points, "points", Inputs::cloud)?),
+        pose_input,
     ];
     if config.ros.labels == crate::config::LabelSource::Image {
         subscribers.push((

@@ -2,11 +2,13 @@
 //! master, with a verdict per input. The same checks as the node's ([`Inputs`](crate::inputs), the
 //! [`Synchroniser`], the mounts from tf, the [`Health`](crate::health::Health) findings), plus what
 //! only a look at the whole stream tells: rates, sizes, which classes the label images' pixel
-//! values mean under `[classes]`. Plain state fed message by message ([`Doctor::observe`]); [`bag`]
+//! values mean under `[classes]`, and for a robot on its own odometry, its IMU as the odometry
+//! would take it ([`imu`]). Plain state fed message by message ([`Doctor::observe`]); [`bag`]
 //! feeds it a bag, [`live`] a running master.
 
 pub mod bag;
 mod error;
+mod imu;
 pub mod live;
 mod report;
 mod verdicts;
@@ -21,6 +23,7 @@ use crate::health::{judge_whole_stream, HealthConfig, TopicTally};
 use crate::inputs::{Inputs, Payload};
 use crate::node::NodeConfig;
 use crate::sync::Synchroniser;
+use imu::ImuTally;
 use sgm_actors::config::OdometrySource;
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::perception::label_map::{LabelMap, Mapped};
@@ -94,9 +97,15 @@ pub struct Doctor {
     pending: u64,
     /// Listening to streams that began before: clouds before the first pose are not judged.
     live: bool,
-    /// An odometry pose has been heard.
-    odometry_heard: bool,
+    /// What places a cloud has been heard: an odometry pose (external), an IMU sample
+    /// (internal).
+    pose_source_heard: bool,
     health: HealthConfig,
+    /// Where the robot's odometry comes from: `odometry` or `imu` is the input it needs.
+    source: OdometrySource,
+    imu: ImuTally,
+    /// Clouds with no per-point time (the robot's own odometry uses them as they come).
+    untimed_clouds: u64,
 }
 
 impl Doctor {
@@ -106,11 +115,12 @@ impl Doctor {
         let (classes, map) = config.robot.class_tables()?;
         let colours = config.robot.colour_ids()?;
         let inputs = Inputs::new(&config.ros, &robot, id).with_colours(colours);
-        // The doctor judges the external odometry's inputs (clouds meet the odometry topic);
-        // the IMU stream of an internal odometry is not among its checks yet.
-        let sync = Synchroniser::for_robot(&config.ros, &inputs, OdometrySource::External)?;
+        // The synchroniser the node would run: clouds meet the odometry topic, or the IMU of
+        // the robot's own odometry.
+        let source = config.robot.odometry.source;
+        let sync = Synchroniser::for_robot(&config.ros, &inputs, source)?;
         let mut tallies = BTreeMap::new();
-        let mut expected = vec!["points", "odometry"];
+        let mut expected = vec!["points", Self::pose_input(source)];
         if config.ros.labels == LabelSource::Image {
             expected.extend(["labels", "camera_info"]);
         }
@@ -124,6 +134,7 @@ impl Doctor {
             labels: resolve(&t.labels),
             camera_info: resolve(&t.camera_info),
             odometry: resolve(&t.odometry),
+            imu: resolve(&t.imu),
             ..t.clone()
         };
         Ok(Self {
@@ -144,9 +155,25 @@ impl Doctor {
             frames: 0,
             pending: 0,
             live: false,
-            odometry_heard: false,
+            pose_source_heard: false,
             health: config.ros.health.clone(),
+            source,
+            imu: ImuTally::new(config.robot.odometry.estimator.imu_limits),
+            untimed_clouds: 0,
         })
+    }
+
+    /// The input that places clouds: `odometry` (external) or `imu` (the robot's own).
+    pub fn pose_input(source: OdometrySource) -> &'static str {
+        match source {
+            OdometrySource::External => "odometry",
+            OdometrySource::Internal => "imu",
+        }
+    }
+
+    /// Where the robot's odometry comes from.
+    pub fn source(&self) -> OdometrySource {
+        self.source
     }
 
     /// Listening to live streams that began before (a window, not a whole mission).
@@ -170,7 +197,7 @@ impl Doctor {
         self.notes.entry(input.to_string()).or_default().push((verdict, text));
     }
 
-    /// One message on `input` (`points`, `labels`, `camera_info`, `odometry`, `tf`,
+    /// One message on `input` (`points`, `labels`, `camera_info`, `odometry`, `imu`, `tf`,
     /// `tf_static`, `clock`), checked or refused.
     pub fn observe(&mut self, input: &str, result: Result<Payload, InputError>) {
         let tally = self.tallies.entry(input.to_string()).or_default();
@@ -186,7 +213,7 @@ impl Doctor {
             }
         };
         let stamp = match &payload {
-            Payload::Cloud(t, _) | Payload::Image(t, ..) | Payload::Odometry(t, _) => Some(*t),
+            Payload::Cloud(t, _) | Payload::Image(t, ..) | Payload::Odometry(t, _) | Payload::Imu(t, _) => Some(*t),
             _ => None,
         };
         if let Some(t) = stamp {
@@ -196,17 +223,25 @@ impl Doctor {
             }
         }
         match &payload {
-            Payload::Odometry(..) => self.odometry_heard = true,
-            // A live window opened between this cloud's odometry and the cloud: it cannot be placed,
-            // through no fault of the streams.
-            Payload::Cloud(..) if self.live && !self.odometry_heard => {
+            Payload::Odometry(..) if self.source == OdometrySource::External => self.pose_source_heard = true,
+            Payload::Imu(..) if self.source == OdometrySource::Internal => self.pose_source_heard = true,
+            // A live window opened between what places this cloud (its odometry, the IMU over
+            // its sweep) and the cloud: it cannot be placed, through no fault of the streams.
+            Payload::Cloud(..) if self.live && !self.pose_source_heard => {
                 self.pending += 1;
                 return;
             }
             _ => {}
         }
         match &payload {
-            Payload::Cloud(_, scan) => self.points += scan.points.len() as u64,
+            Payload::Cloud(_, scan) => {
+                self.points += scan.points.len() as u64;
+                self.untimed_clouds += u64::from(scan.times.is_none());
+            }
+            Payload::Imu(t, reading) => {
+                let epoch = self.epoch.unwrap_or(Epoch { sec: 0 });
+                self.imu.add(epoch.stamp(*t), reading);
+            }
             Payload::Image(_, image, _) => self.count_pixels(image),
             Payload::CameraInfo(camera) => self.camera = Some(camera.clone()),
             _ => {}
@@ -267,12 +302,13 @@ impl Doctor {
 
 /// The static name of an input (for the stamps map).
 fn static_name(input: &str) -> Option<&'static str> {
-    ["points", "labels", "camera_info", "odometry"].into_iter().find(|n| *n == input)
+    ["points", "labels", "camera_info", "odometry", "imu"].into_iter().find(|n| *n == input)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::LabelSource;
     use crate::convert::cloud::Scan;
     use crate::tf::{TfBatch, TfTransform};
     use nalgebra::Point3;
@@ -394,5 +430,67 @@ mod tests {
         let report = ended.finish("test".into(), true);
         let frames = report.inputs.iter().find(|v| v.input == "frames").unwrap();
         assert_eq!(frames.verdict, Verdict::Warn, "{}", report.text());
+    }
+
+    /// The robot's own odometry: the doctor asks for the IMU, not an odometry topic, and names
+    /// what the odometry would drop or coast across, and clouds it could not deskew.
+    #[test]
+    fn an_imu_stream_is_judged_as_the_odometry_would_take_it() {
+        let mut config = config();
+        config.robot.odometry.source = OdometrySource::Internal;
+        config.ros.labels = LabelSource::Cloud;
+        let still = crate::convert::imu::ImuReading {
+            angular_velocity: nalgebra::Vector3::zeros(),
+            linear_acceleration: nalgebra::Vector3::new(0.0, 0.0, 9.81),
+        };
+        let run = |spoil: bool| {
+            let mut d = Doctor::new(&config).unwrap();
+            for k in 0..=400u32 {
+                let t = f64::from(k) * 0.005;
+                if k % 20 == 0 && k < 400 {
+                    let times = (!spoil || k % 40 == 0).then(|| (0..32).map(|i| i as f32 * 0.003).collect());
+                    let scan = Scan {
+                        points: vec![Point3::new(5.0, 0.0, 0.0); 32],
+                        labels: Some(vec![1; 32]),
+                        dropped_non_finite: 0,
+                        times,
+                    };
+                    d.observe("points", Ok(Payload::Cloud(at(t), scan)));
+                }
+                // Spoilt: 0.5–0.6 s silent, one sample from the past, one beyond the gyro's range.
+                if spoil && (100..120).contains(&k) {
+                    continue;
+                }
+                let reading = match (spoil, k) {
+                    (true, 150) => crate::convert::imu::ImuReading {
+                        angular_velocity: nalgebra::Vector3::new(40.0, 0.0, 0.0),
+                        ..still
+                    },
+                    _ => still,
+                };
+                d.observe("imu", Ok(Payload::Imu(at(t), reading)));
+                if spoil && k == 200 {
+                    d.observe("imu", Ok(Payload::Imu(at(0.5), still)));
+                }
+            }
+            d.finish("test".into(), true)
+        };
+        let report = run(false);
+        assert_eq!(report.verdict, Verdict::Ok, "{}", report.text());
+        assert!(!report.inputs.iter().any(|v| v.input == "odometry"), "{}", report.text());
+        assert!(report.text().contains("401 samples on imu, 200.0 Hz"), "{}", report.text());
+        assert!(report.text().contains("20 of 20 clouds assembled into frames (0 of them sweeps"), "{}", report.text());
+
+        let report = run(true);
+        let text = report.text();
+        assert_eq!(
+            verdicts(&report),
+            [("points", Verdict::Warn), ("imu", Verdict::Warn), ("tf", Verdict::Ok), ("frames", Verdict::Ok)],
+            "{text}"
+        );
+        assert!(text.contains("10 of 20 clouds carry no per-point time"), "{text}");
+        assert!(text.contains("1 samples at the gyro's"), "{text}");
+        assert!(text.contains("1 samples not after the one before"), "{text}");
+        assert!(text.contains("1 intervals longer than 0.05 s (the longest 0.105 s)"), "{text}");
     }
 }

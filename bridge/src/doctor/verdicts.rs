@@ -10,6 +10,7 @@ use crate::config::LabelSource;
 use crate::health::{Check, Finding};
 use crate::tf::listener::TfStatus;
 use crate::tf::mounts::MountSource;
+use sgm_actors::config::OdometrySource;
 
 /// A share as a percentage with one decimal.
 fn percent(part: u64, whole: u64) -> String {
@@ -74,24 +75,9 @@ fn lift(j: &mut Judged, findings: &[Finding], checks: &[Check]) {
     }
 }
 
-pub(super) fn judge(d: &Doctor, tf: &TfStatus, findings: &[Finding]) -> Vec<InputVerdict> {
+/// The odometry topic (external odometry).
+fn odometry_verdict(d: &Doctor, tf: &TfStatus, findings: &[Finding]) -> InputVerdict {
     let topics = &d.topics;
-    let image = d.labels == LabelSource::Image;
-    let mut out = Vec::new();
-
-    let (j, clouds) = messages(d, "points", &topics.points);
-    let mean = d.points.checked_div(clouds).unwrap_or(0);
-    out.push(j.done(
-        d,
-        "points",
-        format!(
-            "{clouds} clouds on {}, {}, {mean} points each, frame {}",
-            topics.points,
-            rate(d, "points"),
-            d.inputs.lidar_frame()
-        ),
-    ));
-
     let (mut j, poses) = messages(d, "odometry", &topics.odometry);
     lift(&mut j, findings, &[Check::NoOdometry, Check::OdometryDisagreesWithTf]);
     let compared = if tf.counts.odometry_compared > 0 {
@@ -105,7 +91,7 @@ pub(super) fn judge(d: &Doctor, tf: &TfStatus, findings: &[Finding]) -> Vec<Inpu
     } else {
         String::new()
     };
-    out.push(j.done(
+    j.done(
         d,
         "odometry",
         format!(
@@ -115,7 +101,82 @@ pub(super) fn judge(d: &Doctor, tf: &TfStatus, findings: &[Finding]) -> Vec<Inpu
             d.inputs.world_frame(),
             d.inputs.body_frame()
         ),
+    )
+}
+
+/// The IMU (the robot's own odometry): what its screen would drop, and the gaps it would
+/// coast across.
+fn imu_verdict(d: &Doctor, findings: &[Finding]) -> InputVerdict {
+    let topic = &d.topics.imu;
+    let (mut j, samples) = messages(d, "imu", topic);
+    lift(&mut j, findings, &[Check::ImuShort]);
+    let t = &d.imu;
+    let limits = t.limits();
+    if t.saturated > 0 {
+        j.warn(format!(
+            "{} samples at the gyro's ({} rad/s) or the accelerometer's ({} m/s²) range: dropped, the sample \
+             before held over them (odometry.estimator.imu_limits)",
+            t.saturated, limits.gyro_range_rad_s, limits.accel_range_mps2
+        ));
+    }
+    if t.non_finite > 0 {
+        j.warn(format!("{} samples with a NaN or infinite value: dropped", t.non_finite));
+    }
+    if t.out_of_order > 0 {
+        j.warn(format!(
+            "{} samples not after the one before (time going backwards, or a repeat): dropped",
+            t.out_of_order
+        ));
+    }
+    if t.gaps > 0 {
+        j.warn(format!(
+            "{} intervals longer than {} s (the longest {:.3} s): the odometry coasts across them \
+             (odometry.estimator.imu_limits.max_gap_s)",
+            t.gaps, limits.max_gap_s, t.longest_interval_s
+        ));
+    }
+    if samples > 0 && t.kept == 0 {
+        j.fail(format!("none of the {samples} samples on {topic} is usable"));
+    }
+    j.done(
+        d,
+        "imu",
+        format!(
+            "{samples} samples on {topic}, {}, frame {}; the longest interval {:.1} ms",
+            rate(d, "imu"),
+            d.inputs.imu_frame(),
+            1e3 * t.longest_interval_s
+        ),
+    )
+}
+
+pub(super) fn judge(d: &Doctor, tf: &TfStatus, findings: &[Finding]) -> Vec<InputVerdict> {
+    let topics = &d.topics;
+    let image = d.labels == LabelSource::Image;
+    let mut out = Vec::new();
+
+    let internal = d.source == OdometrySource::Internal;
+    let (mut j, clouds) = messages(d, "points", &topics.points);
+    if internal && d.untimed_clouds > 0 {
+        j.warn(format!(
+            "{} of {clouds} clouds carry no per-point time: the odometry registers them as they come, \
+             not deskewed (the driver's time field, e.g. `t` or `time`, is missing)",
+            d.untimed_clouds
+        ));
+    }
+    let mean = d.points.checked_div(clouds).unwrap_or(0);
+    out.push(j.done(
+        d,
+        "points",
+        format!(
+            "{clouds} clouds on {}, {}, {mean} points each, frame {}",
+            topics.points,
+            rate(d, "points"),
+            d.inputs.lidar_frame()
+        ),
     ));
+
+    out.push(if internal { imu_verdict(d, findings) } else { odometry_verdict(d, tf, findings) });
 
     if image {
         let (mut j, images) = messages(d, "labels", &topics.labels);
@@ -160,7 +221,11 @@ pub(super) fn judge(d: &Doctor, tf: &TfStatus, findings: &[Finding]) -> Vec<Inpu
 
     let mut j = Judged::new();
     let mut mounts = Vec::new();
-    for m in tf.mounts.iter().filter(|m| image || m.sensor == "lidar") {
+    for m in tf
+        .mounts
+        .iter()
+        .filter(|m| m.sensor == "lidar" || (image && m.sensor == "camera") || (internal && m.sensor == "imu"))
+    {
         let how = match m.source {
             MountSource::SameFrame => "the body frame".to_string(),
             MountSource::Tf => format!("from tf ({} ← {})", m.body_frame, m.sensor_frame),
@@ -193,20 +258,27 @@ pub(super) fn judge(d: &Doctor, tf: &TfStatus, findings: &[Finding]) -> Vec<Inpu
     let s = &d.sync.counts;
     // Clouds still waiting for their partners when a live window closed are not judged.
     let clouds = d.tallies.get("points").map_or(0, |t| t.accepted).saturating_sub(d.pending);
+    let own = if internal { format!(", no_imu_mount {}", s.no_imu_mount) } else { String::new() };
     if clouds > 0 && d.frames == 0 {
         j.fail(format!(
-            "none of {clouds} clouds became a frame: no_odometry {}, no_image {}, no_camera_info {}, no_lidar_mount {}",
+            "none of {clouds} clouds became a frame: no_odometry {}, no_image {}, no_camera_info {}, no_lidar_mount {}{own}",
             s.no_odometry, s.no_image, s.no_camera_info, s.no_lidar_mount
         ));
     } else if d.frames < clouds {
         j.warn(format!(
-            "{} of {clouds} clouds dropped (no_odometry {}, no_image {}, no_camera_info {}, no_lidar_mount {}, out_of_order {})",
+            "{} of {clouds} clouds dropped (no_odometry {}, no_image {}, no_camera_info {}, no_lidar_mount {}, out_of_order {}{own})",
             clouds - d.frames,
             s.no_odometry,
             s.no_image,
             s.no_camera_info,
             s.no_lidar_mount,
             s.out_of_order
+        ));
+    }
+    if internal && s.imu_short > 0 {
+        j.warn(format!(
+            "{} clouds handed on before the IMU covered their sweep (ros.sync.max_wait_s): the odometry coasted",
+            s.imu_short
         ));
     }
     lift(&mut j, findings, &[Check::NoMount, Check::PointsOutsideImage]);
@@ -220,7 +292,9 @@ pub(super) fn judge(d: &Doctor, tf: &TfStatus, findings: &[Finding]) -> Vec<Inpu
     } else {
         String::new()
     };
-    out.push(j.done(d, "frames", format!("{} of {clouds} clouds assembled into frames{projected}", d.frames)));
+    let sweeps =
+        if internal { format!(" ({} of them sweeps for the odometry alone)", s.sweeps) } else { String::new() };
+    out.push(j.done(d, "frames", format!("{} of {clouds} clouds assembled into frames{sweeps}{projected}", d.frames)));
 
     if image {
         let mut j = Judged::new();

@@ -49,6 +49,36 @@ impl Default for ImuLimits {
     }
 }
 
+/// Why a sample is not kept.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImuDrop {
+    /// A NaN or infinite stamp or value.
+    NonFinite,
+    /// At or beyond the gyro's or the accelerometer's range on some axis.
+    Saturated,
+    /// Not after `newest` (time going backwards, or a repeat).
+    OutOfOrder,
+}
+
+impl ImuLimits {
+    /// Whether the odometry drops `sample`, and why, after a kept sample stamped `newest`
+    /// (`sgm doctor` asks the same of a recording).
+    pub fn screen(&self, sample: &ImuSample, newest: Option<f64>) -> Option<ImuDrop> {
+        let values = || sample.angular_velocity.iter().chain(sample.specific_force.iter());
+        if !(sample.stamp.is_finite() && values().all(|v| v.is_finite())) {
+            Some(ImuDrop::NonFinite)
+        } else if sample.angular_velocity.amax() >= self.gyro_range_rad_s
+            || sample.specific_force.amax() >= self.accel_range_mps2
+        {
+            Some(ImuDrop::Saturated)
+        } else if newest.is_some_and(|t| sample.stamp <= t) {
+            Some(ImuDrop::OutOfOrder)
+        } else {
+            None
+        }
+    }
+}
+
 /// What became of the samples handed in, and of the time between them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ImuCounts {
@@ -134,23 +164,19 @@ impl ImuQueue {
 
     /// Keeps `sample` when it is finite, within range and after the newest (else counts why not).
     pub fn push(&mut self, sample: &ImuSample) {
-        let values = || sample.angular_velocity.iter().chain(sample.specific_force.iter());
-        if !(sample.stamp.is_finite() && values().all(|v| v.is_finite())) {
-            self.counts.non_finite += 1;
-        } else if sample.angular_velocity.amax() >= self.limits.gyro_range_rad_s
-            || sample.specific_force.amax() >= self.limits.accel_range_mps2
-        {
-            self.counts.saturated += 1;
-        } else if self.newest.is_some_and(|t| sample.stamp <= t) {
-            self.counts.out_of_order += 1;
-        } else {
-            if self.pending.len() >= MAX_PENDING {
-                self.pending.pop_front();
-                self.counts.overflow += 1;
+        match self.limits.screen(sample, self.newest) {
+            Some(ImuDrop::NonFinite) => self.counts.non_finite += 1,
+            Some(ImuDrop::Saturated) => self.counts.saturated += 1,
+            Some(ImuDrop::OutOfOrder) => self.counts.out_of_order += 1,
+            None => {
+                if self.pending.len() >= MAX_PENDING {
+                    self.pending.pop_front();
+                    self.counts.overflow += 1;
+                }
+                self.pending.push_back(*sample);
+                self.newest = Some(sample.stamp);
+                self.counts.kept += 1;
             }
-            self.pending.push_back(*sample);
-            self.newest = Some(sample.stamp);
-            self.counts.kept += 1;
         }
     }
 
