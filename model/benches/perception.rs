@@ -11,6 +11,7 @@ use sgm_model::perception::clustering::{cluster, ClusterConfig};
 use sgm_model::perception::icp::{register, IcpConfig, IcpMethod};
 use sgm_model::perception::label_vote::{vote, LabelVote};
 use sgm_model::perception::projection::{label_points, CameraModel, LabelImage};
+use sgm_model::perception::synthetic_room::box_room as room;
 use sgm_model::scene_graph::LabelId;
 use std::hint::black_box;
 
@@ -74,24 +75,6 @@ fn fusion_and_clustering(c: &mut Criterion) {
     c.bench_function("label_vote_20k", |b| {
         b.iter(|| vote(black_box(&points), &with_ground, &LabelVote::default(), |l| l.0 != 0))
     });
-}
-
-/// The box room of `benches/compare_small_gicp.py` (floor, three walls, a table), `n` points.
-fn room(n: usize, seed: u64) -> Vec<Point3<f64>> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    (0..n)
-        .map(|k| {
-            let (a, b): (f64, f64) = (rng.random_range(0.0..1.0), rng.random_range(0.0..1.0));
-            match k % 6 {
-                0 => Point3::new(8.0 * a, 6.0 * b, 0.0),
-                1 => Point3::new(8.0 * a, 0.0, 3.0 * b),
-                2 => Point3::new(0.0, 6.0 * a, 3.0 * b),
-                3 => Point3::new(8.0 * a, 6.0, 3.0 * b),
-                4 => Point3::new(2.0 + 1.5 * a, 2.0 + 0.8 * b, 0.75),
-                _ => Point3::new(2.0, 2.0 + 0.8 * a, 0.75 * b),
-            }
-        })
-        .collect()
 }
 
 /// ICP as `sgm icp` runs it on a 20k + 20k room (issue [odometry]: ≤ 0.8× small_gicp's time,

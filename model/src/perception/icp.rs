@@ -239,23 +239,7 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    /// A box-shaped room (floor, walls, a table) sampled randomly: well constrained in 6 DoF.
-    pub fn room(n: usize, seed: u64) -> Vec<Point3<f64>> {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        (0..n)
-            .map(|k| {
-                let (a, b) = (rng.random_range(0.0..1.0), rng.random_range(0.0..1.0));
-                match k % 6 {
-                    0 => Point3::new(8.0 * a, 6.0 * b, 0.0),
-                    1 => Point3::new(8.0 * a, 0.0, 3.0 * b),
-                    2 => Point3::new(0.0, 6.0 * a, 3.0 * b),
-                    3 => Point3::new(8.0 * a, 6.0, 3.0 * b),
-                    4 => Point3::new(2.0 + 1.5 * a, 2.0 + 0.8 * b, 0.75),
-                    _ => Point3::new(2.0, 2.0 + 0.8 * a, 0.75 * b),
-                }
-            })
-            .collect()
-    }
+    use crate::perception::synthetic_room::box_room as room;
 
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(24))]

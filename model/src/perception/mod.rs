@@ -23,4 +23,5 @@ pub mod projection;
 pub mod scan_fusion;
 pub mod segmenters;
 pub mod structure_check;
+pub mod synthetic_room;
 pub mod tracker;
