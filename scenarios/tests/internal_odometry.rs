@@ -33,6 +33,9 @@ fn the_map_is_built_on_the_robots_own_odometry() {
         let ate = robot.ate_rmse_m.expect("an ATE");
         assert!(ate < 0.1, "{}: ATE {ate} m", robot.name);
     }
+    let text = sgm_scenarios::report::markdown::render(&report, &outcome.timing);
+    let line = text.lines().find(|l| l.starts_with("Deskew:")).expect("a Deskew line");
+    assert!(line.contains("alpha: by its odometry (") && !line.contains("used as they came"), "{line}");
     // Same scenario and seed, same report.
     let again = actix_rt::System::new().block_on(run(&scenario, None)).expect("runs again");
     let json = |r| serde_json::to_string(&compute(r)).expect("serialises");

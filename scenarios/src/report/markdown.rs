@@ -99,6 +99,20 @@ fn deskew(s: &mut String, report: &Report) {
         let d = &r.deskew;
         let scans = d.deskewed + d.no_times + d.no_motion + d.refused;
         let _ = write!(s, "{} {}: ", if k == 0 { "" } else { ";" }, r.name);
+        // On its own odometry the robot's sweeps are deskewed there, not by Fusion.
+        if let Some(o) = &r.odometry {
+            let c = &o.counts;
+            let _ = write!(s, "by its odometry ({} sweeps estimated, {} of them frames", c.scans, d.upstream);
+            if c.not_deskewed > 0 {
+                let _ = write!(
+                    s,
+                    "; {} sweeps used as they came: no per-point time, or times that did not fit",
+                    c.not_deskewed
+                );
+            }
+            let _ = write!(s, ")");
+            continue;
+        }
         if scans == 0 {
             let _ = write!(s, "off (fusion.deskew = false) or no scan");
             continue;

@@ -6,7 +6,7 @@ pub mod back_end;
 mod figures;
 pub mod ledger;
 mod map_cloud;
-mod markdown;
+pub mod markdown;
 pub mod plots;
 pub mod tum;
 
