@@ -271,19 +271,23 @@ fn a_run_on_its_own_odometry_replays_from_its_sweeps_and_imu() {
         assert_eq!(ran.counts, again.counts, "the same scans and IMU samples");
         assert_eq!((ran.handed_on, ran.origin_stamp), (again.handed_on, again.origin_stamp));
     }
-    // The bags hold the points as f32 (the run's are f64): the figures agree to a micrometre.
+    // The bags hold the points as f32 (the run's are f64; at 30 m, f32 rounds by 2 µm), and the
+    // robots' own odometry carries that through every scan: the figures agree to 1e-5 (m, °).
     // A frame waits for the IMU samples recorded after it (to its sweep's end), so the replay
     // handles it a step later and may align one step later.
     let again = report::compute(&replayed.run.record);
     let near = |a: Option<f64>, b: Option<f64>| match (a, b) {
-        (Some(a), Some(b)) => (a - b).abs() < 1e-6,
+        (Some(a), Some(b)) => (a - b).abs() < 1e-5,
         (a, b) => a.is_none() && b.is_none(),
     };
     assert!(ran.alignments.iter().all(|a| a.first_aligned_s.is_some()), "the scenario aligns");
     for (a, b) in ran.alignments.iter().zip(&again.alignments) {
         let lag = b.first_aligned_s.zip(a.first_aligned_s).map(|(b, a)| b - a);
         assert!(lag.is_some_and(|lag| (0.0..=scenario.scenario.frame_interval_s).contains(&lag)), "{a:?} {b:?}");
-        assert!(near(a.translation_error_m, b.translation_error_m) && near(a.rotation_error_deg, b.rotation_error_deg));
+        assert!(
+            near(a.translation_error_m, b.translation_error_m) && near(a.rotation_error_deg, b.rotation_error_deg),
+            "{a:?}\n{b:?}"
+        );
     }
     for (a, b) in ran.robots.iter().zip(&again.robots) {
         assert_eq!((a.keyframes, a.frames), (b.keyframes, b.frames), "{}", a.name);
