@@ -2,16 +2,10 @@
 //! eigenvector of the smallest eigenvalue of their covariance. Points with fewer than 3
 //! neighbours, or on a line, get no normal.
 
-use crate::spatial::point_tree::PointTree;
 use nalgebra::{Matrix3, Point3, Vector3};
 
-/// Normal of every point (`None` where undetermined) from its `k` nearest neighbours within
-/// `radius` (m), using `tree` built over `points`.
-pub fn estimate(points: &[Point3<f64>], tree: &PointTree, k: usize, radius: f64) -> Vec<Option<Vector3<f64>>> {
-    points.iter().map(|p| of_neighbours(points, tree.nearest_k_within(p, k.max(3), radius))).collect()
-}
-
-/// The normal of the surface through `points[i]` for each i of `neighbours` (at least 3).
+/// The normal of the surface through `points[i]` for each i of `neighbours` (at least 3; ICP
+/// takes them from `spatial::neighbour_graph`, a point's k nearest within a radius).
 pub fn of_neighbours(
     points: &[Point3<f64>],
     neighbours: impl IntoIterator<Item = usize> + Clone,
@@ -72,14 +66,19 @@ mod tests {
 
     #[test]
     fn plane_normals_are_perpendicular() {
+        use crate::spatial::neighbour_graph::NeighbourGraph;
+        let estimate = |points: &[Point3<f64>], k: usize, radius: f64| -> Vec<Option<Vector3<f64>>> {
+            let mut graph = NeighbourGraph::new(points, k, radius);
+            (0..points.len()).map(|i| of_neighbours(points, graph.neighbours(i).iter().map(|&j| j as usize))).collect()
+        };
         let pts: Vec<Point3<f64>> =
             (0..100).map(|k| Point3::new((k % 10) as f64 * 0.1, (k / 10) as f64 * 0.1, 2.0)).collect();
-        for n in estimate(&pts, &PointTree::new(&pts), 8, 1.0) {
+        for n in estimate(&pts, 8, 1.0) {
             let n = n.expect("plane");
             assert!((n.z.abs() - 1.0).abs() < 1e-9);
         }
         let line: Vec<Point3<f64>> = (0..20).map(|k| Point3::new(k as f64, 0.0, 0.0)).collect();
-        assert!(estimate(&line, &PointTree::new(&line), 5, 10.0).iter().all(Option::is_none));
+        assert!(estimate(&line, 5, 10.0).iter().all(Option::is_none));
     }
 
     #[test]

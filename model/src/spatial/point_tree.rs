@@ -47,13 +47,7 @@ impl PointTree {
 
     /// Indices of up to `k` nearest points within `radius` m of `p`, in no particular order.
     pub fn nearest_k_within(&self, p: &Point3<f64>, k: usize, radius: f64) -> Vec<usize> {
-        let Some(k) = NonZero::new(k) else { return Vec::new() };
-        let r2 = (radius * radius) as f32;
-        self.tree
-            .nearest_n_within::<SquaredEuclidean>(&Self::key(p), r2, k, false)
-            .iter()
-            .map(|n| n.item as usize)
-            .collect()
+        self.nearest_k_within_distances(p, k, radius).into_iter().map(|(item, _)| item as usize).collect()
     }
 
     /// [`PointTree::nearest_k_within`] with each point's squared distance (single precision).
