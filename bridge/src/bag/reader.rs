@@ -1,10 +1,16 @@
-//! Reads one robot's bag for the replay: the topics of the `[ros]` section (a bag topic matches
-//! a configured name equal to it or ending it: `points` matches `/points` and `/alpha/points`),
-//! each message decoded and checked by [`Inputs`]. A reader thread per bag decodes ahead into a
-//! bounded channel, so bags decode in parallel and memory stays bounded. The bag's records are
-//! read by [`super::records`], one chunk at a time and within bounds; [`decode_bag`] reads a bag
-//! from any `Read` on the caller's thread (the `rosbag` fuzz target feeds it bytes).
+//! Reads one robot's recording for the replay: the topics of the `[ros]` section (a recorded
+//! topic matches a configured name equal to it or ending it: `points` matches `/points` and
+//! `/alpha/points`), each message decoded and checked by [`Inputs`]. A reader thread per
+//! recording decodes ahead into a bounded channel, so recordings decode in parallel and memory
+//! stays bounded.
+//!
+//! What the path holds chooses the reader ([`RecordingFormat::of`]): a ROS 1 bag's records are
+//! read by [`super::records`], one chunk at a time and within bounds ([`decode_bag`] reads one
+//! from any `Read` on the caller's thread; the `rosbag` fuzz target feeds it bytes); a ROS 2
+//! recording (a rosbag2 directory, an `.mcap` or a `.db3`) by [`super::rosbag2`], its CDR
+//! messages decoded by [`super::cdr`] into the same ROS 1 types, so both take the same checks.
 
+use super::cdr::{self, FromCdr};
 use super::records::{BagLimits, ChunkRecord, ChunkSection, RecordError};
 use crate::bounded::{check_within, Layout};
 use crate::config::RosConfig;
@@ -41,12 +47,17 @@ pub enum BagItem {
 pub enum BagError {
     #[error("{path}: {message}")]
     Read { path: String, message: String },
-    #[error("{path}: topic {topic} carries {found} (md5 {md5}), {expected} expected")]
-    WrongType { path: String, topic: String, found: String, md5: String, expected: String },
+    /// A topic of another type than its input needs: `found` and `expected` with their md5sum
+    /// (ROS 1) or serialisation (ROS 2).
+    #[error("{path}: topic {topic} carries {found}, {expected} expected")]
+    WrongType { path: String, topic: String, found: String, expected: String },
+    /// A ROS 2 recording whose `metadata.yaml` disagrees with what its storage holds.
+    #[error("{path}: metadata.yaml disagrees with the storage on topic {topic}: {what}")]
+    Disagrees { path: String, topic: String, what: String },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Kind {
+pub(super) enum Kind {
     Cloud,
     Image,
     CameraInfo,
@@ -81,6 +92,18 @@ impl Kind {
             Kind::Imu => (sensor_msgs::Imu::msg_type(), sensor_msgs::Imu::md5sum()),
         }
     }
+
+    /// The ROS 2 type, as rosbag2 records it.
+    fn ros2_type(self) -> &'static str {
+        match self {
+            Kind::Cloud => sensor_msgs::PointCloud2::ROS2_TYPE,
+            Kind::Image => sensor_msgs::Image::ROS2_TYPE,
+            Kind::CameraInfo => sensor_msgs::CameraInfo::ROS2_TYPE,
+            Kind::Odometry | Kind::GroundTruth => nav_msgs::Odometry::ROS2_TYPE,
+            Kind::Tf | Kind::TfStatic => tf2_msgs::TFMessage::ROS2_TYPE,
+            Kind::Imu => sensor_msgs::Imu::ROS2_TYPE,
+        }
+    }
 }
 
 /// Whether bag topic `topic` is the configured `name`.
@@ -96,26 +119,87 @@ fn decode<M: RosMsg + Layout>(data: &[u8], max_bytes: usize) -> Result<M, InputE
     M::decode(data).map_err(|e| InputError::invalid(format!("does not decode: {e}")))
 }
 
-struct Decoder {
-    path: String,
+/// How a recording serialises its messages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Serialisation {
+    /// ROS 1 (a bag), each message's type checked by its md5sum.
+    Ros1,
+    /// CDR (rosbag2), each topic's type checked by its ROS 2 name.
+    Cdr,
+}
+
+fn decode_as<M: RosMsg + Layout + FromCdr>(
+    serialisation: Serialisation,
+    data: &[u8],
+    max_bytes: usize,
+) -> Result<M, InputError> {
+    match serialisation {
+        Serialisation::Ros1 => decode(data, max_bytes),
+        Serialisation::Cdr => {
+            cdr::decode(data, max_bytes).map_err(|e| InputError::invalid(format!("does not decode from CDR: {e}")))
+        }
+    }
+}
+
+/// One recording's topics and their decoding: which recorded topic is which input, and each
+/// message decoded and checked by [`Inputs`].
+pub(super) struct Decoder {
+    pub(super) path: String,
     topics: Vec<(String, Kind)>,
     inputs: Inputs,
     connections: BTreeMap<u32, Option<(String, Kind)>>,
     /// `ros.max_message_bytes`.
-    max_bytes: usize,
+    pub(super) max_bytes: usize,
+    serialisation: Serialisation,
 }
 
 impl Decoder {
+    /// The decoder of `source`'s topics for a recording named `name`.
+    pub(super) fn new(name: &str, source: &BagSource, serialisation: Serialisation) -> Self {
+        let BagSource { config, robot, id, colours, imu } = source;
+        let (robot, id) = (robot.as_str(), *id);
+        let t = &config.topics;
+        let mut topics = vec![
+            (RosConfig::resolve(&t.points, robot, id), Kind::Cloud),
+            (RosConfig::resolve(&t.labels, robot, id), Kind::Image),
+            (RosConfig::resolve(&t.camera_info, robot, id), Kind::CameraInfo),
+            (RosConfig::resolve(&t.odometry, robot, id), Kind::Odometry),
+            (RosConfig::resolve(&t.ground_truth, robot, id), Kind::GroundTruth),
+        ];
+        if *imu {
+            topics.push((RosConfig::resolve(&t.imu, robot, id), Kind::Imu));
+        }
+        if config.tf.listen {
+            topics.push((RosConfig::resolve(&config.tf.static_topic, robot, id), Kind::TfStatic));
+            topics.push((RosConfig::resolve(&config.tf.topic, robot, id), Kind::Tf));
+        }
+        Self {
+            path: name.to_string(),
+            topics,
+            inputs: match colours {
+                Some(colours) => Inputs::new(config, robot, id).with_colours(colours.clone()),
+                None => Inputs::new(config, robot, id),
+            },
+            connections: BTreeMap::new(),
+            max_bytes: config.max_message_bytes,
+            serialisation,
+        }
+    }
+
+    fn kind_of(&self, topic: &str) -> Option<Kind> {
+        self.topics.iter().find(|(name, _)| topic_matches(topic, name)).map(|(_, k)| *k)
+    }
+
+    /// A ROS 1 connection: its topic, and its type checked by name and md5sum.
     fn connection(&mut self, id: u32, topic: &str, msg_type: &str, md5: &str) -> Result<(), BagError> {
-        let kind = self.topics.iter().find(|(name, _)| topic_matches(topic, name)).map(|(_, k)| *k);
+        let kind = self.kind_of(topic);
         if let Some(kind) = kind {
             let (expected, expected_md5) = kind.expected();
             if msg_type != expected || md5 != expected_md5 {
                 return Err(BagError::WrongType {
                     path: self.path.clone(),
                     topic: topic.into(),
-                    found: msg_type.into(),
-                    md5: md5.into(),
+                    found: format!("{msg_type} (md5 {md5})"),
                     expected,
                 });
             }
@@ -124,16 +208,45 @@ impl Decoder {
         Ok(())
     }
 
+    /// A ROS 2 topic (a rosbag2 topic or an MCAP channel): its type checked by its ROS 2 name,
+    /// and its serialisation (`cdr`). A later topic of the same id replaces it (each file of a
+    /// split recording numbers its own).
+    pub(super) fn topic(&mut self, id: u32, topic: &str, msg_type: &str, encoding: &str) -> Result<(), BagError> {
+        let kind = self.kind_of(topic);
+        if let Some(kind) = kind {
+            if msg_type != kind.ros2_type() || encoding != "cdr" {
+                return Err(BagError::WrongType {
+                    path: self.path.clone(),
+                    topic: topic.into(),
+                    found: format!("{msg_type} in `{encoding}`"),
+                    expected: format!("{} in `cdr`", kind.ros2_type()),
+                });
+            }
+        }
+        self.connections.insert(id, kind.map(|k| (topic.to_string(), k)));
+        Ok(())
+    }
+
+    /// The item of a message on connection or topic `id` (None for a topic not read).
+    pub(super) fn item(&self, id: u32, time_nanos: u64, data: &[u8]) -> Option<BagItem> {
+        let Some(Some((topic, kind))) = self.connections.get(&id) else { return None };
+        Some(match self.payload(*kind, data) {
+            Ok(payload) => BagItem::Message { time_nanos, payload },
+            Err(error) => BagItem::Refused { topic: topic.clone(), input: kind.input_name(), error },
+        })
+    }
+
     fn payload(&self, kind: Kind, data: &[u8]) -> Result<Payload, InputError> {
+        let (s, max) = (self.serialisation, self.max_bytes);
         match kind {
-            Kind::Cloud => self.inputs.cloud(&decode(data, self.max_bytes)?),
-            Kind::Image => self.inputs.image(&decode(data, self.max_bytes)?),
-            Kind::CameraInfo => self.inputs.camera_info(&decode(data, self.max_bytes)?),
-            Kind::Odometry => self.inputs.odometry(&decode(data, self.max_bytes)?),
-            Kind::GroundTruth => self.inputs.ground_truth(&decode(data, self.max_bytes)?),
-            Kind::Tf => self.inputs.tf(&decode(data, self.max_bytes)?, false),
-            Kind::TfStatic => self.inputs.tf(&decode(data, self.max_bytes)?, true),
-            Kind::Imu => self.inputs.imu(&decode(data, self.max_bytes)?),
+            Kind::Cloud => self.inputs.cloud(&decode_as(s, data, max)?),
+            Kind::Image => self.inputs.image(&decode_as(s, data, max)?),
+            Kind::CameraInfo => self.inputs.camera_info(&decode_as(s, data, max)?),
+            Kind::Odometry => self.inputs.odometry(&decode_as(s, data, max)?),
+            Kind::GroundTruth => self.inputs.ground_truth(&decode_as(s, data, max)?),
+            Kind::Tf => self.inputs.tf(&decode_as(s, data, max)?, false),
+            Kind::TfStatic => self.inputs.tf(&decode_as(s, data, max)?, true),
+            Kind::Imu => self.inputs.imu(&decode_as(s, data, max)?),
         }
     }
 
@@ -152,21 +265,19 @@ impl Decoder {
                         self.connection(id, &topic, &msg_type, &md5sum)?
                     }
                     ChunkRecord::Message { conn, time_nanos, data } => {
-                        if let Some(Some((topic, kind))) = self.connections.get(&conn) {
-                            messages.push((time_nanos, topic.clone(), *kind, data));
+                        if let Some(Some(_)) = self.connections.get(&conn) {
+                            messages.push((time_nanos, conn, data));
                         }
                     }
                 }
             }
             // Record order within a chunk is arrival order; replay goes by record time.
             messages.sort_by_key(|m| m.0);
-            for (time_nanos, topic, kind, data) in messages {
-                let item = match self.payload(kind, data) {
-                    Ok(payload) => BagItem::Message { time_nanos, payload },
-                    Err(error) => BagItem::Refused { topic, input: kind.input_name(), error },
-                };
-                if !out(item) {
-                    return Ok(());
+            for (time_nanos, conn, data) in messages {
+                if let Some(item) = self.item(conn, time_nanos, data) {
+                    if !out(item) {
+                        return Ok(());
+                    }
                 }
             }
         }
@@ -178,34 +289,8 @@ impl Decoder {
 /// each item to `out` until it returns false; a bag that cannot be read ends with one
 /// [`BagItem::Failed`] (`name` names the bag in it). What [`read_bag`]'s thread runs.
 pub fn decode_bag(bag: impl Read, len: u64, name: &str, source: &BagSource, mut out: impl FnMut(BagItem) -> bool) {
-    let BagSource { config, robot, id, colours, imu } = source;
-    let (robot, id) = (robot.as_str(), *id);
-    let t = &config.topics;
-    let mut topics = vec![
-        (RosConfig::resolve(&t.points, robot, id), Kind::Cloud),
-        (RosConfig::resolve(&t.labels, robot, id), Kind::Image),
-        (RosConfig::resolve(&t.camera_info, robot, id), Kind::CameraInfo),
-        (RosConfig::resolve(&t.odometry, robot, id), Kind::Odometry),
-        (RosConfig::resolve(&t.ground_truth, robot, id), Kind::GroundTruth),
-    ];
-    if *imu {
-        topics.push((RosConfig::resolve(&t.imu, robot, id), Kind::Imu));
-    }
-    if config.tf.listen {
-        topics.push((RosConfig::resolve(&config.tf.static_topic, robot, id), Kind::TfStatic));
-        topics.push((RosConfig::resolve(&config.tf.topic, robot, id), Kind::Tf));
-    }
-    let decoder = Decoder {
-        path: name.to_string(),
-        topics,
-        inputs: match colours {
-            Some(colours) => Inputs::new(config, robot, id).with_colours(colours.clone()),
-            None => Inputs::new(config, robot, id),
-        },
-        connections: BTreeMap::new(),
-        max_bytes: config.max_message_bytes,
-    };
-    let result = ChunkSection::open(bag, len, BagLimits::for_messages(config.max_message_bytes))
+    let decoder = Decoder::new(name, source, Serialisation::Ros1);
+    let result = ChunkSection::open(bag, len, BagLimits::for_messages(source.config.max_message_bytes))
         .map_err(|e| BagError::Read { path: name.to_string(), message: e.to_string() })
         .and_then(|section| decoder.run(section, &mut out));
     if let Err(e) = result {
@@ -242,17 +327,73 @@ impl BagSource {
     }
 }
 
-/// Starts reading `path` as `source` says on its own thread.
+/// What a recording's path holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RecordingFormat {
+    /// A ROS 1 bag (`#ROSBAG V2.0`).
+    Ros1,
+    /// A ROS 2 recording: a rosbag2 directory (`metadata.yaml` and its storage files), or one
+    /// storage file (MCAP by its magic, sqlite3 by its header).
+    Ros2,
+}
+
+/// The magic bytes a ROS 1 bag, an MCAP file and an SQLite database begin with.
+const ROS1_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
+const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+const SQLITE_MAGIC: &[u8] = b"SQLite format 3\0";
+
+impl RecordingFormat {
+    /// Decides by what `path` holds, not by its name: a directory is a rosbag2 recording; a file
+    /// by its first bytes.
+    pub fn of(path: &Path) -> Result<Self, String> {
+        let meta = std::fs::metadata(path).map_err(|e| e.to_string())?;
+        if meta.is_dir() {
+            return Ok(Self::Ros2);
+        }
+        let mut head = [0u8; 16];
+        let mut file = File::open(path).map_err(|e| e.to_string())?;
+        let mut got = 0;
+        while got < head.len() {
+            match file.read(&mut head[got..]) {
+                Ok(0) => break,
+                Ok(n) => got += n,
+                Err(e) => return Err(e.to_string()),
+            }
+        }
+        let head = &head[..got];
+        if head.starts_with(ROS1_MAGIC) {
+            Ok(Self::Ros1)
+        } else if head.starts_with(MCAP_MAGIC) || head.starts_with(SQLITE_MAGIC) {
+            Ok(Self::Ros2)
+        } else {
+            Err("neither a ROS 1 bag (#ROSBAG V2.0), an MCAP file, a rosbag2 sqlite3 database nor a rosbag2 \
+                 directory (metadata.yaml)"
+                .into())
+        }
+    }
+}
+
+/// Starts reading `path` as `source` says on its own thread: a ROS 1 bag or a ROS 2 recording,
+/// by what the path holds.
 pub fn read_bag(path: &Path, source: BagSource) -> Receiver<BagItem> {
     let (sender, receiver) = sync_channel(64);
     let path = path.to_path_buf();
     std::thread::spawn(move || {
         let name = path.display().to_string();
-        let opened = File::open(&path).and_then(|file| Ok((file.metadata()?.len(), file)));
-        match opened {
-            Ok((len, file)) => decode_bag(BufReader::new(file), len, &name, &source, |item| sender.send(item).is_ok()),
-            Err(e) => {
-                let _ = sender.send(BagItem::Failed(BagError::Read { path: name, message: e.to_string() }));
+        let send = |item| sender.send(item).is_ok();
+        match RecordingFormat::of(&path) {
+            Ok(RecordingFormat::Ros2) => super::rosbag2::decode_recording(&path, &source, send),
+            Ok(RecordingFormat::Ros1) => {
+                let opened = File::open(&path).and_then(|file| Ok((file.metadata()?.len(), file)));
+                match opened {
+                    Ok((len, file)) => decode_bag(BufReader::new(file), len, &name, &source, send),
+                    Err(e) => {
+                        send(BagItem::Failed(BagError::Read { path: name, message: e.to_string() }));
+                    }
+                }
+            }
+            Err(message) => {
+                send(BagItem::Failed(BagError::Read { path: name, message }));
             }
         }
     });
