@@ -31,6 +31,9 @@ pub const TARGETS: &[(&str, Body)] = &[
     ("snapshot", snapshot),
     ("ros_messages", ros_messages),
     ("rosbag", rosbag),
+    ("rosbag2_mcap", rosbag2_mcap),
+    ("rosbag2_sqlite", rosbag2_sqlite),
+    ("cdr_messages", cdr_messages),
     ("tcpros_reply", tcpros_reply),
 ];
 
@@ -172,6 +175,73 @@ pub fn rosbag(data: &[u8]) {
         failed = matches!(item, BagItem::Failed(_));
         true
     });
+}
+
+/// What a reader of a recording must do whatever its bytes: end, with its messages and refusals
+/// and at most one failure, the last item.
+fn ends_with_at_most_one_failure(read: impl FnOnce(&mut dyn FnMut(sgm_bridge::bag::reader::BagItem) -> bool)) {
+    use sgm_bridge::bag::reader::BagItem;
+    let mut failed = false;
+    read(&mut |item| {
+        assert!(!failed, "an item after the failure");
+        failed = matches!(item, BagItem::Failed(_));
+        true
+    });
+}
+
+/// The replay's robot, reading its IMU too (every input a recording may carry).
+fn replay_source() -> sgm_bridge::bag::reader::BagSource {
+    sgm_bridge::bag::reader::BagSource::new(&RosConfig::default(), "alpha", 1).with_imu()
+}
+
+/// ROS 2 recordings' MCAP storage for `sgm replay`: the bytes as an `.mcap` file through
+/// `bag::rosbag2::decode_mcap` (the file streamed by the `mcap` crate's reader, every record
+/// within the bound, chunks decompressed as they come; channels checked against the topics and
+/// types; each message's CDR decoded within `ros.max_message_bytes` and checked by `Inputs`).
+pub fn rosbag2_mcap(data: &[u8]) {
+    let source = replay_source();
+    ends_with_at_most_one_failure(|out| sgm_bridge::bag::rosbag2::decode_mcap(data, "fuzz.mcap", &source, out));
+}
+
+/// ROS 2 recordings' sqlite3 storage: the bytes as a `.db3` file (SQLite reads files, so they
+/// are written to a temporary one) through `bag::rosbag2::decode_recording`, the replay's reader
+/// of a storage file alone.
+pub fn rosbag2_sqlite(data: &[u8]) {
+    let Ok(dir) = tempfile::tempdir() else { return };
+    let path = dir.path().join("fuzz.db3");
+    if std::fs::write(&path, data).is_err() {
+        return;
+    }
+    let source = replay_source();
+    ends_with_at_most_one_failure(|out| sgm_bridge::bag::rosbag2::decode_recording(&path, &source, out));
+}
+
+/// The CDR decoder: the bytes as each ROS 2 message type the replay reads
+/// (`bag::cdr::decode`, in the byte order the encapsulation says), and what decodes through the
+/// same checks as a ROS 1 message's (`Inputs`).
+pub fn cdr_messages(data: &[u8]) {
+    use sgm_bridge::bag::cdr::decode;
+    use sgm_bridge::msg::tf2_msgs;
+    let max = DEFAULT_MAX_MESSAGE_BYTES;
+    let inputs = Inputs::new(&RosConfig::default(), "alpha", 1);
+    if let Ok(m) = decode::<sensor_msgs::PointCloud2>(data, max) {
+        let _ = inputs.cloud(&m);
+    }
+    if let Ok(m) = decode::<sensor_msgs::Image>(data, max) {
+        let _ = inputs.image(&m);
+    }
+    if let Ok(m) = decode::<sensor_msgs::CameraInfo>(data, max) {
+        let _ = inputs.camera_info(&m);
+    }
+    if let Ok(m) = decode::<nav_msgs::Odometry>(data, max) {
+        let _ = inputs.odometry(&m);
+    }
+    if let Ok(m) = decode::<sensor_msgs::Imu>(data, max) {
+        let _ = inputs.imu(&m);
+    }
+    if let Ok(m) = decode::<tf2_msgs::TFMessage>(data, max) {
+        let _ = inputs.tf(&m, false);
+    }
 }
 
 /// The reply to our TCPROS service client (`transport::call`), which a peer that is slow, buggy

@@ -86,7 +86,20 @@ macro_rules! corpus_tests {
     };
 }
 
-corpus_tests!(wire_envelope, cloud_codec, pcd, g2o, scenario_config, snapshot, ros_messages, rosbag, tcpros_reply);
+corpus_tests!(
+    wire_envelope,
+    cloud_codec,
+    pcd,
+    g2o,
+    scenario_config,
+    snapshot,
+    ros_messages,
+    rosbag,
+    rosbag2_mcap,
+    rosbag2_sqlite,
+    cdr_messages,
+    tcpros_reply
+);
 
 /// Writes the `rosbag` target's seeds into `$SGM_FUZZ_SEEDS`: bags as `sgm run --bag-out`
 /// records them (`BagRecorder`), a few frames of a few points each so that the fuzzer mutates

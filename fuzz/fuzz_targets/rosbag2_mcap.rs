@@ -1,0 +1,5 @@
+//! ROS 2 recordings' MCAP storage through the replay's reader. The body, and what must hold, is
+//! `sgm_tests::fuzz_bodies::rosbag2_mcap` (`tests/src/fuzz_bodies.rs`).
+#![no_main]
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| sgm_tests::fuzz_bodies::rosbag2_mcap(data));
