@@ -58,21 +58,25 @@ enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
         remappings: Vec<String>,
     },
-    /// SGM's LiDAR-inertial odometry alone on one robot's ROS 1 bag (its clouds, with their
-    /// points' times, and its IMU on ros.topics.imu); writes the trajectory as TUM.
+    /// SGM's LiDAR-inertial odometry alone on one robot's ROS 1 bag or ROS 2 recording (its
+    /// clouds, with their points' times, and its IMU on ros.topics.imu); writes the trajectory
+    /// as TUM.
     Odometry {
         #[command(flatten)]
         robot: cli::ros_cmd::RobotArgs,
-        /// The robot's bag.
+        /// The robot's ROS 1 bag or ROS 2 recording (rosbag2 directory, .mcap or .db3).
         #[arg(long)]
         bag: PathBuf,
         /// Where the trajectory goes (TUM: stamp x y z qx qy qz qw, odom_from_body).
         #[arg(long)]
         out: PathBuf,
     },
-    /// Replay recorded missions (one ROS 1 bag per robot) with no ROS master, and write the report.
+    /// Replay recorded missions (one ROS 1 bag or ROS 2 recording per robot) with no ROS master,
+    /// and write the report.
     Replay {
-        /// A robot's bag; give one per robot, in the order of the configuration's [[robots]].
+        /// A robot's ROS 1 bag or ROS 2 recording (a rosbag2 directory, or its .mcap or .db3
+        /// file alone), by what the path holds; give one per robot, in the order of the
+        /// configuration's [[robots]].
         #[arg(long = "bag", required = true, value_name = "BAG")]
         bags: Vec<PathBuf>,
         /// Scenario file or library name giving the robots, their configuration, the radio
@@ -95,7 +99,7 @@ enum Command {
     Doctor {
         #[command(flatten)]
         robot: cli::ros_cmd::RobotArgs,
-        /// A bag of the robot's inputs.
+        /// A bag of the robot's inputs (ROS 1, or a ROS 2 recording: rosbag2 directory, .mcap or .db3).
         #[arg(long, conflicts_with = "live", required_unless_present = "live")]
         bag: Option<PathBuf>,
         /// Listen to the robot's topics on the master (ROS_MASTER_URI) instead.

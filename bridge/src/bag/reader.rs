@@ -339,8 +339,15 @@ pub enum RecordingFormat {
 
 /// The magic bytes a ROS 1 bag, an MCAP file and an SQLite database begin with.
 const ROS1_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
-const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
-const SQLITE_MAGIC: &[u8] = b"SQLite format 3\0";
+pub(super) const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+pub(super) const SQLITE_MAGIC: &[u8] = b"SQLite format 3\0";
+
+/// The first 16 bytes of the file at `path` (fewer if it is shorter).
+pub(super) fn file_head(path: &Path) -> Result<Vec<u8>, String> {
+    let mut head = Vec::with_capacity(16);
+    File::open(path).and_then(|file| file.take(16).read_to_end(&mut head)).map_err(|e| e.to_string())?;
+    Ok(head)
+}
 
 impl RecordingFormat {
     /// Decides by what `path` holds, not by its name: a directory is a rosbag2 recording; a file
@@ -350,17 +357,7 @@ impl RecordingFormat {
         if meta.is_dir() {
             return Ok(Self::Ros2);
         }
-        let mut head = [0u8; 16];
-        let mut file = File::open(path).map_err(|e| e.to_string())?;
-        let mut got = 0;
-        while got < head.len() {
-            match file.read(&mut head[got..]) {
-                Ok(0) => break,
-                Ok(n) => got += n,
-                Err(e) => return Err(e.to_string()),
-            }
-        }
-        let head = &head[..got];
+        let head = file_head(path)?;
         if head.starts_with(ROS1_MAGIC) {
             Ok(Self::Ros1)
         } else if head.starts_with(MCAP_MAGIC) || head.starts_with(SQLITE_MAGIC) {

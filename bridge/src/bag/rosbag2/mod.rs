@@ -15,11 +15,11 @@ pub mod mcap_storage;
 pub mod metadata;
 pub mod sqlite_storage;
 
-use super::reader::{BagError, BagItem, BagSource, Decoder, Serialisation};
+use super::reader::{file_head, BagError, BagItem, BagSource, Decoder, Serialisation, MCAP_MAGIC, SQLITE_MAGIC};
 use super::records::BagLimits;
 use metadata::{Metadata, StorageId};
 use std::collections::BTreeMap;
-use std::io::{BufReader, Read};
+use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 /// What a storage hands the reader, in order: a topic before the messages on it.
@@ -53,12 +53,10 @@ impl Recording {
             }
             return Ok(Self { storage, files, metadata: Some(metadata) });
         }
-        let mut head = [0u8; 16];
-        let mut file = std::fs::File::open(path).map_err(|e| e.to_string())?;
-        let got = file.read(&mut head).map_err(|e| e.to_string())?;
-        let storage = if head[..got].starts_with(b"\x89MCAP0\r\n") {
+        let head = file_head(path)?;
+        let storage = if head.starts_with(MCAP_MAGIC) {
             StorageId::Mcap
-        } else if head[..got].starts_with(b"SQLite format 3\0") {
+        } else if head.starts_with(SQLITE_MAGIC) {
             StorageId::Sqlite3
         } else {
             return Err("neither an MCAP file nor an sqlite3 database".into());
