@@ -120,10 +120,18 @@ fn a_bad_message_is_refused_alone_and_the_reading_goes_on() {
     // An encapsulation that is not plain CDR (parameter lists, 0x0003).
     let mut pl_cdr = good.clone();
     pl_cdr[1] = 3;
+    // Little-endian bytes under a big-endian flag: the frame id's length reads as 184 549 376.
+    let mut wrong_order = good.clone();
+    wrong_order[1] = 0;
     let path = dir.path().join("bad.mcap");
-    write_mcap(&path, "/alpha/odometry", "nav_msgs/msg/Odometry", &[(1, long), (2, pl_cdr), (3, good)]);
+    write_mcap(
+        &path,
+        "/alpha/odometry",
+        "nav_msgs/msg/Odometry",
+        &[(1, long), (2, pl_cdr), (3, wrong_order), (4, good)],
+    );
     let items = items(&path);
-    let errors: Vec<String> = items[..2]
+    let errors: Vec<String> = items[..3]
         .iter()
         .map(|i| match i {
             BagItem::Refused { topic, input: "odometry", error } => format!("{topic}: {error}"),
@@ -137,8 +145,9 @@ fn a_bad_message_is_refused_alone_and_the_reading_goes_on() {
         errors[0]
     );
     assert!(errors[1].contains("encapsulation kind 0x0003 is not plain CDR"), "{}", errors[1]);
-    assert!(matches!(items[2], BagItem::Message { time_nanos: 3, .. }));
-    assert_eq!(items.len(), 3);
+    assert!(errors[2].contains("field `header.frame_id` needs 184549376 bytes"), "{}", errors[2]);
+    assert!(matches!(items[3], BagItem::Message { time_nanos: 4, .. }));
+    assert_eq!(items.len(), 4);
 }
 
 #[test]
