@@ -378,23 +378,37 @@ pub fn read_bag(path: &Path, source: BagSource) -> Receiver<BagItem> {
     std::thread::spawn(move || {
         let name = path.display().to_string();
         let send = |item| sender.send(item).is_ok();
-        match RecordingFormat::of(&path) {
-            Ok(RecordingFormat::Ros2) => super::rosbag2::decode_recording(&path, &source, send),
-            Ok(RecordingFormat::Ros1) => {
-                let opened = File::open(&path).and_then(|file| Ok((file.metadata()?.len(), file)));
-                match opened {
-                    Ok((len, file)) => decode_bag(BufReader::new(file), len, &name, &source, send),
-                    Err(e) => {
-                        send(BagItem::Failed(BagError::Read { path: name, message: e.to_string() }));
-                    }
-                }
-            }
-            Err(message) => {
-                send(BagItem::Failed(BagError::Read { path: name, message }));
-            }
+        // A fault in a container library (the fuzz targets found one in the `mcap` crate's) ends
+        // the reading with an error naming the file, not with a silent end of its stream.
+        let read =
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| read_recording(&path, &name, &source, send)));
+        if let Err(panic) = read {
+            let what =
+                panic.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| panic.downcast_ref::<String>().cloned());
+            let message = format!("the reader failed on this file ({}); please report it", what.unwrap_or_default());
+            let _ = sender.send(BagItem::Failed(BagError::Read { path: name, message }));
         }
     });
     receiver
+}
+
+/// Reads `path` by what it holds, on this thread.
+fn read_recording(path: &Path, name: &str, source: &BagSource, mut send: impl FnMut(BagItem) -> bool) {
+    match RecordingFormat::of(path) {
+        Ok(RecordingFormat::Ros2) => super::rosbag2::decode_recording(path, source, send),
+        Ok(RecordingFormat::Ros1) => {
+            let opened = File::open(path).and_then(|file| Ok((file.metadata()?.len(), file)));
+            match opened {
+                Ok((len, file)) => decode_bag(BufReader::new(file), len, name, source, send),
+                Err(e) => {
+                    send(BagItem::Failed(BagError::Read { path: name.into(), message: e.to_string() }));
+                }
+            }
+        }
+        Err(message) => {
+            send(BagItem::Failed(BagError::Read { path: name.into(), message }));
+        }
+    }
 }
 
 #[cfg(test)]
