@@ -34,14 +34,14 @@ for scenario in quickstart outdoor_two_robots; do
     done
   done
   declare -A best=()
-  for format in ros1 mcap sqlite3; do best[$format]=1e9; done
+  for format in ros1 mcap sqlite3; do best[$format]=999999999; done
   for _ in $(seq "$rounds"); do
     for format in ros1 mcap sqlite3; do
-      start=$(date +%s.%N)
+      start=$(date +%s%N)
       # shellcheck disable=SC2086
       "$SGM" replay ${bags[$format]} --config "$scenario" --quiet --out "$WORK/$scenario/replay-$format" --no-result-bag >/dev/null
-      took=$(echo "$(date +%s.%N) - $start" | bc -l)
-      best[$format]=$(echo "if ($took < ${best[$format]}) $took else ${best[$format]}" | bc -l)
+      took=$((($(date +%s%N) - start) / 1000000))
+      ((took < best[$format])) && best[$format]=$took
     done
   done
   same=identical
@@ -51,7 +51,7 @@ for scenario in quickstart outdoor_two_robots; do
   sim=$(python3 -c "import json; print(json.load(open('$WORK/$scenario/replay-ros1/report.json'))['sim_s'])")
   row="| $scenario | ${sim} s |"
   for format in ros1 mcap sqlite3; do
-    row+=$(printf " %.2f s (%.0f×) |" "${best[$format]}" "$(echo "$sim / ${best[$format]}" | bc -l)")
+    row+=$(awk -v ms="${best[$format]}" -v sim="$sim" 'BEGIN { printf " %.2f s (%.0f×) |", ms / 1000, sim * 1000 / ms }')
   done
   echo "$row $same |"
   unset bags best
