@@ -184,7 +184,13 @@ impl Reading {
             }
             StorageRecord::Message { topic, time_nanos, data } => {
                 if let Some(name) = self.names.get(&topic) {
-                    *self.counts.entry(name.clone()).or_default() += 1;
+                    // Counted by name for the metadata's check, without a name's copy per message.
+                    match self.counts.get_mut(name) {
+                        Some(count) => *count += 1,
+                        None => {
+                            self.counts.insert(name.clone(), 1);
+                        }
+                    }
                 }
                 if let Some(item) = self.decoder.item(topic, time_nanos, data) {
                     self.done = !out(item);

@@ -85,7 +85,9 @@ impl Database {
             );
             let time_nanos =
                 u64::try_from(time).map_err(|_| format!("message {id}: timestamp {time} ns is before 1970"))?;
-            let Ok(topic) = u32::try_from(topic) else { continue };
+            let Ok(topic) = u32::try_from(topic) else {
+                return Err(format!("message {id}: topic id {topic}, beyond what a topic id may be"));
+            };
             if len < 0 || len as u64 > max_message_bytes as u64 {
                 return Err(format!("message {id}: {len} bytes, at most {max_message_bytes} accepted"));
             }
