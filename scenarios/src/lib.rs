@@ -23,3 +23,4 @@ pub mod scenario;
 pub mod settings;
 pub mod sim;
 pub mod team;
+pub mod threads;

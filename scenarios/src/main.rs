@@ -44,6 +44,10 @@ enum Command {
         /// Do not write the team's result as a ROS 1 bag (result.bag in the report directory).
         #[arg(long)]
         no_result_bag: bool,
+        /// How many robots run at once (default: every core). The report is the same for any
+        /// number; more than the machine's cores is cut to them.
+        #[arg(long, value_name = "N")]
+        threads: Option<usize>,
     },
     /// Run one robot as a ROS 1 node (rosrust); ROS remappings (`__ns:=/alpha`, `a:=b`) may follow.
     Ros {
@@ -92,6 +96,10 @@ enum Command {
         /// Do not write the team's result as a ROS 1 bag (result.bag in the report directory).
         #[arg(long)]
         no_result_bag: bool,
+        /// How many robots run at once (default: every core). The report is the same for any
+        /// number; more than the machine's cores is cut to them.
+        #[arg(long, value_name = "N")]
+        threads: Option<usize>,
     },
     /// Check a robot's inputs (topics, frames, mounts from tf, stamps, classes) from a bag or a
     /// live master, with a verdict per input; ROS remappings (`points:=cloud`, `__ns:=/alpha`)
@@ -361,9 +369,10 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     init_logging(&cli.command);
     match cli.command {
-        Command::Run { scenario, out, seed, quiet, bag_out, no_result_bag } => {
+        Command::Run { scenario, out, seed, quiet, bag_out, no_result_bag, threads } => {
             let result_bag = !no_result_bag;
-            match cli::run_cmd::execute(cli::run_cmd::Options { scenario, out, seed, quiet, bag_out, result_bag }) {
+            let options = cli::run_cmd::Options { scenario, out, seed, quiet, bag_out, result_bag, threads };
+            match cli::run_cmd::execute(options) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("sgm run: {e:#}");
@@ -380,9 +389,9 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Replay { bags, config, out, quiet, no_result_bag } => {
+        Command::Replay { bags, config, out, quiet, no_result_bag, threads } => {
             let result_bag = !no_result_bag;
-            match cli::replay_cmd::execute(cli::replay_cmd::Options { bags, config, out, quiet, result_bag }) {
+            match cli::replay_cmd::execute(cli::replay_cmd::Options { bags, config, out, quiet, result_bag, threads }) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("sgm replay: {e:#}");

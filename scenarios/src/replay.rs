@@ -13,6 +13,7 @@ use crate::scenario::Scenario;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
 use crate::sim::world::World;
 use crate::team::{RunError, Team};
+use crate::threads::Threads;
 use indicatif::ProgressBar;
 use serde::Serialize;
 use sgm_actors::config::OdometrySource;
@@ -150,7 +151,7 @@ pub async fn replay(
     bags: &[PathBuf],
     progress: Option<&ProgressBar>,
 ) -> Result<ReplayOutcome, RunError> {
-    replay_with(scenario, bags, progress, None).await
+    replay_with(scenario, bags, progress, None, Threads::default()).await
 }
 
 /// As [`replay`], also writing the team's result as a ROS 1 bag at `result_bag`
@@ -160,6 +161,7 @@ pub async fn replay_with(
     bags: &[PathBuf],
     progress: Option<&ProgressBar>,
     result_bag: Option<&std::path::Path>,
+    threads: Threads,
 ) -> Result<ReplayOutcome, RunError> {
     let classes = sgm_model::perception::classes::ClassTable::new(scenario.fusion.classes.clone())
         .map_err(|e| RunError::Input(format!("fusion.classes: {e}")))?;
@@ -275,7 +277,7 @@ pub async fn replay_with(
                     spec.range_m = 0.0;
                 }
                 let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&spec, seed, shared.clone(), &names)));
-                team.insert(Team::new(names.clone(), radio))
+                team.insert(Team::new(names.clone(), radio, threads))
             }
         };
         decoding += started.elapsed();
@@ -284,9 +286,9 @@ pub async fn replay_with(
         let t = t.max(latest_stamp);
         for (k, frame) in frames {
             team.advance(k, t);
-            team.frame(k, || scenario.robot_config(k), frame)?;
+            team.frame(k, || scenario.robot_config(k), frame).await?;
         }
-        team.settle(t).await;
+        team.settle(t).await?;
         last_t = t;
         if step % report_every == 0 {
             let observation = team.observe(t).await?;
@@ -390,7 +392,7 @@ pub async fn replay_with(
         deskew: team.deskew_counts().await?,
         odometry,
     };
-    let timing = Timing::measure(wall, sim_s, decoding, memory);
+    let timing = Timing::measure(wall, sim_s, decoding, memory, team.busy_time().await);
     Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing }, bags: bag_stats })
 }
 

@@ -15,7 +15,7 @@ fn the_result_bag_holds_what_rviz_shows() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("result.bag");
     let scenario = Scenario::load("quickstart").unwrap();
-    let outputs = RunOutputs { bag_out: None, result_bag: Some(&path) };
+    let outputs = RunOutputs { result_bag: Some(&path), ..RunOutputs::default() };
     let outcome = actix_rt::System::new().block_on(run_with(&scenario, None, outputs)).unwrap();
     let computed = report::compute(&outcome.record);
     assert!(computed.alignments.iter().all(|a| a.first_aligned_s.is_some()));

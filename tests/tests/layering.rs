@@ -19,7 +19,7 @@ const MODEL: Layers = &[
 
 /// The library of `sgm-scenarios` (the binary's `bench` and `cli` sit on top of all of it).
 const SCENARIOS: Layers = &[
-    &["memory", "object_file", "observation", "output_error", "settings"],
+    &["memory", "object_file", "observation", "output_error", "settings", "threads"],
     &["scenario"],
     &["sim"],
     &["record", "bag_out", "bag_odometry"],

@@ -1,4 +1,4 @@
-//! `sgm replay --bag A.bag --bag B.bag [--config FILE] [--out DIR] [--quiet] [--no-result-bag]`: replays
+//! `sgm replay --bag A.bag --bag B.bag [--config FILE] [--out DIR] [--quiet] [--no-result-bag] [--threads N]`: replays
 //! recorded missions through the robots with no ROS master and writes the scenarios' report,
 //! plus `bags.json` (per robot: messages refused by topic, and the synchroniser's counts).
 
@@ -18,9 +18,12 @@ pub struct Options {
     pub quiet: bool,
     /// Write `result.bag` into the report directory.
     pub result_bag: bool,
+    /// `--threads N` (default: every core).
+    pub threads: Option<usize>,
 }
 
 pub fn execute(options: Options) -> Result<()> {
+    let threads = super::run_cmd::threads(options.threads)?;
     let scenario = match &options.config {
         Some(name) => Scenario::load(name)?,
         None => Scenario {
@@ -42,7 +45,7 @@ pub fn execute(options: Options) -> Result<()> {
     let system = actix_rt::System::new();
     let result_bag = options.result_bag.then(|| dir.join(super::run_cmd::RESULT_BAG));
     let outcome = system
-        .block_on(replay_with(&scenario, &options.bags, Some(&bar), result_bag.as_deref()))
+        .block_on(replay_with(&scenario, &options.bags, Some(&bar), result_bag.as_deref(), threads))
         .context("the replay failed")?;
     bar.finish_and_clear();
     let report = report::write(&outcome.run, &dir).context("writing the report")?;

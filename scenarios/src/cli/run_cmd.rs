@@ -1,4 +1,4 @@
-//! `sgm run [SCENARIO] [--out DIR] [--seed N] [--quiet] [--bag-out DIR] [--no-result-bag]`:
+//! `sgm run [SCENARIO] [--out DIR] [--seed N] [--quiet] [--bag-out DIR] [--no-result-bag] [--threads N]`:
 //! runs a scenario (a library name or a TOML file; default `quickstart`) on the virtual clock
 //! and writes its report directory (default: a fresh folder under `runs/`), with the team's
 //! result as `result.bag` for RViz. Prints a one-screen summary.
@@ -9,6 +9,7 @@ use sgm_scenarios::record::Timing;
 use sgm_scenarios::report::{self, Report};
 use sgm_scenarios::runner::{run_with, RunOutputs};
 use sgm_scenarios::scenario::Scenario;
+use sgm_scenarios::threads::Threads;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -20,6 +21,16 @@ pub struct Options {
     pub bag_out: Option<PathBuf>,
     /// Write `result.bag` into the report directory.
     pub result_bag: bool,
+    /// `--threads N` (default: every core).
+    pub threads: Option<usize>,
+}
+
+/// `--threads N`: 0 is refused, more than the cores is cut to them (with a warning).
+pub fn threads(requested: Option<usize>) -> Result<Threads> {
+    Ok(match requested {
+        Some(n) => Threads::requested(n)?,
+        None => Threads::all_cores(),
+    })
 }
 
 /// The result bag's name in a report directory.
@@ -35,6 +46,7 @@ pub fn fresh_run_dir(name: &str) -> PathBuf {
 }
 
 pub fn execute(options: Options) -> Result<()> {
+    let threads = threads(options.threads)?;
     let name = options.scenario.as_deref().unwrap_or("quickstart");
     let mut scenario = Scenario::load(name)?;
     if let Some(seed) = options.seed {
@@ -49,7 +61,7 @@ pub fn execute(options: Options) -> Result<()> {
     bar.set_prefix(format!("{} (seed {})", scenario.scenario.name, scenario.scenario.seed));
     let system = actix_rt::System::new();
     let result_bag = options.result_bag.then(|| dir.join(RESULT_BAG));
-    let outputs = RunOutputs { bag_out: options.bag_out.as_deref(), result_bag: result_bag.as_deref() };
+    let outputs = RunOutputs { bag_out: options.bag_out.as_deref(), result_bag: result_bag.as_deref(), threads };
     let outcome = system.block_on(run_with(&scenario, Some(&bar), outputs)).context("the run failed")?;
     bar.finish_and_clear();
     let report = report::write(&outcome, &dir).context("writing the report")?;

@@ -10,7 +10,8 @@ pub struct Timing {
     pub wall_s: f64,
     pub sim_s: f64,
     pub realtime_factor: f64,
-    /// Time in handlers per actor kind, s (one thread: CPU time).
+    /// Time in handlers per actor kind, summed over the robots' threads, s (CPU time, when
+    /// the threads did not outnumber the cores).
     pub actor_busy_s: std::collections::BTreeMap<String, f64>,
     /// Time producing sensor frames (simulating, or reading and decoding bags), s.
     pub simulation_s: f64,
@@ -20,7 +21,14 @@ pub struct Timing {
 }
 
 impl Timing {
-    pub fn measure(wall: Instant, sim_s: f64, simulation: Duration, memory: Vec<MemorySample>) -> Self {
+    /// `actor_busy`: time in handlers per actor kind, summed over the robots' threads.
+    pub fn measure(
+        wall: Instant,
+        sim_s: f64,
+        simulation: Duration,
+        memory: Vec<MemorySample>,
+        actor_busy: std::collections::BTreeMap<&'static str, Duration>,
+    ) -> Self {
         let wall_s = wall.elapsed().as_secs_f64();
         Self {
             memory,
@@ -28,10 +36,7 @@ impl Timing {
             wall_s,
             sim_s,
             realtime_factor: sim_s / wall_s.max(1e-9),
-            actor_busy_s: sgm_actors::containment::busy_time()
-                .into_iter()
-                .map(|(k, v)| (k.to_string(), v.as_secs_f64()))
-                .collect(),
+            actor_busy_s: actor_busy.into_iter().map(|(k, v)| (k.to_string(), v.as_secs_f64())).collect(),
             simulation_s: simulation.as_secs_f64(),
         }
     }

@@ -3,12 +3,21 @@
 //! ([`Team::frame`]); then [`Team::settle`] lets the team run until quiet, ticks every robot,
 //! delivers what the radio has due, and lets the team run until quiet again.
 //!
+//! Each robot runs on a thread of its own ([`robot_thread`]). What the team hands a robot waits
+//! in its inbox until the next "run until quiet", which sends it all on the robot's thread and
+//! waits there until the robot is quiet — the virtual clock's barrier. Up to `threads` robots
+//! run at once; the report is the same for any number.
+//!
 //! With snapshots kept ([`Team::keep_snapshots`]), each robot's state is frozen and written to
 //! disk every `persistence.interval_s`; [`Team::crash`] takes a robot down with everything it
 //! held, and its next frame starts it again from its latest snapshot on disk.
 
+mod robot_thread;
+
 use crate::observation::Observation;
 use crate::record::Restart;
+use crate::threads::Threads;
+use robot_thread::{run_jobs, RobotThread};
 use sgm_actors::clock::Clock;
 use sgm_actors::comms::GetCommsStatus;
 use sgm_actors::config::{PersistenceConfig, RobotConfig};
@@ -21,10 +30,12 @@ use sgm_actors::quiescence::until_quiet;
 use sgm_actors::snapshot::SnapshotStore;
 use sgm_actors::supervisor::{start_robot_restored, RobotHandle};
 use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
-use sgm_actors::transport::InProcessRadio;
+use sgm_actors::transport::{Delivered, InProcessRadio};
 use sgm_model::perception::deskew::DeskewCounts;
 use sgm_model::scene_graph::{SceneGraph, Stamp};
+use std::collections::BTreeMap;
 use std::path::Path;
+use std::time::Duration;
 
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
@@ -42,9 +53,31 @@ fn mailbox(e: actix::MailboxError) -> RunError {
     RunError::Mailbox(e.to_string())
 }
 
+/// Something handed to a robot, sent on its thread at the next "run until quiet".
+enum Input {
+    Frame(Box<SensorFrame>),
+    Tick(Stamp),
+    Delivered(Delivered),
+    Constraints(InterRobotConstraints),
+}
+
+impl Input {
+    fn send_to(self, handle: &RobotHandle) {
+        match self {
+            Input::Frame(frame) => handle.supervisor.do_send(*frame),
+            Input::Tick(now) => handle.supervisor.do_send(Tick { now }),
+            Input::Delivered(packet) => handle.comms.do_send(packet),
+            Input::Constraints(message) => handle.optimiser.do_send(message),
+        }
+    }
+}
+
 struct Member {
     name: String,
     clock: Clock,
+    /// Its thread, from its first start on.
+    thread: Option<RobotThread>,
+    inbox: Vec<Input>,
     handle: Option<RobotHandle>,
     store: Option<SnapshotStore>,
     last_snapshot: Option<Stamp>,
@@ -62,6 +95,7 @@ struct Crash {
 pub struct Team {
     pub radio: InProcessRadio,
     members: Vec<Member>,
+    threads: Threads,
     snapshot_interval_s: f64,
     restarts: Vec<Restart>,
     /// Snapshots written, and their bytes in all.
@@ -69,19 +103,30 @@ pub struct Team {
 }
 
 impl Team {
-    pub fn new(names: Vec<String>, radio: InProcessRadio) -> Self {
+    /// The team of robots `names`, talking over `radio`, up to `threads` of them running at once.
+    /// Must be called inside an actix system.
+    pub fn new(names: Vec<String>, radio: InProcessRadio, threads: Threads) -> Self {
         let members = names
             .into_iter()
             .map(|name| Member {
                 name,
                 clock: Clock::starting_at(0.0),
+                thread: None,
+                inbox: Vec::new(),
                 handle: None,
                 store: None,
                 last_snapshot: None,
                 crashed: None,
             })
             .collect();
-        Self { radio, members, snapshot_interval_s: f64::INFINITY, restarts: Vec::new(), snapshots_written: (0, 0) }
+        Self {
+            radio,
+            members,
+            threads,
+            snapshot_interval_s: f64::INFINITY,
+            restarts: Vec::new(),
+            snapshots_written: (0, 0),
+        }
     }
 
     /// Every robot writes a snapshot into `directory` every `persistence.interval_s`. Stale
@@ -127,9 +172,16 @@ impl Team {
         let keyframes = handle.tracker.send(GetMapSummary).await.map_err(mailbox)?.keyframes.len();
         tracing::info!(robot = %member.name, at = t, keyframes, "crash");
         self.radio.detach(handle.robot);
-        handle.halt();
         member.crashed = Some(Crash { at: t, keyframes });
-        Ok(())
+        let Some(thread) = member.thread.as_ref().and_then(RobotThread::handle) else { return Ok(()) };
+        let halt = move || async move {
+            handle.halt();
+            until_quiet().await;
+        };
+        match run_jobs(vec![(thread, halt)], 1).await.pop().flatten() {
+            Some(()) => Ok(()),
+            None => Err(RunError::Robot { robot: member.name.clone(), message: "its thread stopped".into() }),
+        }
     }
 
     /// Whether robot `k` is running.
@@ -157,16 +209,19 @@ impl Team {
         }
     }
 
-    /// Hands robot `k` a frame, starting it first (with `config()`) if it is not running yet.
-    pub fn frame(
+    /// Hands robot `k` a frame (handled at the next [`Team::settle`]), starting it first (with
+    /// `config()`, on its own thread) if it is not running yet.
+    pub async fn frame(
         &mut self,
         k: usize,
         config: impl FnOnce() -> RobotConfig,
         frame: SensorFrame,
     ) -> Result<(), RunError> {
+        let radio = self.radio.clone();
         let Some(member) = self.members.get_mut(k) else { return Ok(()) };
         if member.handle.is_none() {
-            let failed = |message: String| RunError::Robot { robot: member.name.clone(), message };
+            let name = member.name.clone();
+            let failed = |message: String| RunError::Robot { robot: name.clone(), message };
             // After a crash: the latest whole snapshot on disk, if any.
             let snapshot = match (&member.crashed, &member.store) {
                 (Some(_), Some(store)) => store.load().map_err(|e| failed(e.to_string()))?.map(|loaded| {
@@ -192,35 +247,74 @@ impl Team {
                         .unwrap_or_default(),
                 });
             }
-            let radio = self.radio.clone();
-            let attach = |robot, comms: actix::Addr<sgm_actors::comms::Comms>| radio.attach(robot, comms.recipient());
-            let handle = start_robot_restored(
-                &config(),
-                member.clock.clone(),
-                Box::new(self.radio.clone()),
-                attach,
-                snapshot,
-                0,
-            )
-            .map_err(|e| failed(e.to_string()))?;
-            member.handle = Some(handle);
+            let thread = member.thread.get_or_insert_with(RobotThread::start).handle();
+            let thread = thread.ok_or_else(|| failed("its thread stopped".into()))?;
+            let (config, clock) = (config(), member.clock.clone());
+            // The robot's actors start on its thread, which they then never leave; what they do
+            // on starting is done before the job ends (nothing runs between two barriers).
+            let start = move || async move {
+                let attach =
+                    |robot, comms: actix::Addr<sgm_actors::comms::Comms>| radio.attach(robot, comms.recipient());
+                let started = start_robot_restored(&config, clock, Box::new(radio.clone()), attach, snapshot, 0);
+                until_quiet().await;
+                started
+            };
+            let started = run_jobs(vec![(thread, start)], 1).await.pop().flatten();
+            let handle = started.ok_or_else(|| failed("its thread stopped while it started".into()))?;
+            member.handle = Some(handle.map_err(|e| failed(e.to_string()))?);
         }
-        if let Some(handle) = &member.handle {
-            handle.supervisor.do_send(frame);
-        }
+        member.inbox.push(Input::Frame(Box::new(frame)));
         Ok(())
+    }
+
+    /// Sends every running robot its inbox, on its own thread, and waits there until it is
+    /// quiet — at most `threads` robots at once; then hands what they transmitted to the radio,
+    /// in its fixed order.
+    async fn run_until_quiet(&mut self) -> Result<(), RunError> {
+        let mut names = Vec::new();
+        let mut jobs = Vec::new();
+        for member in &mut self.members {
+            let (Some(handle), Some(thread)) = (&member.handle, member.thread.as_ref().and_then(RobotThread::handle))
+            else {
+                continue;
+            };
+            if member.inbox.is_empty() {
+                // Quiet since the last barrier, and nothing new: nothing to run.
+                continue;
+            }
+            let (handle, inbox) = (handle.clone(), std::mem::take(&mut member.inbox));
+            let job = move || async move {
+                for input in inbox {
+                    input.send_to(&handle);
+                }
+                until_quiet().await;
+            };
+            names.push(member.name.clone());
+            jobs.push((thread, job));
+        }
+        let results = run_jobs(jobs, self.threads.get()).await;
+        self.radio.flush();
+        match names.into_iter().zip(results).find(|(_, r)| r.is_none()) {
+            Some((robot, _)) => Err(RunError::Robot { robot, message: "its thread stopped".into() }),
+            None => Ok(()),
+        }
     }
 
     /// Runs the team until quiet, ticks it, delivers the radio's packets due by `t`, and runs
     /// it until quiet again.
-    pub async fn settle(&self, t: Stamp) {
-        until_quiet().await;
-        for handle in self.members.iter().filter_map(|m| m.handle.as_ref()) {
-            handle.supervisor.do_send(Tick { now: t });
+    pub async fn settle(&mut self, t: Stamp) -> Result<(), RunError> {
+        self.run_until_quiet().await?;
+        for member in self.members.iter_mut().filter(|m| m.handle.is_some()) {
+            member.inbox.push(Input::Tick(t));
         }
-        until_quiet().await;
-        self.radio.deliver_due(t);
-        until_quiet().await;
+        self.run_until_quiet().await?;
+        for (robot, packet) in self.radio.take_due(t) {
+            let to = self.members.iter_mut().find(|m| m.handle.as_ref().is_some_and(|h| h.robot == robot));
+            if let Some(member) = to {
+                member.inbox.push(Input::Delivered(packet));
+            }
+        }
+        self.run_until_quiet().await
     }
 
     /// What every robot knows at time `t`.
@@ -240,11 +334,29 @@ impl Team {
     }
 
     /// Hands robot `k`'s Optimiser inter-robot constraints that did not come from its Matcher
-    /// (fault injection).
-    pub fn inject(&self, k: usize, message: InterRobotConstraints) {
-        if let Some(handle) = self.members.get(k).and_then(|m| m.handle.as_ref()) {
-            handle.optimiser.do_send(message);
+    /// (fault injection), at the next [`Team::settle`].
+    pub fn inject(&mut self, k: usize, message: InterRobotConstraints) {
+        if let Some(member) = self.members.get_mut(k).filter(|m| m.handle.is_some()) {
+            member.inbox.push(Input::Constraints(message));
         }
+    }
+
+    /// Time spent in handlers per actor kind, summed over the robots' threads (for
+    /// `timing.json`).
+    pub async fn busy_time(&self) -> BTreeMap<&'static str, Duration> {
+        let jobs = self
+            .members
+            .iter()
+            .filter_map(|m| m.thread.as_ref().and_then(RobotThread::handle))
+            .map(|thread| (thread, || async { sgm_actors::containment::busy_time() }))
+            .collect();
+        let mut total = BTreeMap::new();
+        for busy in run_jobs(jobs, self.threads.get()).await.into_iter().flatten() {
+            for (actor, time) in busy {
+                *total.entry(actor).or_default() += time;
+            }
+        }
+        total
     }
 
     /// Each robot's pose graph at a glance (`None`: not running).

@@ -15,13 +15,15 @@
 //! crashes or `persistence.directory` is set.
 
 use crate::bag_out::{BagRecorder, RecordedFrame, RecordedImage};
+mod sensing;
+
 use crate::observation::Observation;
 use crate::record::Timing;
-use crate::record::{RobotTruth, RunOutcome, RunRecord, TruthTrack, RAW_BYTES_PER_POINT};
+use crate::record::{RobotTruth, RunOutcome, RunRecord, TruthTrack};
 use crate::report::series_point;
 use crate::result_bag::ResultBag;
-use crate::scenario::{CameraSpec, OdometrySourceSpec, Scenario};
-use crate::sim::camera::{camera_model, mislabels, noisy_labels, render, segmenter_ids, CameraMount};
+use crate::scenario::{OdometrySourceSpec, Scenario};
+use crate::sim::camera::{camera_model, segmenter_ids, CameraMount};
 use crate::sim::false_factors::FalseFactors;
 use crate::sim::imu::Imu;
 use crate::sim::lidar::Lidar;
@@ -29,40 +31,20 @@ use crate::sim::mount::LidarMount;
 use crate::sim::odometry::Odometry;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
 use crate::sim::segmenter_errors::SegmenterErrors;
-use crate::sim::setup::{sweep_in_body, SimulatedWorld};
-use crate::sim::trajectory::Route;
-use crate::sim::world::NO_LABEL;
+use crate::sim::setup::SimulatedWorld;
 pub use crate::team::RunError;
 use crate::team::Team;
+use crate::threads::Threads;
 use indicatif::ProgressBar;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use sensing::{Sensed, Sensing, SimRobot};
 use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_actors::transport::InProcessRadio;
 use sgm_model::geometry::Pose3;
-use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, LabelId, RobotId, Stamp};
+use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, RobotId};
 use std::path::Path;
 use std::time::{Duration, Instant};
-
-struct SimRobot {
-    name: String,
-    route: Route,
-    odometry: Odometry,
-    lidar: Lidar,
-    lidar_mount: LidarMount,
-    camera: CameraMount,
-    /// `[imu]`: the IMU and its own noise stream (the other sensors' draws do not depend on it).
-    imu: Option<(Imu, ChaCha8Rng)>,
-    rng: ChaCha8Rng,
-    /// The segmenter's errors (`[segmentation]`), apart from `rng` so that with them off the
-    /// run is the same.
-    segmenter_rng: ChaCha8Rng,
-    /// The unlabelled sweeps' range noise (internal odometry), apart from `rng` likewise.
-    sweep_rng: ChaCha8Rng,
-    frames: u64,
-    raw_bytes: u64,
-    raw_max_bytes: u64,
-}
 
 /// Runs `scenario` to its end. Must be called inside an actix system (`actix_rt::System`).
 pub async fn run(scenario: &Scenario, progress: Option<&ProgressBar>) -> Result<RunOutcome, RunError> {
@@ -75,16 +57,18 @@ pub async fn run_recording(
     progress: Option<&ProgressBar>,
     bag_out: Option<&Path>,
 ) -> Result<RunOutcome, RunError> {
-    run_with(scenario, progress, RunOutputs { bag_out, result_bag: None }).await
+    run_with(scenario, progress, RunOutputs { bag_out, ..RunOutputs::default() }).await
 }
 
-/// What a run writes beside its outcome.
+/// What a run writes beside its outcome, and how many threads it may use.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RunOutputs<'a> {
     /// Each robot's sensor streams as a ROS 1 bag, into this directory (`NAME.bag`).
     pub bag_out: Option<&'a Path>,
     /// The team's result as a ROS 1 bag ([`crate::result_bag`]), at this path.
     pub result_bag: Option<&'a Path>,
+    /// How many robots run at once (default: every core); the outcome does not depend on it.
+    pub threads: Threads,
 }
 
 /// As [`run`], with the outputs `outputs` asks for.
@@ -101,7 +85,7 @@ pub async fn run_with(
     let shared = RadioShared::default();
     let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
     let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&scenario.radio, seed, shared.clone(), &names)));
-    let mut team = Team::new(names.clone(), radio);
+    let mut team = Team::new(names.clone(), radio, outputs.threads);
     let mut false_factors =
         FalseFactors::new(&scenario.false_factors, seed, |name| names.iter().position(|n| n == name));
     let snapshots = SnapshotDir::for_run(scenario)?;
@@ -126,7 +110,16 @@ pub async fn run_with(
     let (_, label_map) = scenario.robot_config(0).class_tables().map_err(|e| RunError::Input(e.to_string()))?;
     // The camera speaks the configured segmenter's ids (`[classes]`); None: they are ours.
     let pixel_values = segmenter_ids(&scenario.classes, &label_map);
-    let as_pixel = |id: u16| pixel_values.as_ref().map_or(id, |v| v.get(usize::from(id)).copied().unwrap_or(NO_LABEL));
+    // The robots' sensors are simulated on `threads` threads at once (none: on this one).
+    let pool = match outputs.threads.get() {
+        1 => None,
+        n => Some(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|e| RunError::Input(format!("{n} threads: {e}")))?,
+        ),
+    };
 
     let mut robots: Vec<SimRobot> = routes
         .into_iter()
@@ -184,85 +177,48 @@ pub async fn run_with(
         let t = stamp_from_nanos(step as i64 * dt_nanos);
         let sim_started = Instant::now();
         people.place(&mut world, t);
-        for (k, robot) in robots.iter_mut().enumerate() {
-            let Some(truth) = robot.route.pose_at(t) else { continue };
+        let sensing = Sensing {
+            scenario,
+            world: &world,
+            segmenter_errors: segmenter_errors.as_ref(),
+            camera: &camera,
+            splat,
+            pixel_values: pixel_values.as_deref(),
+            dt_nanos,
+            sweep_nanos,
+            sweeps_per_frame,
+        };
+        let sensed = sensing.sense_all(&mut robots, step, t, pool.as_ref());
+        simulation += sim_started.elapsed();
+        for (k, sensed) in sensed.into_iter().enumerate() {
+            let Some(Sensed { truth, odometry, down, sweeps, frame }) = sensed else { continue };
             team.advance(k, t);
-            let id = RobotId::from_index(k);
-            shared.set_position(id, truth.translation.vector.into());
-            let odometry = robot.odometry.step(&truth, &mut robot.rng);
-            let spec = &scenario.robots[k];
-            let crashed = spec.crash_s.is_some_and(|c| t >= c);
-            if crashed && spec.restart_s.is_none_or(|r| t < r) {
+            shared.set_position(RobotId::from_index(k), truth.translation.vector.into());
+            if down {
                 if team.is_running(k) {
                     team.crash(k, t).await?;
                 }
                 continue;
             }
-            let route = &robot.route;
-            // The sweeps between the last frame and this one, for the internal odometry.
-            for j in 1..sweeps_per_frame {
-                let s = stamp_from_nanos((step as i64 - 1) * dt_nanos + j * sweep_nanos);
-                let Some(truth_s) = route.pose_at(s) else { continue };
-                let samples = match robot.imu.as_mut() {
-                    Some((imu, rng)) => imu.samples_until(s + scenario.lidar.sweep_s, &|u| route.pose_at(u), rng),
-                    None => Vec::new(),
-                };
-                let mount = robot.lidar_mount;
-                let sweep = sweep_in_body(&mut robot.lidar, &mount, &world, route, s, &truth_s, &mut robot.sweep_rng);
-                let told = mount.as_told(&sweep.points).unwrap_or(sweep.points);
-                let point_times = (!sweep.times.is_empty()).then_some(sweep.times);
+            for sweep in sweeps {
                 if let Some(recorder) = recorder.as_mut() {
-                    recorder.record_sweep(k, s, &told, point_times.as_deref(), &samples)?;
+                    recorder.record_sweep(k, sweep.stamp, &sweep.points, sweep.times.as_deref(), &sweep.imu)?;
                 }
                 let sweep_frame = SensorFrame {
-                    stamp: s,
+                    stamp: sweep.stamp,
                     odom_from_body: Pose3::identity(),
-                    points_in_body: told,
-                    point_times,
+                    points_in_body: sweep.points,
+                    point_times: sweep.times,
                     points_deskewed: false,
                     labels: FrameLabels::Unlabelled,
-                    imu: samples,
+                    imu: sweep.imu,
                     motion_covariance: None,
                 };
-                team.frame(k, || scenario.robot_config(k), sweep_frame)?;
+                team.frame(k, || scenario.robot_config(k), sweep_frame).await?;
             }
-            // A driver hands on a sweep once it ends: the IMU has sampled it by then.
-            let imu_samples = match robot.imu.as_mut() {
-                Some((imu, rng)) => imu.samples_until(t + scenario.lidar.sweep_s, &|s| route.pose_at(s), rng),
-                None => Vec::new(),
-            };
-            let mount = robot.lidar_mount;
-            let mut frame = sweep_in_body(&mut robot.lidar, &mount, &world, route, t, &truth, &mut robot.rng);
-            if let Some(errors) = &segmenter_errors {
-                errors.apply(&mut frame, &truth, &mut robot.segmenter_rng);
-            }
-            let wrong = mislabels(&frame, scenario.camera.mislabel_rate, &world.matchable_labels, &mut robot.rng);
-            let (labels, recorded_labels) = if scenario.camera.enabled {
-                let shot = camera_shot(&scenario.camera, robot.camera.camera_from_body, route, t, &truth);
-                let mut image = render(&scenario.camera, &frame, &wrong, splat, &shot, &mut robot.rng);
-                if pixel_values.is_some() {
-                    image.labels.iter_mut().for_each(|l| *l = as_pixel(*l));
-                }
-                let labels = FrameLabels::Image {
-                    image,
-                    camera: camera.clone(),
-                    camera_from_body: robot.camera.configured_camera_from_body,
-                    image_offset_s: scenario.camera.exposure_offset_s + scenario.camera.clock_offset_s,
-                };
-                (labels, None)
-            } else {
-                let labels: Vec<u16> = noisy_labels(&frame, &wrong).into_iter().map(as_pixel).collect();
-                let per_point = labels.iter().map(|&l| (l != NO_LABEL).then_some(LabelId(l))).collect();
-                (FrameLabels::PerPoint(per_point), Some(labels))
-            };
-            // What the robot's driver hands on: the returns through the mount it is told.
-            let told = mount.as_told(&frame.points);
-            robot.frames += 1;
-            let raw = frame.points.len() as u64 * RAW_BYTES_PER_POINT;
-            robot.raw_bytes += raw;
-            robot.raw_max_bytes = robot.raw_max_bytes.max(raw);
+            let Some(frame) = frame else { continue };
             if let Some(recorder) = recorder.as_mut() {
-                let image = match &labels {
+                let image = match &frame.labels {
                     FrameLabels::Image { image, camera, camera_from_body, image_offset_s } => Some(RecordedImage {
                         image,
                         camera,
@@ -275,35 +231,33 @@ pub async fn run_with(
                     t,
                     odometry: &odometry,
                     truth: &truth,
-                    points: told.as_deref().unwrap_or(&frame.points),
-                    labels: recorded_labels.as_deref(),
+                    points: &frame.points,
+                    labels: frame.recorded_labels.as_deref(),
                     image,
-                    times: (!frame.times.is_empty()).then_some(&frame.times[..]),
-                    imu: &imu_samples,
+                    times: frame.times.as_deref(),
+                    imu: &frame.imu,
                 };
                 recorder.record(k, recorded)?;
             }
-            let point_times = (!frame.times.is_empty()).then_some(frame.times);
             let sensor_frame = SensorFrame {
                 stamp: t,
                 odom_from_body: odometry,
-                points_in_body: told.unwrap_or(frame.points),
-                point_times,
+                points_in_body: frame.points,
+                point_times: frame.times,
                 points_deskewed: false,
-                labels,
-                imu: imu_samples,
+                labels: frame.labels,
+                imu: frame.imu,
                 motion_covariance: None,
             };
-            team.frame(k, || scenario.robot_config(k), sensor_frame)?;
+            team.frame(k, || scenario.robot_config(k), sensor_frame).await?;
         }
-        simulation += sim_started.elapsed();
-        team.settle(t).await;
+        team.settle(t).await?;
         if false_factors.due(t) {
             let observation = team.observe(t).await?;
             for (k, message) in false_factors.make(t, &observation, |k, s| robots.get(k)?.route.pose_at(s)) {
                 team.inject(k, message);
             }
-            team.settle(t).await;
+            team.settle(t).await?;
         }
         team.snapshot_due(t).await?;
         if step % report_every == 0 || step == steps {
@@ -348,7 +302,7 @@ pub async fn run_with(
         (truth.frames, truth.raw_bytes, truth.raw_max_bytes) = (robot.frames, robot.raw_bytes, robot.raw_max_bytes);
     }
     let sim_s = steps as f64 * dt;
-    let timing = Timing::measure(wall, sim_s, simulation, memory);
+    let timing = Timing::measure(wall, sim_s, simulation, memory, team.busy_time().await);
     let record = RunRecord {
         scenario: scenario.scenario.name.clone(),
         seed,
@@ -402,26 +356,6 @@ impl Drop for SnapshotDir {
         if self.temporary {
             let _ = std::fs::remove_dir_all(&self.path);
         }
-    }
-}
-
-/// The camera at its exposure (`exposure_offset_s` after the stamp `t`) from the body at τ
-/// after `t` (a return's time): `camera_from_body · B(t + e)⁻¹ · B(t + τ)`, the true poses of
-/// `route` (`truth`, the pose at `t`, where the route has none).
-fn camera_shot<'a>(
-    spec: &CameraSpec,
-    camera_from_body: Pose3,
-    route: &'a Route,
-    t: Stamp,
-    truth: &'a Pose3,
-) -> impl Fn(f32) -> Pose3 + 'a {
-    let exposure = spec.exposure_offset_s;
-    let at = move |s: Stamp| route.pose_at(s).unwrap_or(*truth);
-    let body_at_exposure = (exposure != 0.0).then(|| at(t + exposure).inverse());
-    move |tau: f32| match (body_at_exposure, tau == 0.0) {
-        (None, true) => camera_from_body,
-        (None, false) => camera_from_body * truth.inverse() * at(t + f64::from(tau)),
-        (Some(inverse), _) => camera_from_body * inverse * at(t + f64::from(tau)),
     }
 }
 

@@ -1,0 +1,84 @@
+//! How many robots' work runs at once (`sgm run --threads N`, `sgm replay --threads N`). Every
+//! robot has a thread of its own (the team's); this bounds how many of them run at the
+//! same time, and how many robots' sensors are simulated at once. The report does not depend
+//! on it: only the wall time does.
+
+use std::num::NonZeroUsize;
+
+/// A number of threads, at least one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Threads(NonZeroUsize);
+
+#[derive(Debug, PartialEq, Eq, thiserror::Error)]
+pub enum ThreadsError {
+    #[error("--threads 0: a run needs at least one thread (leave --threads out to use all {0} cores)")]
+    Zero(usize),
+}
+
+impl Threads {
+    /// One thread per core of this machine (what the OS lets this process use).
+    pub fn all_cores() -> Self {
+        Self(cores())
+    }
+
+    /// One thread: robots take turns.
+    pub fn one() -> Self {
+        Self(NonZeroUsize::MIN)
+    }
+
+    /// Exactly `n` threads, however many cores there are (tests and benches).
+    pub fn exactly(n: NonZeroUsize) -> Self {
+        Self(n)
+    }
+
+    /// What a user asked for: 0 is an error; more than the machine's cores is cut to them, with
+    /// a warning (more would only take turns on the same cores).
+    pub fn requested(n: usize) -> Result<Self, ThreadsError> {
+        let cores = cores();
+        let n = NonZeroUsize::new(n).ok_or(ThreadsError::Zero(cores.get()))?;
+        if n > cores {
+            tracing::warn!(
+                requested = n.get(),
+                cores = cores.get(),
+                "--threads {n} is more than this machine's {cores} cores: using {cores}"
+            );
+            return Ok(Self(cores));
+        }
+        Ok(Self(n))
+    }
+
+    pub fn get(self) -> usize {
+        self.0.get()
+    }
+}
+
+impl Default for Threads {
+    fn default() -> Self {
+        Self::all_cores()
+    }
+}
+
+impl std::fmt::Display for Threads {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+fn cores() -> NonZeroUsize {
+    std::thread::available_parallelism().unwrap_or(NonZeroUsize::MIN)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zero_is_refused_and_too_many_is_cut_to_the_cores() {
+        let cores = cores().get();
+        assert_eq!(Threads::requested(0), Err(ThreadsError::Zero(cores)));
+        assert!(ThreadsError::Zero(cores).to_string().contains("--threads 0"));
+        assert_eq!(Threads::requested(cores + 5).map(Threads::get), Ok(cores));
+        assert_eq!(Threads::requested(1).map(Threads::get), Ok(1));
+        assert_eq!(Threads::all_cores().get(), cores);
+    }
+}
