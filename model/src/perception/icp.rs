@@ -145,7 +145,7 @@ pub fn register(
         (inliers, sum2, unweighted) = (0, 0.0, Moments::default());
         for (s, last) in source.iter().zip(last_match.iter_mut()) {
             let p = pose * s;
-            let Some((d2, item)) = graph.nearest(&p, *last) else { continue };
+            let Some((d2, item)) = graph.nearest_within(&p, *last) else { continue };
             *last = Some(item);
             if d2 > max_d2 {
                 continue;

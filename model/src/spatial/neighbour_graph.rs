@@ -21,8 +21,13 @@
 //!
 //! Each point's list is the kd-tree's `nearest_k_within`, in its order, computed on first use:
 //! the same list serves the surface normal at that point (`perception::normals`).
+//!
+//! A caller that wants only answers within the radius ([`NeighbourGraph::nearest_within`], as
+//! ICP does) is told `None` without a search when the query's cell is beyond the cloud's
+//! [`Reach`].
 
 use super::point_tree::{squared_distance, PointTree};
+use super::reach::Reach;
 use nalgebra::Point3;
 
 /// Graph steps a search takes before it hands over to the kd-tree.
@@ -46,6 +51,8 @@ pub struct NeighbourGraph<'a> {
     cover2: Vec<f32>,
     items: Vec<u32>,
     item_keys: Vec<[f32; 3]>,
+    /// Built on the first [`NeighbourGraph::nearest_within`].
+    reach: Option<Reach>,
 }
 
 impl<'a> NeighbourGraph<'a> {
@@ -62,6 +69,7 @@ impl<'a> NeighbourGraph<'a> {
             cover2: vec![0.0; points.len()],
             items: vec![0; points.len() * k],
             item_keys: vec![[0.0; 3]; points.len() * k],
+            reach: None,
         }
     }
 
@@ -96,6 +104,19 @@ impl<'a> NeighbourGraph<'a> {
     pub fn nearest(&mut self, p: &Point3<f64>, hint: Option<usize>) -> Option<(f64, usize)> {
         if let Some(found) = hint.filter(|&h| h < self.points.len()).and_then(|h| self.walk(p, h)) {
             return Some(found);
+        }
+        self.tree.nearest(p)
+    }
+
+    /// [`NeighbourGraph::nearest`] when a point may be within the graph's radius of `p`;
+    /// `None` when none is (the answer may still lie beyond the radius: callers check).
+    pub fn nearest_within(&mut self, p: &Point3<f64>, hint: Option<usize>) -> Option<(f64, usize)> {
+        if let Some(found) = hint.filter(|&h| h < self.points.len()).and_then(|h| self.walk(p, h)) {
+            return Some(found);
+        }
+        let (points, radius) = (self.points, self.radius);
+        if !self.reach.get_or_insert_with(|| Reach::new(points, radius)).may_reach(p) {
+            return None;
         }
         self.tree.nearest(p)
     }
@@ -160,6 +181,11 @@ mod tests {
                 prop_assert_eq!(got.0.to_bits(), want.0.to_bits());
                 prop_assert!(got.1 == want.1 || squared_distance(&PointTree::key(&q), &graph.keys[got.1]) as f64 == want.0);
                 prop_assert_eq!(graph.nearest(&q, None), Some(want));
+                // Bounded by the radius: the same answer, or none when the nearest is beyond it.
+                match graph.nearest_within(&q, Some(near)) {
+                    Some(got) => prop_assert_eq!(got.0.to_bits(), want.0.to_bits()),
+                    None => prop_assert!(want.0 > radius * radius, "{} within {}", want.0, radius),
+                }
             }
         }
     }
