@@ -393,7 +393,7 @@ pub async fn replay_with(
         odometry,
     };
     let timing = Timing::measure(wall, sim_s, decoding, memory, team.busy_time().await);
-    Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing }, bags: bag_stats })
+    Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing, threads }, bags: bag_stats })
 }
 
 /// The plot's extent: every true and estimated position, with a 10 m margin.

@@ -133,7 +133,7 @@ impl ResultBag {
             self.writer.write(&topic, time, &voxels_msg(&header, &voxels, &self.classes)).map_err(|e| self.io(e))?;
             if let Some(first_from_robot) = crate::report::reference_from(last, k) {
                 for (p, label) in voxels.points() {
-                    team.insert(first_from_robot * p, *label);
+                    team.insert(first_from_robot * p, label);
                 }
             }
         }

@@ -50,6 +50,15 @@ impl Threads {
     pub fn get(self) -> usize {
         self.0.get()
     }
+
+    /// A rayon pool of this many threads for work split over robots; `None` for one thread (the
+    /// work runs on the caller's).
+    pub fn pool(self) -> Result<Option<rayon::ThreadPool>, rayon::ThreadPoolBuildError> {
+        match self.get() {
+            1 => Ok(None),
+            n => rayon::ThreadPoolBuilder::new().num_threads(n).build().map(Some),
+        }
+    }
 }
 
 impl Default for Threads {

@@ -75,6 +75,8 @@ pub struct RunOutcome {
     /// Each robot's final map (with its clouds), for the merged semantic map.
     pub maps: Vec<SceneGraph>,
     pub timing: Timing,
+    /// The threads the run had (`--threads`): the report's heavy parts use as many.
+    pub threads: crate::threads::Threads,
 }
 
 /// One crash and restart of a robot, and what its snapshot carried over.

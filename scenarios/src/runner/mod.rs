@@ -111,15 +111,7 @@ pub async fn run_with(
     // The camera speaks the configured segmenter's ids (`[classes]`); None: they are ours.
     let pixel_values = segmenter_ids(&scenario.classes, &label_map);
     // The robots' sensors are simulated on `threads` threads at once (none: on this one).
-    let pool = match outputs.threads.get() {
-        1 => None,
-        n => Some(
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
-                .map_err(|e| RunError::Input(format!("{n} threads: {e}")))?,
-        ),
-    };
+    let pool = outputs.threads.pool().map_err(|e| RunError::Input(format!("{} threads: {e}", outputs.threads)))?;
 
     let mut robots: Vec<SimRobot> = routes
         .into_iter()
@@ -320,7 +312,7 @@ pub async fn run_with(
         odometry: team.odometry_statuses().await?,
     };
     drop(snapshots);
-    Ok(RunOutcome { record, world, maps, timing })
+    Ok(RunOutcome { record, world, maps, timing, threads: outputs.threads })
 }
 
 /// Where a run keeps its snapshots: `persistence.directory`, or (when a robot crashes and none
