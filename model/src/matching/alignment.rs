@@ -18,8 +18,8 @@
 
 pub use crate::geometry::medoid;
 use crate::geometry::{pose_error, Pose3};
-use crate::perception::icp::{register, IcpConfig};
-use crate::perception::structure_check::{structure_agreement, StructureCheck};
+use crate::perception::icp::{register, register_to, IcpConfig, IcpTarget};
+use crate::perception::structure_check::{StructureCheck, StructureTarget};
 use crate::scene_graph::{KeyframeId, Stamp};
 use nalgebra::{Matrix6, Point3};
 use std::collections::{BTreeMap, BTreeSet};
@@ -100,8 +100,9 @@ pub fn register_round<'a>(
     config: &RoundConfig,
 ) -> RoundRegistrations {
     let mut out = RoundRegistrations::default();
-    // Several neighbour keyframes usually register to one local keyframe: widen it once.
-    let mut widened: BTreeMap<KeyframeId, Vec<Point3<f64>>> = BTreeMap::new();
+    // Several neighbour keyframes usually register to one local keyframe: make it ready once
+    // (its ICP target and its structure; `None`: too few points to register onto).
+    let mut ready: BTreeMap<KeyframeId, Option<(IcpTarget, StructureTarget)>> = BTreeMap::new();
     for remote in round {
         let in_local = local_from_remote * remote.world_from_body;
         let nearest = targets.iter().min_by(|a, b| {
@@ -110,15 +111,18 @@ pub fn register_round<'a>(
             da.total_cmp(&db)
         });
         let Some((local_id, local)) = nearest else { continue };
-        let target =
-            widened.entry(*local_id).or_insert_with(|| local.points_in_body.iter().map(|p| p.cast::<f64>()).collect());
+        let target = ready.entry(*local_id).or_insert_with(|| {
+            let points: Vec<Point3<f64>> = local.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
+            let icp = IcpTarget::new(&points, config.icp).ok()?;
+            Some((icp, StructureTarget::new(&points, config.structure)))
+        });
+        let Some((icp_target, structure_target)) = target else { continue };
         let initial = local.world_from_body.inverse() * in_local;
-        let Ok(result) = register(remote.points_in_body, target, &initial, config.icp) else { continue };
+        let Ok(result) = register_to(remote.points_in_body, icp_target, &initial, config.icp) else { continue };
         if !result.converged {
             continue;
         }
-        let agreement =
-            structure_agreement(remote.points_in_body, target, &result.target_from_source, config.structure);
+        let agreement = structure_target.agreement(remote.points_in_body, &result.target_from_source, config.structure);
         if agreement.is_none_or(|a| a < config.min_structure_agreement) {
             continue;
         }

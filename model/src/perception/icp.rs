@@ -98,6 +98,59 @@ fn finite(points: &[Point3<f64>]) -> Vec<Point3<f64>> {
     points.iter().filter(|p| p.coords.iter().all(|v| v.is_finite())).copied().collect()
 }
 
+/// A target cloud made ready for registration once — its finite points (downsampled by
+/// `voxel_m`), kd-tree, neighbour lists, reach and normals, all built as first needed — for any
+/// number of sources: a round registers several neighbour keyframes onto one local keyframe.
+/// Each answer is the same as a fresh [`register`]'s: what is kept depends on the cloud alone.
+pub struct IcpTarget {
+    graph: NeighbourGraph<'static>,
+    /// Per point: its normal (`None` inside: too few neighbours), once fitted.
+    normals: Vec<Option<Option<Vector3<f64>>>>,
+    /// The settings it was made with: voxel size, neighbours, correspondence distance (bits).
+    made_with: (u64, usize, u64),
+}
+
+fn checked(config: &IcpConfig) -> Result<(), IcpError> {
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    if !positive(config.max_correspondence_distance_m) || !positive(config.huber_m) || config.max_iterations == 0 {
+        return Err(IcpError::Parameter("max_correspondence_distance_m, huber_m or max_iterations"));
+    }
+    Ok(())
+}
+
+fn prepared(points: &[Point3<f64>], config: &IcpConfig) -> Vec<Point3<f64>> {
+    let points = finite(points);
+    match config.voxel_m > 0.0 {
+        true => downsample(&points, config.voxel_m),
+        false => points,
+    }
+}
+
+fn made_with(config: &IcpConfig) -> (u64, usize, u64) {
+    (config.voxel_m.to_bits(), config.normal_neighbours.max(3), config.max_correspondence_distance_m.to_bits())
+}
+
+impl IcpTarget {
+    /// `target` made ready for registrations with `config` (its voxel size, normal neighbours
+    /// and correspondence distance).
+    pub fn new(target: &[Point3<f64>], config: &IcpConfig) -> Result<Self, IcpError> {
+        checked(config)?;
+        Self::from_prepared(prepared(target, config), config)
+    }
+
+    fn from_prepared(target: Vec<Point3<f64>>, config: &IcpConfig) -> Result<Self, IcpError> {
+        if target.len() < 3 {
+            return Err(IcpError::TooFewPoints("target"));
+        }
+        let normals = vec![None; target.len()];
+        // Target normals from each point's k nearest within the correspondence distance,
+        // fitted when a source point first pairs with it; the same lists start each pass's
+        // searches from the last pass's answers.
+        let graph = NeighbourGraph::new(target, config.normal_neighbours.max(3), config.max_correspondence_distance_m);
+        Ok(Self { graph, normals, made_with: made_with(config) })
+    }
+}
+
 /// Registers `source` to `target` starting from `initial` (target_from_source).
 pub fn register(
     source: &[Point3<f64>],
@@ -105,29 +158,44 @@ pub fn register(
     initial: &Pose3,
     config: &IcpConfig,
 ) -> Result<IcpResult, IcpError> {
-    let positive = |v: f64| v.is_finite() && v > 0.0;
-    if !positive(config.max_correspondence_distance_m) || !positive(config.huber_m) || config.max_iterations == 0 {
-        return Err(IcpError::Parameter("max_correspondence_distance_m, huber_m or max_iterations"));
-    }
-    let (mut source, mut target) = (finite(source), finite(target));
-    if config.voxel_m > 0.0 {
-        source = downsample(&source, config.voxel_m);
-        target = downsample(&target, config.voxel_m);
-    }
+    checked(config)?;
+    let source = prepared(source, config);
     if source.len() < 3 {
         return Err(IcpError::TooFewPoints("source"));
     }
-    if target.len() < 3 {
-        return Err(IcpError::TooFewPoints("target"));
+    let mut target = IcpTarget::from_prepared(prepared(target, config), config)?;
+    register_prepared(&source, &mut target, initial, config)
+}
+
+/// [`register`] onto a target made ready by [`IcpTarget::new`] with the same voxel size,
+/// normal neighbours and correspondence distance as `config` (otherwise
+/// [`IcpError::Parameter`]).
+pub fn register_to(
+    source: &[Point3<f64>],
+    target: &mut IcpTarget,
+    initial: &Pose3,
+    config: &IcpConfig,
+) -> Result<IcpResult, IcpError> {
+    checked(config)?;
+    if target.made_with != made_with(config) {
+        return Err(IcpError::Parameter(
+            "voxel_m, normal_neighbours or max_correspondence_distance_m (not the target's)",
+        ));
     }
-    // Target normals from each point's k nearest within the correspondence distance, fitted
-    // when a source point first pairs with it; the same lists start each pass's searches from
-    // the last pass's answers.
-    let mut graph = NeighbourGraph::new(&target, config.normal_neighbours.max(3), config.max_correspondence_distance_m);
-    let mut target_normals: Vec<Option<Option<Vector3<f64>>>> = match config.method {
-        IcpMethod::PointToPlane => vec![None; target.len()],
-        IcpMethod::PointToPoint => Vec::new(),
-    };
+    let source = prepared(source, config);
+    if source.len() < 3 {
+        return Err(IcpError::TooFewPoints("source"));
+    }
+    register_prepared(&source, target, initial, config)
+}
+
+fn register_prepared(
+    source: &[Point3<f64>],
+    target: &mut IcpTarget,
+    initial: &Pose3,
+    config: &IcpConfig,
+) -> Result<IcpResult, IcpError> {
+    let IcpTarget { graph, normals: target_normals, .. } = target;
     let mut last_match: Vec<Option<usize>> = vec![None; source.len()];
     let max_d2 = config.max_correspondence_distance_m.powi(2);
     let mut pose = *initial;
@@ -150,16 +218,20 @@ pub fn register(
             if d2 > max_d2 {
                 continue;
             }
-            let q = target[item];
+            let q = graph.points()[item];
             let e = p - q;
             inliers += 1;
             sum2 += d2;
             unweighted.add(1.0, &p.coords);
             match config.method {
                 IcpMethod::PointToPlane => {
-                    let normal = *target_normals[item].get_or_insert_with(|| {
-                        normals::of_neighbours(&target, graph.neighbours(item).iter().map(|&j| j as usize))
-                    });
+                    let normal = match target_normals[item] {
+                        Some(known) => known,
+                        None => {
+                            let around: Vec<usize> = graph.neighbours(item).iter().map(|&j| j as usize).collect();
+                            *target_normals[item].insert(normals::of_neighbours(graph.points(), around.iter().copied()))
+                        }
+                    };
                     let Some(n) = normal else { continue };
                     let (r, j) = point_to_plane::residual(&p, &q, &n);
                     equations.add(huber(r), r, &j);
@@ -269,6 +341,29 @@ mod tests {
             register(&[Point3::origin()], &target, &Pose3::identity(), &IcpConfig::default()),
             Err(IcpError::TooFewPoints("source"))
         );
+    }
+
+    /// One target made ready serves several sources with the answers fresh registrations give,
+    /// bit for bit, whatever came before; a config it was not made with is refused.
+    #[test]
+    fn a_ready_target_answers_as_a_fresh_one() {
+        let target = room(3000, 1);
+        for method in [IcpMethod::PointToPlane, IcpMethod::PointToPoint] {
+            let config = IcpConfig { method, voxel_m: 0.1, max_iterations: 30, ..IcpConfig::default() };
+            let mut ready = IcpTarget::new(&target, &config).unwrap();
+            for seed in 2..6 {
+                let truth = pose_from_rpy_translation(0.02, -0.01, 0.1 * seed as f64, Vector3::new(0.2, -0.1, 0.05));
+                let source: Vec<Point3<f64>> = room(2000, seed).iter().map(|q| truth.inverse() * q).collect();
+                let fresh = register(&source, &target, &Pose3::identity(), &config).unwrap();
+                assert_eq!(register_to(&source, &mut ready, &Pose3::identity(), &config).unwrap(), fresh);
+            }
+            let other = IcpConfig { max_correspondence_distance_m: 0.5, ..config.clone() };
+            assert!(matches!(
+                register_to(&room(500, 9), &mut ready, &Pose3::identity(), &other),
+                Err(IcpError::Parameter(_))
+            ));
+        }
+        assert_eq!(IcpTarget::new(&target[..2], &IcpConfig::default()).err(), Some(IcpError::TooFewPoints("target")));
     }
 
     #[test]

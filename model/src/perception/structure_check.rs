@@ -93,15 +93,34 @@ pub fn structure_agreement(
     target_from_source: &Pose3,
     check: &StructureCheck,
 ) -> Option<f64> {
-    let (s, t) = (structure(source, check), structure(target, check));
-    if s.is_empty() || t.is_empty() {
-        return None;
+    StructureTarget::new(target, check).agreement(source, target_from_source, check)
+}
+
+/// A target scan's structure and its kd-tree, found once for the several sources a round
+/// checks against it (with the same check).
+pub struct StructureTarget {
+    /// `None`: the scan has no structure.
+    tree: Option<PointTree>,
+}
+
+impl StructureTarget {
+    pub fn new(target: &[Point3<f64>], check: &StructureCheck) -> Self {
+        let structure = structure(target, check);
+        Self { tree: (!structure.is_empty()).then(|| PointTree::new(&structure)) }
     }
-    let tree = PointTree::new(&t);
-    let r2 = check.inlier_m * check.inlier_m;
-    let agreeing =
-        s.iter().filter(|p| tree.nearest(&(target_from_source * *p)).is_some_and(|(d2, _)| d2 <= r2)).count();
-    Some(agreeing as f64 / s.len() as f64)
+
+    /// [`structure_agreement`] of `source` onto this target (made with the same `check`).
+    pub fn agreement(&self, source: &[Point3<f64>], target_from_source: &Pose3, check: &StructureCheck) -> Option<f64> {
+        let tree = self.tree.as_ref()?;
+        let s = structure(source, check);
+        if s.is_empty() {
+            return None;
+        }
+        let r2 = check.inlier_m * check.inlier_m;
+        let agreeing =
+            s.iter().filter(|p| tree.nearest(&(target_from_source * *p)).is_some_and(|(d2, _)| d2 <= r2)).count();
+        Some(agreeing as f64 / s.len() as f64)
+    }
 }
 
 #[cfg(test)]

@@ -29,6 +29,7 @@
 use super::point_tree::{squared_distance, PointTree};
 use super::reach::Reach;
 use nalgebra::Point3;
+use std::borrow::Cow;
 
 /// Graph steps a search takes before it hands over to the kd-tree.
 const MAX_STEPS: usize = 8;
@@ -40,7 +41,7 @@ const UNKNOWN: u32 = u32::MAX;
 /// are flat, k slots a point, each neighbour's key beside its index, so a search reads one
 /// contiguous run per step.
 pub struct NeighbourGraph<'a> {
-    points: &'a [Point3<f64>],
+    points: Cow<'a, [Point3<f64>]>,
     keys: Vec<[f32; 3]>,
     tree: PointTree,
     k: usize,
@@ -56,13 +57,14 @@ pub struct NeighbourGraph<'a> {
 }
 
 impl<'a> NeighbourGraph<'a> {
-    /// The graph of up to `k` neighbours within `radius` m of each of `points` (fewer than 2³²).
-    pub fn new(points: &'a [Point3<f64>], k: usize, radius: f64) -> Self {
+    /// The graph of up to `k` neighbours within `radius` m of each of `points` (fewer than 2³²),
+    /// borrowed or owned (a graph kept for several searches' sake owns its cloud).
+    pub fn new(points: impl Into<Cow<'a, [Point3<f64>]>>, k: usize, radius: f64) -> Self {
+        let points = points.into();
         let k = k.max(1);
         Self {
-            points,
             keys: points.iter().map(PointTree::key).collect(),
-            tree: PointTree::new(points),
+            tree: PointTree::new(&points),
             k,
             radius,
             len: vec![UNKNOWN; points.len()],
@@ -70,7 +72,13 @@ impl<'a> NeighbourGraph<'a> {
             items: vec![0; points.len() * k],
             item_keys: vec![[0.0; 3]; points.len() * k],
             reach: None,
+            points,
         }
+    }
+
+    /// The cloud.
+    pub fn points(&self) -> &[Point3<f64>] {
+        &self.points
     }
 
     /// Up to k neighbours of point `i` within the radius (itself included), in the kd-tree's
@@ -114,7 +122,7 @@ impl<'a> NeighbourGraph<'a> {
         if let Some(found) = hint.filter(|&h| h < self.points.len()).and_then(|h| self.walk(p, h)) {
             return Some(found);
         }
-        let (points, radius) = (self.points, self.radius);
+        let (points, radius) = (&self.points, self.radius);
         if !self.reach.get_or_insert_with(|| Reach::new(points, radius)).may_reach(p) {
             return None;
         }
