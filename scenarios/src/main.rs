@@ -27,7 +27,7 @@ struct Cli {
 enum Command {
     /// Run a scenario (a library name or a TOML file; default quickstart) and write its report.
     Run {
-        /// quickstart, outdoor_two_robots, indoor_three_robots, team_of_eight, or a path.
+        /// quickstart, outdoor_two_robots, indoor_three_robots, team_of_eight, team_of_sixteen, or a path.
         scenario: Option<String>,
         /// Report directory (default: a fresh folder under runs/).
         #[arg(long)]

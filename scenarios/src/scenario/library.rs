@@ -6,6 +6,7 @@ const LIBRARY: &[(&str, &str)] = &[
     ("outdoor_two_robots", include_str!("../../library/outdoor_two_robots.toml")),
     ("indoor_three_robots", include_str!("../../library/indoor_three_robots.toml")),
     ("team_of_eight", include_str!("../../library/team_of_eight.toml")),
+    ("team_of_sixteen", include_str!("../../library/team_of_sixteen.toml")),
     ("legged_campus", include_str!("../../library/legged_campus.toml")),
     ("handheld_indoor", include_str!("../../library/handheld_indoor.toml")),
     ("faults/clean", include_str!("../../library/faults/clean.toml")),
