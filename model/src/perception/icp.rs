@@ -228,8 +228,9 @@ fn register_prepared(
                     let normal = match target_normals[item] {
                         Some(known) => known,
                         None => {
-                            let around: Vec<usize> = graph.neighbours(item).iter().map(|&j| j as usize).collect();
-                            *target_normals[item].insert(normals::of_neighbours(graph.points(), around.iter().copied()))
+                            let (points, around) = graph.neighbours_in(item);
+                            *target_normals[item]
+                                .insert(normals::of_neighbours(points, around.iter().map(|&j| j as usize)))
                         }
                     };
                     let Some(n) = normal else { continue };

@@ -84,8 +84,13 @@ impl<'a> NeighbourGraph<'a> {
     /// Up to k neighbours of point `i` within the radius (itself included), in the kd-tree's
     /// order.
     pub fn neighbours(&mut self, i: usize) -> &[u32] {
+        self.neighbours_in(i).1
+    }
+
+    /// The cloud and point `i`'s neighbours, together (a normal is fitted from both).
+    pub fn neighbours_in(&mut self, i: usize) -> (&[Point3<f64>], &[u32]) {
         let n = self.ensure(i);
-        &self.items[i * self.k..i * self.k + n]
+        (&self.points, &self.items[i * self.k..i * self.k + n])
     }
 
     /// Computes point `i`'s list if it is not yet known; its length.
@@ -110,16 +115,18 @@ impl<'a> NeighbourGraph<'a> {
     /// from `hint` (a point near the answer, e.g. the last pass's) when the graph can certify
     /// it (module notes). `None` for an empty cloud.
     pub fn nearest(&mut self, p: &Point3<f64>, hint: Option<usize>) -> Option<(f64, usize)> {
-        if let Some(found) = hint.filter(|&h| h < self.points.len()).and_then(|h| self.walk(p, h)) {
-            return Some(found);
-        }
-        self.tree.nearest(p)
+        self.walk_from(p, hint).or_else(|| self.tree.nearest(p))
+    }
+
+    /// The walk's certified answer from a valid hint.
+    fn walk_from(&mut self, p: &Point3<f64>, hint: Option<usize>) -> Option<(f64, usize)> {
+        hint.filter(|&h| h < self.points.len()).and_then(|h| self.walk(p, h))
     }
 
     /// [`NeighbourGraph::nearest`] when a point may be within the graph's radius of `p`;
     /// `None` when none is (the answer may still lie beyond the radius: callers check).
     pub fn nearest_within(&mut self, p: &Point3<f64>, hint: Option<usize>) -> Option<(f64, usize)> {
-        if let Some(found) = hint.filter(|&h| h < self.points.len()).and_then(|h| self.walk(p, h)) {
+        if let Some(found) = self.walk_from(p, hint) {
             return Some(found);
         }
         let (points, radius) = (&self.points, self.radius);
