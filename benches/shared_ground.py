@@ -55,8 +55,16 @@ def main(argv):
     args = [a for a in argv if not a.startswith("--")]
     within = 10.0
     if "--within" in argv:
-        within = float(argv[argv.index("--within") + 1])
-        args.remove(argv[argv.index("--within") + 1])
+        at = argv.index("--within") + 1
+        try:
+            within = float(argv[at])
+        except (IndexError, ValueError):
+            print("shared_ground: --within needs a distance in metres, e.g. --within 10", file=sys.stderr)
+            return 2
+        if not (math.isfinite(within) and within > 0):
+            print(f"shared_ground: --within {argv[at]}: the distance must be positive", file=sys.stderr)
+            return 2
+        args.remove(argv[at])
     if len(args) != 1:
         print(__doc__, file=sys.stderr)
         return 2
