@@ -20,7 +20,7 @@ use crate::geometry::lie::{se3_adjoint, se3_exp, Matrix6, Tangent3};
 use crate::geometry::point_to_plane::{self, NormalEquations};
 use crate::geometry::Pose3;
 use crate::spatial::neighbour_graph::NeighbourGraph;
-use crate::spatial::voxel::downsample;
+use crate::spatial::voxel::Downsampler;
 use nalgebra::{Matrix3, Point3, Vector3};
 
 /// Error metric.
@@ -94,10 +94,6 @@ pub enum IcpError {
     Parameter(&'static str),
 }
 
-fn finite(points: &[Point3<f64>]) -> Vec<Point3<f64>> {
-    points.iter().filter(|p| p.coords.iter().all(|v| v.is_finite())).copied().collect()
-}
-
 /// A target cloud made ready for registration once — its finite points (downsampled by
 /// `voxel_m`), kd-tree, neighbour lists, reach and normals, all built as first needed — for any
 /// number of sources: a round registers several neighbour keyframes onto one local keyframe.
@@ -118,12 +114,24 @@ fn checked(config: &IcpConfig) -> Result<(), IcpError> {
     Ok(())
 }
 
-fn prepared(points: &[Point3<f64>], config: &IcpConfig) -> Vec<Point3<f64>> {
-    let points = finite(points);
-    match config.voxel_m > 0.0 {
-        true => downsample(&points, config.voxel_m),
-        false => points,
+/// The finite points of a cloud (about `expected` of them), downsampled by `voxel_m` when it is
+/// finite and positive.
+fn prepared_from(
+    points: impl IntoIterator<Item = Point3<f64>>,
+    expected: usize,
+    config: &IcpConfig,
+) -> Vec<Point3<f64>> {
+    let finite = points.into_iter().filter(|p| p.coords.iter().all(|v| v.is_finite()));
+    if !(config.voxel_m.is_finite() && config.voxel_m > 0.0) {
+        return finite.collect();
     }
+    let mut voxels = Downsampler::new(config.voxel_m, expected);
+    finite.for_each(|p| voxels.add(&p));
+    voxels.centroids()
+}
+
+fn prepared(points: &[Point3<f64>], config: &IcpConfig) -> Vec<Point3<f64>> {
+    prepared_from(points.iter().copied(), points.len(), config)
 }
 
 fn made_with(config: &IcpConfig) -> (u64, usize, u64) {
@@ -136,6 +144,17 @@ impl IcpTarget {
     pub fn new(target: &[Point3<f64>], config: &IcpConfig) -> Result<Self, IcpError> {
         checked(config)?;
         Self::from_prepared(prepared(target, config), config)
+    }
+
+    /// [`IcpTarget::new`] on a cloud gathered point by point (about `expected` of them, e.g. a
+    /// submap of several scans), never collected whole: the same target.
+    pub fn gathered(
+        target: impl IntoIterator<Item = Point3<f64>>,
+        expected: usize,
+        config: &IcpConfig,
+    ) -> Result<Self, IcpError> {
+        checked(config)?;
+        Self::from_prepared(prepared_from(target, expected, config), config)
     }
 
     fn from_prepared(target: Vec<Point3<f64>>, config: &IcpConfig) -> Result<Self, IcpError> {

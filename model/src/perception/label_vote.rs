@@ -67,25 +67,31 @@ pub fn vote(
         .map(|k| (key(&points[k]), k))
         .collect();
     keyed.sort_unstable();
-    // Unique voxels (sorted), their histograms, and where their members start in `keyed`.
+    // Unique voxels (sorted), where their members start in `keyed`, and their histograms, one
+    // after another in `counts` (from `first[i]` to `first[i + 1]`: one allocation in all).
     let mut voxels: Vec<[i64; 3]> = Vec::new();
-    let mut histograms: Vec<Histogram> = Vec::new();
-    let mut starts: Vec<usize> = Vec::new();
+    let mut counts: Histogram = Vec::new();
+    let (mut first, mut starts): (Vec<usize>, Vec<usize>) = (Vec::new(), Vec::new());
     for (n, (v, k)) in keyed.iter().enumerate() {
         if voxels.last() != Some(v) {
             voxels.push(*v);
-            histograms.push(Vec::new());
+            first.push(counts.len());
             starts.push(n);
         }
-        if let (Some(h), Some(l)) = (histograms.last_mut(), labels[*k]) {
-            add(h, l, 1);
+        if let (Some(&from), Some(l)) = (first.last(), labels[*k]) {
+            match counts[from..].iter_mut().find(|(known, _)| *known == l) {
+                Some((_, c)) => *c += 1,
+                None => counts.push((l, 1)),
+            }
         }
     }
     starts.push(keyed.len());
+    first.push(counts.len());
+    let histogram = |i: usize| &counts[first[i]..first[i + 1]];
     let mut block = Histogram::new();
     for (i, voxel) in voxels.iter().enumerate() {
         let members = &keyed[starts[i]..starts[i + 1]];
-        if !histograms[i].iter().any(|(l, _)| revote(*l)) {
+        if !histogram(i).iter().any(|(l, _)| revote(*l)) {
             continue;
         }
         block.clear();
@@ -94,7 +100,7 @@ pub fn vote(
                 for dz in -1..=1 {
                     let neighbour = [voxel[0] + dx, voxel[1] + dy, voxel[2] + dz];
                     if let Ok(j) = voxels.binary_search(&neighbour) {
-                        for (l, c) in &histograms[j] {
+                        for (l, c) in histogram(j) {
                             add(&mut block, *l, *c);
                         }
                     }
@@ -166,6 +172,41 @@ mod tests {
         assert_eq!(vote(&points, &labels, &LabelVote::default(), |l| l == CHAIR), voted);
         // Only walls re-voted: the fringe stays.
         assert_eq!(vote(&points, &labels, &LabelVote::default(), |l| l == WALL), labels);
+    }
+
+    /// The module's equation evaluated directly: for each return, the labelled returns whose
+    /// voxel is within one of its own on every axis.
+    fn by_definition(points: &[Point3<f64>], labels: &[Option<LabelId>], size: f64) -> Vec<Option<LabelId>> {
+        let voxel =
+            |p: &Point3<f64>| [(p.x / size).floor() as i64, (p.y / size).floor() as i64, (p.z / size).floor() as i64];
+        (0..points.len())
+            .map(|k| {
+                let own = labels[k]?;
+                let mut votes = std::collections::BTreeMap::<u16, u32>::new();
+                for (q, l) in points.iter().zip(labels) {
+                    let (a, b) = (voxel(&points[k]), voxel(q));
+                    if let (Some(l), true) = (l, (0..3).all(|d| (a[d] - b[d]).abs() <= 1)) {
+                        *votes.entry(l.0).or_default() += 1;
+                    }
+                }
+                let own_votes = votes.get(&own.0).copied().unwrap_or(0);
+                // Most votes, then the smaller id; only strictly more than the return's own.
+                let best = votes.iter().filter(|(_, c)| **c > own_votes).max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)));
+                Some(best.map_or(own, |(l, _)| LabelId(*l)))
+            })
+            .collect()
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn the_vote_is_its_equation(
+            returns in proptest::collection::vec((0.0f64..1.5, 0.0f64..1.5, 0.0f64..0.6, proptest::option::of(0u16..4)), 0..120),
+        ) {
+            let points: Vec<Point3<f64>> = returns.iter().map(|r| Point3::new(r.0, r.1, r.2)).collect();
+            let labels: Vec<Option<LabelId>> = returns.iter().map(|r| r.3.map(LabelId)).collect();
+            let config = LabelVote::default();
+            proptest::prop_assert_eq!(vote(&points, &labels, &config, |_| true), by_definition(&points, &labels, config.voxel_m));
+        }
     }
 
     #[test]

@@ -8,7 +8,7 @@
 //!   z = x_candidate⁻¹ · (T_icp · x_current),
 //! with LIO-SAM's noise model: an isotropic σ equal to the RMSE on all six axes.
 
-use super::icp::{register, IcpConfig};
+use super::icp::{register_to, IcpConfig, IcpTarget};
 use crate::geometry::Pose3;
 use crate::scene_graph::{KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, SceneGraph};
 use nalgebra::{Matrix6, Point3};
@@ -46,11 +46,10 @@ impl Default for LoopClosureConfig {
     }
 }
 
-fn scan_in_world(graph: &SceneGraph, id: KeyframeId) -> Vec<Point3<f64>> {
-    match (graph.keyframe(id), graph.semantic_scan(id)) {
-        (Some(kf), Some(scan)) => scan.points_in_body.iter().map(|p| kf.world_from_body * p.cast::<f64>()).collect(),
-        _ => Vec::new(),
-    }
+/// A keyframe's held scan in the world frame, at its current estimate (nothing if it holds none).
+fn scan_in_world(graph: &SceneGraph, id: KeyframeId) -> impl Iterator<Item = Point3<f64>> + '_ {
+    let held = graph.keyframe(id).zip(graph.semantic_scan(id));
+    held.into_iter().flat_map(|(kf, scan)| scan.points_in_body.iter().map(|p| kf.world_from_body * p.cast::<f64>()))
 }
 
 /// Looks for a loop closure for `current`; returns the loop edge (not yet added to the graph).
@@ -69,10 +68,13 @@ pub fn detect(graph: &SceneGraph, current: KeyframeId, config: &LoopClosureConfi
     let at = ordered.iter().position(|&k| k == candidate.id)?;
     let lo = at.saturating_sub(config.submap_neighbours);
     let hi = (at + config.submap_neighbours + 1).min(ordered.len());
-    let target: Vec<Point3<f64>> =
-        ordered[lo..hi].iter().filter(|&&k| k != current).flat_map(|&k| scan_in_world(graph, k)).collect();
-    let source = scan_in_world(graph, current);
-    let result = register(&source, &target, &Pose3::identity(), &config.icp).ok()?;
+    // The submap is voxelised as it is gathered (up to 25 scans: never collected whole).
+    let submap = || ordered[lo..hi].iter().filter(|&&k| k != current);
+    let expected = submap().filter_map(|&k| graph.semantic_scan(k)).map(|s| s.points_in_body.len()).sum();
+    let mut target =
+        IcpTarget::gathered(submap().flat_map(|&k| scan_in_world(graph, k)), expected, &config.icp).ok()?;
+    let source: Vec<Point3<f64>> = scan_in_world(graph, current).collect();
+    let result = register_to(&source, &mut target, &Pose3::identity(), &config.icp).ok()?;
     if !result.converged || result.rmse_m > config.max_rmse_m {
         return None;
     }
