@@ -371,11 +371,16 @@ mod tests {
         for method in [IcpMethod::PointToPlane, IcpMethod::PointToPoint] {
             let config = IcpConfig { method, voxel_m: 0.1, max_iterations: 30, ..IcpConfig::default() };
             let mut ready = IcpTarget::new(&target, &config).unwrap();
+            // Gathered point by point, with a non-finite point among them and a poor size guess.
+            let mut gathered =
+                IcpTarget::gathered(target.iter().copied().chain([Point3::new(f64::NAN, 0.0, 0.0)]), 7, &config)
+                    .unwrap();
             for seed in 2..6 {
                 let truth = pose_from_rpy_translation(0.02, -0.01, 0.1 * seed as f64, Vector3::new(0.2, -0.1, 0.05));
                 let source: Vec<Point3<f64>> = room(2000, seed).iter().map(|q| truth.inverse() * q).collect();
                 let fresh = register(&source, &target, &Pose3::identity(), &config).unwrap();
                 assert_eq!(register_to(&source, &mut ready, &Pose3::identity(), &config).unwrap(), fresh);
+                assert_eq!(register_to(&source, &mut gathered, &Pose3::identity(), &config).unwrap(), fresh);
             }
             let other = IcpConfig { max_correspondence_distance_m: 0.5, ..config.clone() };
             assert!(matches!(
