@@ -25,6 +25,7 @@
 //! Determinism: lookups go by key; every pass over all voxels (pruning, the budget, `points`)
 //! either does not depend on the order or sorts by key.
 
+use crate::spatial::voxel::voxel_of;
 use nalgebra::{Point3, Vector3};
 use rustc_hash::{FxHashMap, FxHashSet};
 use serde::{Deserialize, Serialize};
@@ -204,8 +205,7 @@ impl LocalMap {
     }
 
     fn key(&self, p: &Point3<f64>) -> Key {
-        let v = self.config.voxel_m;
-        [(p.x / v).floor() as i64, (p.y / v).floor() as i64, (p.z / v).floor() as i64]
+        voxel_of(p, self.config.voxel_m)
     }
 
     /// Adds a scan's points (odometry frame; non-finite ones are skipped), then drops the voxels

@@ -19,6 +19,7 @@
 //! the smaller id (deterministic). Returns without a label neither vote nor change.
 
 use crate::scene_graph::LabelId;
+use crate::spatial::voxel::voxel_of;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
@@ -61,10 +62,9 @@ pub fn vote(
     if !(size > 0.0 && size.is_finite()) || points.len() != labels.len() {
         return out;
     }
-    let key = |p: &Point3<f64>| [(p.x / size).floor() as i64, (p.y / size).floor() as i64, (p.z / size).floor() as i64];
     let mut keyed: Vec<([i64; 3], usize)> = (0..points.len())
         .filter(|&k| labels[k].is_some() && points[k].coords.iter().all(|v| v.is_finite()))
-        .map(|k| (key(&points[k]), k))
+        .map(|k| (voxel_of(&points[k], size), k))
         .collect();
     keyed.sort_unstable();
     // Unique voxels (sorted), where their members start in `keyed`, and their histograms, one

@@ -59,9 +59,9 @@ impl Downsampler {
     }
 }
 
-/// The index of the voxel of side `size` holding `p`.
+/// The index of the voxel of side `size` holding `p`: ⌊p / size⌋ per axis.
 #[inline]
-fn voxel_of(p: &Point3<f64>, size: f64) -> [i64; 3] {
+pub fn voxel_of(p: &Point3<f64>, size: f64) -> [i64; 3] {
     [(p.x / size).floor() as i64, (p.y / size).floor() as i64, (p.z / size).floor() as i64]
 }
 
