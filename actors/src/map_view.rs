@@ -141,7 +141,8 @@ mod tests {
                 candidates: &candidates,
                 motion_covariance: None,
             };
-            map.add_keyframe(input, &classes, &config).expect("a keyframe on a fresh map");
+            map.add_keyframe(input, &classes, &config, &sgm_model::workers::Workers::sequential())
+                .expect("a keyframe on a fresh map");
         }
         map
     }

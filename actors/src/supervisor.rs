@@ -24,6 +24,7 @@ use actix::{Actor, Addr, Context, Handler, Supervisor};
 use sgm_model::matching::{LabelSimilarity, MatcherConfig};
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::scene_graph::{KeyframeId, LabelId, RobotId};
+use sgm_model::workers::Workers;
 use std::collections::{BTreeMap, BTreeSet};
 
 /// Addresses of one robot's actors (stable across restarts).
@@ -93,7 +94,7 @@ pub fn start_robot_on(
     transport: Box<dyn Transport>,
     attach: impl FnOnce(RobotId, Addr<Comms>),
 ) -> Result<RobotHandle, ConfigError> {
-    start_robot_restored(config, clock, transport, attach, None, 0)
+    start_robot_restored(config, clock, transport, attach, None, 0, Workers::sequential())
 }
 
 /// As [`start_robot_on`], continuing from `snapshot` when there is one: each child starts from
@@ -101,6 +102,8 @@ pub fn start_robot_on(
 /// start at `sequence_floor` or the clock in microseconds, whichever is higher (simulation: 0,
 /// so the counter of incarnation 0 follows its never-receding clock; a ROS node passes the first
 /// sequence of its fresh incarnation), and go on above the snapshot's within one incarnation.
+/// The Tracker's and Matcher's registrations may split their work over `workers` (the robot's
+/// results are the same for any number of threads).
 pub fn start_robot_restored(
     config: &RobotConfig,
     clock: Clock,
@@ -108,6 +111,7 @@ pub fn start_robot_restored(
     attach: impl FnOnce(RobotId, Addr<Comms>),
     snapshot: Option<RobotSnapshot>,
     sequence_floor: u64,
+    workers: Workers,
 ) -> Result<RobotHandle, ConfigError> {
     config.validate()?;
     let robot = RobotId(config.robot.id);
@@ -150,9 +154,12 @@ pub fn start_robot_restored(
     let tracker_config = (config.tracker.clone(), classes, config.optimiser.clone(), config.comms.cloud_resolution_m);
     let progress = FrameProgress::default();
     let tracker_progress = progress.clone();
+    let (tracker_workers, matcher_workers) = (workers.clone(), workers);
     let tracker = Supervisor::start(move |_| {
         let (t, classes, o, r) = tracker_config;
-        let tracker = Tracker::new(robot, t, classes, &o, r).with_progress(tracker_progress.clone());
+        let tracker = Tracker::new(robot, t, classes, &o, r)
+            .with_progress(tracker_progress.clone())
+            .with_workers(tracker_workers.clone());
         match tracker_state {
             Some(state) => tracker.thawed(state),
             None => tracker,
@@ -160,7 +167,8 @@ pub fn start_robot_restored(
     });
     let (matcher_config, retry, matcher_clock) = (config.matcher.clone(), config.comms.retry.clone(), clock.clone());
     let matcher = Supervisor::start(move |_| {
-        let matcher = Matcher::new(robot, matcher_config, retry, matcher_clock, labels.clone());
+        let matcher = Matcher::new(robot, matcher_config, retry, matcher_clock, labels.clone())
+            .with_workers(matcher_workers.clone());
         match matcher_state {
             Some(state) => matcher.thawed(state),
             None => matcher,

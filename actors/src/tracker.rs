@@ -25,6 +25,7 @@ use sgm_model::wire::messages::{
     ObjectCloudResponse, WirePose,
 };
 use sgm_model::wire::Message as WireMessage;
+use sgm_model::workers::Workers;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -103,6 +104,7 @@ pub struct Tracker {
     covariances: BTreeMap<KeyframeId, [f32; 21]>,
     /// The newest frame handled, for latency measurement outside the robot.
     progress: crate::progress::FrameProgress,
+    workers: Workers,
 }
 
 impl Tracker {
@@ -126,6 +128,7 @@ impl Tracker {
             map: Mapper::default(),
             covariances: BTreeMap::new(),
             progress: crate::progress::FrameProgress::default(),
+            workers: Workers::sequential(),
         }
     }
 
@@ -141,13 +144,20 @@ impl Tracker {
         }
     }
 
-    /// Continues from `state` (see [`KEYFRAME_ID_EPOCH`]).
     /// Reports each handled frame's stamp to `progress`.
     pub fn with_progress(mut self, progress: crate::progress::FrameProgress) -> Self {
         self.progress = progress;
         self
     }
 
+    /// Lets a loop closure's registration split its work over `workers` (the same map for any
+    /// number of threads).
+    pub fn with_workers(mut self, workers: Workers) -> Self {
+        self.workers = workers;
+        self
+    }
+
+    /// Continues from `state` (see [`KEYFRAME_ID_EPOCH`]).
     pub fn thawed(mut self, state: TrackerState) -> Self {
         let epoch = state.next_keyframe.div_ceil(KEYFRAME_ID_EPOCH).saturating_add(1);
         self.map = Mapper {
@@ -174,7 +184,7 @@ impl Tracker {
             motion_covariance: scan.motion_covariance.as_ref(),
         };
         let moving_before = self.map.objects.moving_count();
-        let added = self.map.add_keyframe(input, &self.classes, &self.config)?;
+        let added = self.map.add_keyframe(input, &self.classes, &self.config, &self.workers)?;
         let id = added.keyframe.id;
         let moving = self.map.objects.moving_count();
         if moving > moving_before {

@@ -80,6 +80,7 @@ async fn envelopes_accepted_after_the_snapshot_are_refused_after_the_restore() {
         |r, c| radio.attach(r, c.recipient()),
         Some(snapshot),
         0,
+        sgm_model::workers::Workers::sequential(),
     )
     .unwrap();
     until_quiet().await;

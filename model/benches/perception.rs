@@ -1,6 +1,7 @@
 //! Semantic fusion + clustering of a 20k-point scan (issue [perception] target ≤ 5 ms): a
 //! synthetic scene of 40 objects of 6 classes on a ground plane, seen by a 640 × 480 camera
-//! looking along the LiDAR's x axis. And ICP on a 20k + 20k room, as `sgm icp` runs it.
+//! looking along the LiDAR's x axis. And ICP on a 20k + 20k room, as `sgm icp` runs it, and its
+//! registration on one thread and split over two (`icp_room_20k_registration_*`).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::{Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
@@ -8,11 +9,12 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::clustering::{cluster, ClusterConfig};
-use sgm_model::perception::icp::{register, IcpConfig, IcpMethod};
+use sgm_model::perception::icp::{register, register_to, IcpConfig, IcpMethod, IcpTarget};
 use sgm_model::perception::label_vote::{vote, LabelVote};
 use sgm_model::perception::projection::{label_points, CameraModel, LabelImage};
 use sgm_model::perception::synthetic_room::box_room as room;
 use sgm_model::scene_graph::LabelId;
+use sgm_model::workers::Workers;
 use std::hint::black_box;
 
 fn scene() -> (Vec<Point3<f64>>, CameraModel, LabelImage, Pose3) {
@@ -104,5 +106,27 @@ fn icp_room(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, fusion_and_clustering, icp_room);
+/// The registration alone (onto a fresh target, made outside the clock) on one thread and split
+/// over two: the same answer, and the split's speed-up.
+fn icp_split(c: &mut Criterion) {
+    let truth = Pose3::from_parts(
+        Translation3::new(0.3, -0.2, 0.1),
+        UnitQuaternion::from_euler_angles(2f64.to_radians(), -1.5f64.to_radians(), 5f64.to_radians()),
+    );
+    let target = room(20_000, 1);
+    let source: Vec<Point3<f64>> = room(20_000, 2).iter().map(|q| truth.inverse() * q).collect();
+    let config = IcpConfig { voxel_m: 0.1, ..IcpConfig::default() };
+    let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("a pool of two threads");
+    for (name, workers) in [("1", Workers::sequential()), ("2", Workers::on(std::sync::Arc::new(two)))] {
+        c.bench_function(&format!("icp_room_20k_registration_{name}_threads"), |b| {
+            b.iter_batched(
+                || IcpTarget::new(&target, &config).expect("a room"),
+                |mut ready| register_to(black_box(&source), &mut ready, &Pose3::identity(), &config, &workers),
+                criterion::BatchSize::LargeInput,
+            )
+        });
+    }
+}
+
+criterion_group!(benches, fusion_and_clustering, icp_room, icp_split);
 criterion_main!(benches);

@@ -18,7 +18,8 @@
 //!   scan-to-map registration with a prior and degeneracy, IMU propagation).
 //! - [`optim`]: the pose-graph solver on faer (§IV-F); [`wire`]: the radio protocol;
 //!   [`eval`]: metrics and the paper's synthetic matching protocol (§V-A); [`pcd`], [`snapshot`]:
-//!   file formats.
+//!   file formats; [`workers`]: threads a function may split independent work over, with the
+//!   same answer for any number.
 //!
 
 pub mod eval;
@@ -32,3 +33,4 @@ pub mod scene_graph;
 pub mod snapshot;
 pub mod spatial;
 pub mod wire;
+pub mod workers;

@@ -3,7 +3,9 @@
 //! same time, and how many robots' sensors are simulated at once. The report does not depend
 //! on it: only the wall time does.
 
+use sgm_model::workers::Workers;
 use std::num::NonZeroUsize;
+use std::sync::Arc;
 
 /// A number of threads, at least one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -58,6 +60,15 @@ impl Threads {
             1 => Ok(None),
             n => rayon::ThreadPoolBuilder::new().num_threads(n).build().map(Some),
         }
+    }
+
+    /// [`Threads::pool`], shared: as the sensors' pool and as the [`Workers`] one robot's
+    /// registrations split their work over, so a core that ran out of robots at a barrier helps
+    /// the robot still running.
+    pub fn shared_pool(self) -> Result<(Option<Arc<rayon::ThreadPool>>, Workers), String> {
+        let pool = self.pool().map_err(|e| format!("{self} threads: {e}"))?.map(Arc::new);
+        let workers = pool.clone().map_or_else(Workers::sequential, Workers::on);
+        Ok((pool, workers))
     }
 }
 

@@ -1,5 +1,6 @@
 //! `sgm run --threads N`: the robots run on threads of their own, up to N at once, and the
-//! report does not depend on N — `report.json` is byte-identical on 1, 2 and more threads. Two
+//! report does not depend on N — `report.json` is byte-identical on 1, 2 and more threads, with
+//! each robot's registrations split over the same N threads (`sgm_model::workers`). Two
 //! scenarios: eight robots on a campus (one joining late), where many pairs align and exchange
 //! over the radio in the same steps, and a crash and restart from a snapshot on a lossy link
 //! (the radio's random draws, which the robots' threads must not reorder).

@@ -36,11 +36,12 @@ use sgm_model::matching::alignment::{
 use sgm_model::matching::place_candidates::{EvenPlaces, PlaceCandidate, PlaceCandidates};
 use sgm_model::matching::scan_context::{Place, ScanContext};
 use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
-use sgm_model::perception::icp::{register, IcpConfig};
+use sgm_model::perception::icp::{register_to, IcpConfig, IcpTarget};
 use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS};
 use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{KeyframeRefusalReason, ObjectCloud, ObjectData};
+use sgm_model::workers::Workers;
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
@@ -73,6 +74,8 @@ pub struct Matcher {
     /// Each neighbour's latest alignments (`[matcher.relay]`): hints, not kept in snapshots (they
     /// come again within `comms.alignments_refresh_s`).
     hints: BTreeMap<RobotId, Vec<(RobotId, Pose3)>>,
+    /// Threads a registration may split its work over (the same answers for any number).
+    workers: Workers,
 }
 
 impl Matcher {
@@ -94,7 +97,14 @@ impl Matcher {
             places: EvenPlaces::default(),
             neighbours: BTreeMap::new(),
             hints: BTreeMap::new(),
+            workers: Workers::sequential(),
         }
+    }
+
+    /// Lets registrations split their work over `workers` (the same answers for any number).
+    pub fn with_workers(mut self, workers: Workers) -> Self {
+        self.workers = workers;
+        self
     }
 
     pub fn freeze(&self) -> MatcherState {

@@ -38,6 +38,7 @@ impl Matcher {
             structure: &self.config.structure_check,
             min_structure_agreement: self.config.min_structure_agreement,
             sigma_floor: self.config.factor_sigma_floor(),
+            workers: &self.workers,
         }
     }
 
@@ -75,7 +76,10 @@ impl Matcher {
                 target.extend(self.local_object_cloud(object));
             }
         }
-        let refined = match register(&source, &target, initial, &self.config.icp) {
+        let icp = &self.config.icp;
+        let registered =
+            IcpTarget::new(&target, icp).and_then(|mut t| register_to(&source, &mut t, initial, icp, &self.workers));
+        let refined = match registered {
             Ok(result) if result.converged => result.target_from_source,
             _ => *initial,
         };

@@ -59,6 +59,7 @@ use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::classes::ClassTable;
 use sgm_model::wire::Sequence;
+use sgm_model::workers::Workers;
 use std::path::Path;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
@@ -130,6 +131,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
             attach,
             snapshot,
             Sequence::first(incarnation),
+            Workers::sequential(),
         )
         .map_err(NodeError::Config)?;
         let Some(comms) = comms_addr else { return Err(ros_error("the robot's Comms did not start")) };

@@ -21,6 +21,7 @@ use crate::geometry::{pose_error, Pose3};
 use crate::perception::icp::{register, register_to, IcpConfig, IcpTarget};
 use crate::perception::structure_check::{StructureCheck, StructureTarget};
 use crate::scene_graph::{KeyframeId, Stamp};
+use crate::workers::Workers;
 use nalgebra::{Matrix6, Point3};
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -78,6 +79,8 @@ pub struct RoundConfig<'a> {
     pub min_structure_agreement: f64,
     /// Least standard deviations of a factor, (rotation rad, translation m): see [`with_floor`].
     pub sigma_floor: (f64, f64),
+    /// Threads each registration may split its correspondence search over (same answer).
+    pub workers: &'a Workers,
 }
 
 /// What a round's registrations gave.
@@ -118,7 +121,9 @@ pub fn register_round<'a>(
         });
         let Some((icp_target, structure_target)) = target else { continue };
         let initial = local.world_from_body.inverse() * in_local;
-        let Ok(result) = register_to(remote.points_in_body, icp_target, &initial, config.icp) else { continue };
+        let Ok(result) = register_to(remote.points_in_body, icp_target, &initial, config.icp, config.workers) else {
+            continue;
+        };
         if !result.converged {
             continue;
         }
@@ -300,8 +305,14 @@ mod tests {
         let estimate = local_from_remote * pose(0.4, 0.0, 3f64.to_radians());
         let icp = IcpConfig { max_correspondence_distance_m: 1.0, ..IcpConfig::default() };
         let structure = StructureCheck::default();
-        let config =
-            RoundConfig { icp: &icp, structure: &structure, min_structure_agreement: 0.5, sigma_floor: (0.0, 0.0) };
+        let workers = Workers::sequential();
+        let config = RoundConfig {
+            icp: &icp,
+            structure: &structure,
+            min_structure_agreement: 0.5,
+            sigma_floor: (0.0, 0.0),
+            workers: &workers,
+        };
         let registered = register_round(&targets, round, &estimate, &config);
         assert_eq!(registered.factors.len(), 2, "{registered:?}");
         assert_eq!(registered.factors[0].0, KeyframeId(4));

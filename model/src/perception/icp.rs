@@ -14,6 +14,10 @@
 //! thresholds), fitness (fraction of source points with a correspondence), inlier RMSE, and the
 //! information matrix H = Σ Jᵀ J / RMSE² converted to the optimiser's chart (right
 //! perturbation of `target_from_source`: H_right = Adᵀ H Ad), usable as a between factor.
+//!
+//! A pass's searches and normal fits are per point, so [`register_to`] may split them over
+//! [`Workers`]; the sums are still taken one point at a time in source order, so the answer is
+//! the same, bit for bit, for any number of threads (`split_passes_answer_as_one_thread`).
 
 use super::normals;
 use crate::geometry::lie::{se3_adjoint, se3_exp, Matrix6, Tangent3};
@@ -21,6 +25,7 @@ use crate::geometry::point_to_plane::{self, NormalEquations};
 use crate::geometry::Pose3;
 use crate::spatial::neighbour_graph::NeighbourGraph;
 use crate::spatial::voxel::Downsampler;
+use crate::workers::Workers;
 use nalgebra::{Matrix3, Point3, Vector3};
 
 /// Error metric.
@@ -183,7 +188,7 @@ pub fn register(
         return Err(IcpError::TooFewPoints("source"));
     }
     let mut target = IcpTarget::from_prepared(prepared(target, config), config)?;
-    register_prepared(&source, &mut target, initial, config)
+    register_prepared(&source, &mut target, initial, config, &Workers::sequential())
 }
 
 /// [`register`] onto a target made ready by [`IcpTarget::new`] with the same voxel size,
@@ -194,6 +199,7 @@ pub fn register_to(
     target: &mut IcpTarget,
     initial: &Pose3,
     config: &IcpConfig,
+    workers: &Workers,
 ) -> Result<IcpResult, IcpError> {
     checked(config)?;
     if target.made_with != made_with(config) {
@@ -205,7 +211,7 @@ pub fn register_to(
     if source.len() < 3 {
         return Err(IcpError::TooFewPoints("source"));
     }
-    register_prepared(&source, target, initial, config)
+    register_prepared(&source, target, initial, config, workers)
 }
 
 fn register_prepared(
@@ -213,65 +219,21 @@ fn register_prepared(
     target: &mut IcpTarget,
     initial: &Pose3,
     config: &IcpConfig,
+    workers: &Workers,
 ) -> Result<IcpResult, IcpError> {
-    let IcpTarget { graph, normals: target_normals, .. } = target;
     let mut last_match: Vec<Option<usize>> = vec![None; source.len()];
-    let max_d2 = config.max_correspondence_distance_m.powi(2);
     let mut pose = *initial;
     let mut iterations = 0;
     let mut step_converged = false;
-    let huber = |r: f64| if r.abs() <= config.huber_m { 1.0 } else { config.huber_m / r.abs() };
-    // Statistics of the last correspondence pass (before its small final step).
-    let (mut inliers, mut sum2) = (0usize, 0.0);
-    let mut unweighted = Moments::default();
+    // Sums of the last correspondence pass (before its small final step).
+    let mut sums = PassSums::default();
     while iterations < config.max_iterations {
         iterations += 1;
-        let mut weighted = Moments::default();
-        let mut equations = NormalEquations::new();
-        let mut pairs = 0;
-        (inliers, sum2, unweighted) = (0, 0.0, Moments::default());
-        for (s, last) in source.iter().zip(last_match.iter_mut()) {
-            let p = pose * s;
-            let Some((d2, item)) = graph.nearest_within(&p, *last) else { continue };
-            *last = Some(item);
-            if d2 > max_d2 {
-                continue;
-            }
-            let q = graph.points()[item];
-            let e = p - q;
-            inliers += 1;
-            sum2 += d2;
-            unweighted.add(1.0, &p.coords);
-            match config.method {
-                IcpMethod::PointToPlane => {
-                    let normal = match target_normals[item] {
-                        Some(known) => known,
-                        None => {
-                            let (points, around) = graph.neighbours_in(item);
-                            *target_normals[item]
-                                .insert(normals::of_neighbours(points, around.iter().map(|&j| j as usize)))
-                        }
-                    };
-                    let Some(n) = normal else { continue };
-                    let (r, j) = point_to_plane::residual(&p, &q, &n);
-                    equations.add(huber(r), r, &j);
-                }
-                IcpMethod::PointToPoint => {
-                    let w = huber(e.norm());
-                    weighted.add(w, &p.coords);
-                    let (gw, gv) = (w * p.coords.cross(&e), w * e);
-                    equations.gradient += Tangent3::new(gw.x, gw.y, gw.z, gv.x, gv.y, gv.z);
-                }
-            }
-            pairs += 1;
-        }
-        if config.method == IcpMethod::PointToPoint {
-            equations.hessian = weighted.gram();
-        }
-        if pairs < 6 {
+        sums = pass(source, target, &pose, &mut last_match, config, workers);
+        if sums.pairs < 6 {
             break;
         }
-        let Some(delta) = equations.step() else { break };
+        let Some(delta) = sums.equations.step() else { break };
         pose = se3_exp(&delta) * pose;
         let (w, v) = (delta.fixed_rows::<3>(0).norm(), delta.fixed_rows::<3>(3).norm());
         if w < config.convergence_rotation_rad && v < config.convergence_translation_m {
@@ -279,9 +241,9 @@ fn register_prepared(
             break;
         }
     }
-    let h = unweighted.gram();
-    let fitness = inliers as f64 / source.len() as f64;
-    let rmse_m = if inliers > 0 { (sum2 / inliers as f64).sqrt() } else { f64::INFINITY };
+    let h = sums.unweighted.gram();
+    let fitness = sums.inliers as f64 / source.len() as f64;
+    let rmse_m = if sums.inliers > 0 { (sums.sum2 / sums.inliers as f64).sqrt() } else { f64::INFINITY };
     let noise2 = rmse_m.max(1e-4).powi(2);
     let ad = se3_adjoint(&pose);
     let information = ad.transpose() * (h / noise2) * ad;
@@ -293,6 +255,170 @@ fn register_prepared(
         iterations,
         information,
     })
+}
+
+/// Source points (or target normals) a thread takes at least, when a pass is split.
+const MIN_SPLIT: usize = 256;
+
+/// One correspondence pass at `pose`: each source point paired with its nearest target point
+/// (its hint updated), the normal equations summed in source order.
+///
+/// Split over `workers`, the pass runs in three stages, each point's and each normal's answer a
+/// function of the cloud alone: the nearest points, searched in pieces of the source on the
+/// shared target (lists a piece lacks computed aside, kept afterwards); the normals the pairs
+/// need and the target lacks, each fitted once, in pieces; the sums, in source order. So the
+/// pass is the same, bit for bit, for any number of threads.
+fn pass(
+    source: &[Point3<f64>],
+    target: &mut IcpTarget,
+    pose: &Pose3,
+    last_match: &mut [Option<usize>],
+    config: &IcpConfig,
+    workers: &Workers,
+) -> PassSums {
+    let mut sums = PassSums::default();
+    let max_d2 = config.max_correspondence_distance_m.powi(2);
+    let IcpTarget { graph, normals: target_normals, .. } = target;
+    let shared = graph.shared();
+    let hints: &[Option<usize>] = last_match;
+    let found = workers.split(source.len(), MIN_SPLIT, |range| {
+        let mut search = shared.search();
+        let found: Vec<_> = range.map(|i| search.nearest_within(&(pose * source[i]), hints[i])).collect();
+        (found, search.into_aside())
+    });
+    let Some(found) = found else {
+        for (s, last) in source.iter().zip(last_match.iter_mut()) {
+            let p = pose * s;
+            let Some((d2, item)) = graph.nearest_within(&p, *last) else { continue };
+            *last = Some(item);
+            if d2 <= max_d2 {
+                let normal = match config.method {
+                    IcpMethod::PointToPlane => own_normal(graph, target_normals, item),
+                    IcpMethod::PointToPoint => None,
+                };
+                sums.add(&Pair { p, q: graph.points()[item], d2, normal }, config);
+            }
+        }
+        return sums.finished(config);
+    };
+    let mut nearest = Vec::with_capacity(source.len());
+    for (piece, lists) in found {
+        graph.absorb(lists);
+        nearest.extend(piece);
+    }
+    if config.method == IcpMethod::PointToPlane {
+        fit_normals(graph, target_normals, &nearest, max_d2, workers);
+    }
+    for ((s, last), found) in source.iter().zip(last_match.iter_mut()).zip(nearest) {
+        let Some((d2, item)) = found else { continue };
+        *last = Some(item);
+        if d2 <= max_d2 {
+            let normal = target_normals[item].flatten();
+            sums.add(&Pair { p: pose * s, q: graph.points()[item], d2, normal }, config);
+        }
+    }
+    sums.finished(config)
+}
+
+/// Target point `item`'s normal, fitted on first need.
+fn own_normal(
+    graph: &mut NeighbourGraph<'static>,
+    normals: &mut [Option<Option<Vector3<f64>>>],
+    item: usize,
+) -> Option<Vector3<f64>> {
+    if let Some(known) = normals[item] {
+        return known;
+    }
+    let (points, around) = graph.neighbours_in(item);
+    *normals[item].insert(normals::of_neighbours(points, around.iter().map(|&j| j as usize)))
+}
+
+/// Fits the normals of the target points `nearest` pairs with (within the distance) that it
+/// lacks, each once, in pieces over `workers`.
+fn fit_normals(
+    graph: &mut NeighbourGraph<'static>,
+    normals: &mut [Option<Option<Vector3<f64>>>],
+    nearest: &[Option<(f64, usize)>],
+    max_d2: f64,
+    workers: &Workers,
+) {
+    let mut lacking: Vec<usize> =
+        nearest.iter().flatten().filter(|(d2, item)| *d2 <= max_d2 && normals[*item].is_none()).map(|n| n.1).collect();
+    lacking.sort_unstable();
+    lacking.dedup();
+    let shared = graph.shared();
+    let fit = |range: std::ops::Range<usize>| {
+        let mut search = shared.search();
+        let fitted: Vec<_> = lacking[range]
+            .iter()
+            .map(|&item| {
+                let (points, around) = search.neighbours_in(item);
+                (item, normals::of_neighbours(points, around.iter().map(|&j| j as usize)))
+            })
+            .collect();
+        (fitted, search.into_aside())
+    };
+    let pieces = workers.split(lacking.len(), MIN_SPLIT, fit).unwrap_or_else(|| vec![fit(0..lacking.len())]);
+    for (fitted, lists) in pieces {
+        graph.absorb(lists);
+        for (item, normal) in fitted {
+            normals[item] = Some(normal);
+        }
+    }
+}
+
+/// A source point p and its correspondence q within the distance (d² = ‖p − q‖²), with q's
+/// normal (point-to-plane; `None`: none could be fitted).
+struct Pair {
+    p: Point3<f64>,
+    q: Point3<f64>,
+    d2: f64,
+    normal: Option<Vector3<f64>>,
+}
+
+/// What a pass sums over its pairs, in source order.
+#[derive(Default)]
+struct PassSums {
+    weighted: Moments,
+    equations: NormalEquations,
+    /// Pairs in the equations; inliers (pairs within the distance), Σ d² and moments of them.
+    pairs: usize,
+    inliers: usize,
+    sum2: f64,
+    unweighted: Moments,
+}
+
+impl PassSums {
+    fn add(&mut self, pair: &Pair, config: &IcpConfig) {
+        let huber = |r: f64| if r.abs() <= config.huber_m { 1.0 } else { config.huber_m / r.abs() };
+        let Pair { p, q, d2, normal } = pair;
+        self.inliers += 1;
+        self.sum2 += d2;
+        self.unweighted.add(1.0, &p.coords);
+        match config.method {
+            IcpMethod::PointToPlane => {
+                let Some(n) = normal else { return };
+                let (r, j) = point_to_plane::residual(p, q, n);
+                self.equations.add(huber(r), r, &j);
+            }
+            IcpMethod::PointToPoint => {
+                let e = p - q;
+                let w = huber(e.norm());
+                self.weighted.add(w, &p.coords);
+                let (gw, gv) = (w * p.coords.cross(&e), w * e);
+                self.equations.gradient += Tangent3::new(gw.x, gw.y, gw.z, gv.x, gv.y, gv.z);
+            }
+        }
+        self.pairs += 1;
+    }
+
+    /// The sums once every pair is in (point-to-point: Σ w JᵀJ from the moments).
+    fn finished(mut self, config: &IcpConfig) -> Self {
+        if config.method == IcpMethod::PointToPoint {
+            self.equations.hessian = self.weighted.gram();
+        }
+        self
+    }
 }
 
 /// Weighted moments of the transformed source points p, enough for Σ w Jᵀ J of the
@@ -379,16 +505,43 @@ mod tests {
                 let truth = pose_from_rpy_translation(0.02, -0.01, 0.1 * seed as f64, Vector3::new(0.2, -0.1, 0.05));
                 let source: Vec<Point3<f64>> = room(2000, seed).iter().map(|q| truth.inverse() * q).collect();
                 let fresh = register(&source, &target, &Pose3::identity(), &config).unwrap();
-                assert_eq!(register_to(&source, &mut ready, &Pose3::identity(), &config).unwrap(), fresh);
-                assert_eq!(register_to(&source, &mut gathered, &Pose3::identity(), &config).unwrap(), fresh);
+                let one = Workers::sequential();
+                assert_eq!(register_to(&source, &mut ready, &Pose3::identity(), &config, &one).unwrap(), fresh);
+                assert_eq!(register_to(&source, &mut gathered, &Pose3::identity(), &config, &one).unwrap(), fresh);
             }
             let other = IcpConfig { max_correspondence_distance_m: 0.5, ..config.clone() };
             assert!(matches!(
-                register_to(&room(500, 9), &mut ready, &Pose3::identity(), &other),
+                register_to(&room(500, 9), &mut ready, &Pose3::identity(), &other, &Workers::sequential()),
                 Err(IcpError::Parameter(_))
             ));
         }
         assert_eq!(IcpTarget::new(&target[..2], &IcpConfig::default()).err(), Some(IcpError::TooFewPoints("target")));
+    }
+
+    /// A registration whose passes are split over threads answers as one thread does, bit for
+    /// bit: on a fresh target, and on one that earlier registrations (split or not) made ready.
+    #[test]
+    fn split_passes_answer_as_one_thread() {
+        let pool = std::sync::Arc::new(rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap());
+        let (split, one) = (Workers::on(pool), Workers::sequential());
+        let target = room(6000, 1);
+        for method in [IcpMethod::PointToPlane, IcpMethod::PointToPoint] {
+            let config = IcpConfig { method, max_iterations: 30, ..IcpConfig::default() };
+            let mut shared = IcpTarget::new(&target, &config).unwrap();
+            for seed in 2..6 {
+                let truth = pose_from_rpy_translation(0.02, -0.01, 0.05 * seed as f64, Vector3::new(0.3, -0.1, 0.05));
+                // Far more points than one piece: every pass is split.
+                let source: Vec<Point3<f64>> = room(4000, seed).iter().map(|q| truth.inverse() * q).collect();
+                assert!(split.split(source.len(), MIN_SPLIT, |r| r).is_some_and(|pieces| pieces.len() > 2));
+                let mut fresh = IcpTarget::new(&target, &config).unwrap();
+                let alone = register_to(&source, &mut fresh, &Pose3::identity(), &config, &one).unwrap();
+                assert!(alone.fitness > 0.9, "{alone:?}");
+                let mut fresh = IcpTarget::new(&target, &config).unwrap();
+                assert_eq!(register_to(&source, &mut fresh, &Pose3::identity(), &config, &split).unwrap(), alone);
+                let workers = if seed % 2 == 0 { &split } else { &one };
+                assert_eq!(register_to(&source, &mut shared, &Pose3::identity(), &config, workers).unwrap(), alone);
+            }
+        }
     }
 
     #[test]

@@ -11,6 +11,7 @@
 use super::icp::{register_to, IcpConfig, IcpTarget};
 use crate::geometry::Pose3;
 use crate::scene_graph::{KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, SceneGraph};
+use crate::workers::Workers;
 use nalgebra::{Matrix6, Point3};
 use serde::{Deserialize, Serialize};
 
@@ -53,7 +54,13 @@ fn scan_in_world(graph: &SceneGraph, id: KeyframeId) -> impl Iterator<Item = Poi
 }
 
 /// Looks for a loop closure for `current`; returns the loop edge (not yet added to the graph).
-pub fn detect(graph: &SceneGraph, current: KeyframeId, config: &LoopClosureConfig) -> Option<KeyframeEdge> {
+/// The registration may split its correspondence search over `workers` (same answer).
+pub fn detect(
+    graph: &SceneGraph,
+    current: KeyframeId,
+    config: &LoopClosureConfig,
+    workers: &Workers,
+) -> Option<KeyframeEdge> {
     let now = graph.keyframe(current)?;
     let here = now.world_from_body.translation.vector;
     let candidate = graph
@@ -74,7 +81,7 @@ pub fn detect(graph: &SceneGraph, current: KeyframeId, config: &LoopClosureConfi
     let mut target =
         IcpTarget::gathered(submap().flat_map(|&k| scan_in_world(graph, k)), expected, &config.icp).ok()?;
     let source: Vec<Point3<f64>> = scan_in_world(graph, current).collect();
-    let result = register_to(&source, &mut target, &Pose3::identity(), &config.icp).ok()?;
+    let result = register_to(&source, &mut target, &Pose3::identity(), &config.icp, workers).ok()?;
     if !result.converged || result.rmse_m > config.max_rmse_m {
         return None;
     }
@@ -134,7 +141,8 @@ mod tests {
         let truth = pose_from_yaw_translation(0.5, Vector3::new(1.0, 0.3, 0.0));
         let drifted = pose_from_yaw_translation(0.5 + 2f64.to_radians(), Vector3::new(1.5, -0.1, 0.0));
         add(&mut graph, 1, 60.0, drifted, truth, 2);
-        let edge = detect(&graph, KeyframeId(1), &LoopClosureConfig::default()).expect("loop found");
+        let edge =
+            detect(&graph, KeyframeId(1), &LoopClosureConfig::default(), &Workers::sequential()).expect("loop found");
         assert_eq!(
             (edge.kind, edge.from, edge.to),
             (KeyframeEdgeKind::Loop, KeyframeId(0), KeyframeRef::Local(KeyframeId(1)))
@@ -144,6 +152,6 @@ mod tests {
         assert!(edge.information[(0, 0)] > 1.0);
         // Too recent: no candidate.
         let config = LoopClosureConfig { time_gap_s: 90.0, ..LoopClosureConfig::default() };
-        assert!(detect(&graph, KeyframeId(1), &config).is_none());
+        assert!(detect(&graph, KeyframeId(1), &config, &Workers::sequential()).is_none());
     }
 }

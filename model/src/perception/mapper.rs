@@ -32,6 +32,7 @@ use crate::scene_graph::{
     Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, LabelId, SceneGraph, SceneGraphError,
     SemanticScan, Stamp,
 };
+use crate::workers::Workers;
 use nalgebra::{Matrix6, Point3};
 
 /// What the mapper decides with.
@@ -131,12 +132,13 @@ impl Mapper {
 
     /// Adds `scan` as the next keyframe (see the module's equations). On an error the steps
     /// already taken stay (a keyframe added before its scan was refused stays, and its id is not
-    /// reused).
+    /// reused). The loop closure's registration may split its work over `workers`.
     pub fn add_keyframe(
         &mut self,
         scan: ScanInput<'_>,
         classes: &ClassTable,
         config: &MapperConfig,
+        workers: &Workers,
     ) -> Result<KeyframeAdded, SceneGraphError> {
         let id = KeyframeId(self.next_keyframe);
         let (world_from_body, odometry_edge) = match self.last_odometry {
@@ -176,7 +178,8 @@ impl Mapper {
             self.last_loop_attempt = Some(scan.stamp);
         }
         let mut refused_loop = None;
-        if let Some(edge) = due.then(|| loop_closure::detect(&self.graph, id, &config.loop_closure)).flatten() {
+        if let Some(edge) = due.then(|| loop_closure::detect(&self.graph, id, &config.loop_closure, workers)).flatten()
+        {
             match self.graph.add_edge(edge.clone()) {
                 Ok(()) => edges.push(edge),
                 Err(e) => refused_loop = Some(e),
@@ -243,10 +246,11 @@ mod tests {
         let scan =
             |k: usize, covariance| ScanInput { motion_covariance: covariance, ..scan_at(k as f64, &poses[k], &[]) };
         mapper.note_scan(&poses[0], None);
-        mapper.add_keyframe(scan(0, None), &classes, &config).expect("first");
+        mapper.add_keyframe(scan(0, None), &classes, &config, &Workers::sequential()).expect("first");
         mapper.note_scan(&poses[1], Some(&step));
         mapper.note_scan(&poses[2], Some(&step));
-        let added = mapper.add_keyframe(scan(2, Some(&step)), &classes, &config).expect("second");
+        let added =
+            mapper.add_keyframe(scan(2, Some(&step)), &classes, &config, &Workers::sequential()).expect("second");
         let covariance = added.edges[0].information.try_inverse().expect("invertible");
         let expected = nalgebra::Vector6::new(2.0 * a, 2.0 * a, 2.0 * a, 2.0 * b, 2.0 * b + a, 2.0 * b + a);
         assert!((covariance.diagonal() - expected).norm() < 1e-12, "{}", covariance.diagonal());
@@ -254,7 +258,7 @@ mod tests {
         assert!((covariance[(2, 4)] - a).abs() < 1e-12 && (covariance[(1, 5)] + a).abs() < 1e-12, "{covariance}");
         let later = ScanInput { stamp: 3.0, ..scan(1, None) };
         mapper.note_scan(later.odom_from_body, None);
-        let third = mapper.add_keyframe(later, &classes, &config).expect("third");
+        let third = mapper.add_keyframe(later, &classes, &config, &Workers::sequential()).expect("third");
         assert_eq!(third.edges[0].information, config.odometry_information);
     }
 
@@ -266,7 +270,7 @@ mod tests {
         let labels = [None, None];
         let odom0 = pose_from_yaw_translation(0.3, Vector3::new(1.0, 2.0, 0.0));
         let first = ScanInput { labels: &labels, ..scan_at(0.0, &odom0, &points) };
-        let added = mapper.add_keyframe(first, &classes, &config).expect("first keyframe");
+        let added = mapper.add_keyframe(first, &classes, &config, &Workers::sequential()).expect("first keyframe");
         assert_eq!(added.keyframe.world_from_body, odom0, "the first keyframe takes its odometry pose");
         assert!(added.edges.is_empty());
         assert_eq!(mapper.graph.semantic_scan(added.keyframe.id).map(|s| s.points_in_body.len()), Some(2));
@@ -274,7 +278,8 @@ mod tests {
         let corrected = pose_from_yaw_translation(0.25, Vector3::new(1.2, 1.9, 0.0));
         mapper.apply_poses(&[(KeyframeId(0), corrected), (KeyframeId(99), Pose3::identity())]).expect("poses");
         let odom1 = odom0 * pose_from_yaw_translation(0.1, Vector3::new(2.0, 0.0, 0.0));
-        let second = mapper.add_keyframe(scan_at(1.0, &odom1, &[]), &classes, &config).expect("second");
+        let second =
+            mapper.add_keyframe(scan_at(1.0, &odom1, &[]), &classes, &config, &Workers::sequential()).expect("second");
         let expected = corrected * pose_from_yaw_translation(0.1, Vector3::new(2.0, 0.0, 0.0));
         assert!((second.keyframe.world_from_body.translation.vector - expected.translation.vector).norm() < 1e-12);
         assert!(second.keyframe.world_from_body.rotation.angle_to(&expected.rotation) < 1e-12);
@@ -294,17 +299,21 @@ mod tests {
         let mut mapper = Mapper::default();
         let origin = Pose3::identity();
         assert!(mapper.wants(&origin, &config), "the first scan is always a keyframe");
-        mapper.add_keyframe(scan_at(0.0, &origin, &[]), &classes, &config).expect("first");
+        mapper.add_keyframe(scan_at(0.0, &origin, &[]), &classes, &config, &Workers::sequential()).expect("first");
         let near = pose_from_yaw_translation(0.0, Vector3::new(0.01, 0.0, 0.0));
         assert!(!mapper.wants(&near, &config), "1 cm is below the distance threshold");
         let far = pose_from_yaw_translation(0.0, Vector3::new(5.0, 0.0, 0.0));
         assert!(mapper.wants(&far, &config));
         // A stamp earlier than the latest keyframe's is refused by the scene graph: nothing is
         // added, and the next keyframe still gets a fresh id.
-        let err = mapper.add_keyframe(scan_at(-1.0, &far, &[]), &classes, &config).expect_err("older stamp");
+        let err = mapper
+            .add_keyframe(scan_at(-1.0, &far, &[]), &classes, &config, &Workers::sequential())
+            .expect_err("older stamp");
         assert!(matches!(err, SceneGraphError::StampNotIncreasing { .. }), "{err}");
         assert_eq!(mapper.graph.keyframe_count(), 1);
-        let next = mapper.add_keyframe(scan_at(2.0, &far, &[]), &classes, &config).expect("later stamp");
+        let next = mapper
+            .add_keyframe(scan_at(2.0, &far, &[]), &classes, &config, &Workers::sequential())
+            .expect("later stamp");
         assert_eq!(next.keyframe.id, KeyframeId(1));
     }
 
@@ -337,7 +346,7 @@ mod tests {
             let body_from_world = pose.inverse();
             let points: Vec<Point3<f64>> = room.iter().map(|p| body_from_world * p).collect();
             let scan = ScanInput { labels: &labels, ..scan_at(t, &pose, &points) };
-            let added = mapper.add_keyframe(scan, &classes, &config).expect("add");
+            let added = mapper.add_keyframe(scan, &classes, &config, &Workers::sequential()).expect("add");
             loops.extend(added.edges.into_iter().filter(|e| e.kind == KeyframeEdgeKind::Loop));
         }
         assert_eq!(mapper.last_loop_attempt, Some(40.0), "42 s is within the interval of 40 s");

@@ -85,7 +85,10 @@ pub async fn run_with(
     let shared = RadioShared::default();
     let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
     let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&scenario.radio, seed, shared.clone(), &names)));
-    let mut team = Team::new(names.clone(), radio, outputs.threads);
+    // The robots' sensors are simulated on `threads` threads at once (none: on this one), and
+    // one robot's registrations split over the same threads.
+    let (pool, workers) = outputs.threads.shared_pool().map_err(RunError::Input)?;
+    let mut team = Team::new(names.clone(), radio, outputs.threads, workers);
     let mut false_factors =
         FalseFactors::new(&scenario.false_factors, seed, |name| names.iter().position(|n| n == name));
     let snapshots = SnapshotDir::for_run(scenario)?;
@@ -110,8 +113,6 @@ pub async fn run_with(
     let (_, label_map) = scenario.robot_config(0).class_tables().map_err(|e| RunError::Input(e.to_string()))?;
     // The camera speaks the configured segmenter's ids (`[classes]`); None: they are ours.
     let pixel_values = segmenter_ids(&scenario.classes, &label_map);
-    // The robots' sensors are simulated on `threads` threads at once (none: on this one).
-    let pool = outputs.threads.pool().map_err(|e| RunError::Input(format!("{} threads: {e}", outputs.threads)))?;
 
     let mut robots: Vec<SimRobot> = routes
         .into_iter()
@@ -180,7 +181,7 @@ pub async fn run_with(
             sweep_nanos,
             sweeps_per_frame,
         };
-        let sensed = sensing.sense_all(&mut robots, step, t, pool.as_ref());
+        let sensed = sensing.sense_all(&mut robots, step, t, pool.as_deref());
         simulation += sim_started.elapsed();
         for (k, sensed) in sensed.into_iter().enumerate() {
             let Some(Sensed { truth, odometry, down, sweeps, frame }) = sensed else { continue };

@@ -33,6 +33,7 @@ use sgm_actors::tracker::{GetMapSummary, GetSceneGraph};
 use sgm_actors::transport::{Delivered, InProcessRadio};
 use sgm_model::perception::deskew::DeskewCounts;
 use sgm_model::scene_graph::{SceneGraph, Stamp};
+use sgm_model::workers::Workers;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Duration;
@@ -96,6 +97,8 @@ pub struct Team {
     pub radio: InProcessRadio,
     members: Vec<Member>,
     threads: Threads,
+    /// What one robot's registrations may split their work over.
+    workers: Workers,
     snapshot_interval_s: f64,
     restarts: Vec<Restart>,
     /// Snapshots written, and their bytes in all.
@@ -103,9 +106,9 @@ pub struct Team {
 }
 
 impl Team {
-    /// The team of robots `names`, talking over `radio`, up to `threads` of them running at once.
-    /// Must be called inside an actix system.
-    pub fn new(names: Vec<String>, radio: InProcessRadio, threads: Threads) -> Self {
+    /// The team of robots `names`, talking over `radio`, up to `threads` of them running at once,
+    /// each robot's registrations split over `workers`. Must be called inside an actix system.
+    pub fn new(names: Vec<String>, radio: InProcessRadio, threads: Threads, workers: Workers) -> Self {
         let members = names
             .into_iter()
             .map(|name| Member {
@@ -123,6 +126,7 @@ impl Team {
             radio,
             members,
             threads,
+            workers,
             snapshot_interval_s: f64::INFINITY,
             restarts: Vec::new(),
             snapshots_written: (0, 0),
@@ -249,13 +253,14 @@ impl Team {
             }
             let thread = member.thread.get_or_insert_with(RobotThread::start).handle();
             let thread = thread.ok_or_else(|| failed("its thread stopped".into()))?;
-            let (config, clock) = (config(), member.clock.clone());
+            let (config, clock, workers) = (config(), member.clock.clone(), self.workers.clone());
             // The robot's actors start on its thread, which they then never leave; what they do
             // on starting is done before the job ends (nothing runs between two barriers).
             let start = move || async move {
                 let attach =
                     |robot, comms: actix::Addr<sgm_actors::comms::Comms>| radio.attach(robot, comms.recipient());
-                let started = start_robot_restored(&config, clock, Box::new(radio.clone()), attach, snapshot, 0);
+                let started =
+                    start_robot_restored(&config, clock, Box::new(radio.clone()), attach, snapshot, 0, workers);
                 until_quiet().await;
                 started
             };
