@@ -8,7 +8,8 @@
 //! The modules, lowest first; each uses only those above it in this list (the book's
 //! architecture chapter draws it):
 //! - [`geometry`]: rigid transforms, weighted rigid fits (planar and 3D), and SE(2)/SE(3) as Lie
-//!   groups (`geometry::lie`).
+//!   groups (`geometry::lie`); beside it [`workers`]: threads a function may split independent
+//!   work over, with the same answer for any number.
 //! - [`spatial`]: kd-tree, voxel grid and linear assignment, for the layers below.
 //! - [`scene_graph`]: keyframe, object and semantic layers with their cross-layer links (§IV-A).
 //! - [`perception`]: segmentation to objects, keyframes, the object tracker, ICP (§IV-A, §IV-E).
@@ -18,8 +19,7 @@
 //!   scan-to-map registration with a prior and degeneracy, IMU propagation).
 //! - [`optim`]: the pose-graph solver on faer (§IV-F); [`wire`]: the radio protocol;
 //!   [`eval`]: metrics and the paper's synthetic matching protocol (§V-A); [`pcd`], [`snapshot`]:
-//!   file formats; [`workers`]: threads a function may split independent work over, with the
-//!   same answer for any number.
+//!   file formats.
 //!
 
 pub mod eval;

@@ -4,8 +4,8 @@
 //! done, and it splits only work whose pieces are independent (each piece's answer a function
 //! of its input alone), then folds the pieces' answers in their input order, exactly as one
 //! thread would. So its result is bit for bit the same with any number of threads; only the
-//! wall time changes. ICP's correspondence search is the one such split today
-//! ([`crate::perception::icp::register_to`]).
+//! wall time changes. ICP's correspondence passes are the one such split today
+//! (`perception::icp::register_to`).
 
 use std::ops::Range;
 use std::sync::Arc;

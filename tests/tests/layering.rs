@@ -9,7 +9,7 @@ type Layers = &'static [&'static [&'static str]];
 
 /// Lowest first. Modules on one line are peers that do not use each other.
 const MODEL: Layers = &[
-    &["geometry"],
+    &["geometry", "workers"],
     &["spatial", "pcd", "snapshot"],
     &["scene_graph"],
     &["perception"],
