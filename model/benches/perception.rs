@@ -79,16 +79,22 @@ fn fusion_and_clustering(c: &mut Criterion) {
     });
 }
 
-/// ICP as `sgm icp` runs it on a 20k + 20k room (issue [odometry]: ≤ 0.8× small_gicp's time,
-/// measured against it by `benches/compare_small_gicp.sh`): 0.1 m voxels, 1 m correspondences,
-/// small_gicp's convergence (0.1°, 1 mm), from identity to a 5° / 0.37 m offset.
-fn icp_room(c: &mut Criterion) {
+/// The 20k-point room (target) and an independent 20k sampling of it seen from a 5° / 0.37 m
+/// offset (source, in its own frame).
+fn room_pair() -> (Vec<Point3<f64>>, Vec<Point3<f64>>) {
     let truth = Pose3::from_parts(
         Translation3::new(0.3, -0.2, 0.1),
         UnitQuaternion::from_euler_angles(2f64.to_radians(), -1.5f64.to_radians(), 5f64.to_radians()),
     );
-    let target = room(20_000, 1);
-    let source: Vec<Point3<f64>> = room(20_000, 2).iter().map(|q| truth.inverse() * q).collect();
+    let source = room(20_000, 2).iter().map(|q| truth.inverse() * q).collect();
+    (source, room(20_000, 1))
+}
+
+/// ICP as `sgm icp` runs it on a 20k + 20k room (issue [odometry]: ≤ 0.8× small_gicp's time,
+/// measured against it by `benches/compare_small_gicp.sh`): 0.1 m voxels, 1 m correspondences,
+/// small_gicp's convergence (0.1°, 1 mm), from identity to a 5° / 0.37 m offset.
+fn icp_room(c: &mut Criterion) {
+    let (source, target) = room_pair();
     for method in [IcpMethod::PointToPlane, IcpMethod::PointToPoint] {
         let config = IcpConfig {
             method,
@@ -109,12 +115,7 @@ fn icp_room(c: &mut Criterion) {
 /// The registration alone (onto a fresh target, made outside the clock) on one thread and split
 /// over two: the same answer, and the split's speed-up.
 fn icp_split(c: &mut Criterion) {
-    let truth = Pose3::from_parts(
-        Translation3::new(0.3, -0.2, 0.1),
-        UnitQuaternion::from_euler_angles(2f64.to_radians(), -1.5f64.to_radians(), 5f64.to_radians()),
-    );
-    let target = room(20_000, 1);
-    let source: Vec<Point3<f64>> = room(20_000, 2).iter().map(|q| truth.inverse() * q).collect();
+    let (source, target) = room_pair();
     let config = IcpConfig { voxel_m: 0.1, ..IcpConfig::default() };
     let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("a pool of two threads");
     for (name, workers) in [("1", Workers::sequential()), ("2", Workers::on(std::sync::Arc::new(two)))] {
