@@ -33,7 +33,14 @@ def main():
         time.sleep(max(0.0, start + (t - first).to_sec() / rate - time.monotonic()))
         publisher.publish(cls().deserialize(data))
         sent += 1
-    time.sleep(1)  # let the queues drain before the connections close
+    # rospy writes each connection's queue from its own thread and drops what is still queued
+    # when the process exits: wait until every queue is written (a loaded machine or a veth can
+    # take seconds), then a second for the last bytes to be read.
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and any(
+            getattr(c, "_queue", None) for p, _ in publishers.values() for c in p.impl.connections):
+        time.sleep(0.05)
+    time.sleep(1)
     print(f"{path}: {sent} messages published")
 
 

@@ -116,6 +116,16 @@ status() { "${@:2}" timeout 20 rostopic echo -n 1 "/$1/sgm/status" | /usr/bin/py
 import sys, json, yaml
 doc = yaml.safe_load(sys.stdin.read().split("---")[0])
 print(doc["data"])'; }
+# settled_status ROBOT FILE [COMMAND PREFIX]: the status into FILE once every accepted cloud is
+# assembled into a frame (or after 30 s): a loaded machine may still be working through the last.
+settled_status() {
+  for _ in $(seq 30); do
+    status "$1" "${@:3}" > "$2" || return 1
+    /usr/bin/python3 -c 'import json, sys; s = json.load(open(sys.argv[1])); sys.exit(s["sync"]["frames"] < s["accepted"]["points"])' "$2" \
+      && return 0
+    sleep 1
+  done
+}
 # check_run ROBOT FILE: every frame accepted and assembled, nothing refused, aligned.
 check_run() {
   /usr/bin/python3 - "$2" "$1" <<'PY' || fail "$1 status"
@@ -135,7 +145,7 @@ print(f"  {sys.argv[2]}: 180/180 frames, {s['keyframes']} keyframes, {s['objects
 PY
 }
 for robot in alpha bravo; do
-  status "$robot" > "$WORK/$robot.status.json"
+  settled_status "$robot" "$WORK/$robot.status.json" || fail "$robot's status"
   check_run "$robot" "$WORK/$robot.status.json"
 done
 # The book's checks: the delivery services, and the status as JSON through `rostopic echo -p`.
@@ -221,9 +231,9 @@ if [ "$(id -u)" = 0 ] && command -v ip >/dev/null; then
   wait "$FEED_B" || { cat "$WORK/feed_bravo.log"; fail "rospy feeder of bravo"; }
   sleep 3
   # alpha's status read in B and bravo's in A: the topic crosses the veth either way.
-  status alpha in_b > "$WORK/alpha.netns.json" || fail "alpha's status from $B"
+  settled_status alpha "$WORK/alpha.netns.json" in_b || fail "alpha's status from $B"
   check_run alpha "$WORK/alpha.netns.json"
-  status bravo in_a > "$WORK/bravo.netns.json" || fail "bravo's status from $A"
+  settled_status bravo "$WORK/bravo.netns.json" in_a || fail "bravo's status from $A"
   check_run bravo "$WORK/bravo.netns.json"
   ip -n "$A" -s -j link show "$VA" > "$WORK/veth.json"
   /usr/bin/python3 - "$WORK/veth.json" <<'PY' || fail "no traffic on the veth"
