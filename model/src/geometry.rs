@@ -41,6 +41,16 @@ pub fn yaw_of(pose: &Pose3) -> f64 {
     pose.rotation.euler_angles().2
 }
 
+/// A pose for log lines and messages: "(x, y, z) m, yaw θ°" (centimetres, tenths of a degree).
+pub struct Brief<'a>(pub &'a Pose3);
+
+impl std::fmt::Display for Brief<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let t = self.0.translation.vector;
+        write!(f, "({:.2}, {:.2}, {:.2}) m, yaw {:.1}°", t.x, t.y, t.z, yaw_of(self.0).to_degrees())
+    }
+}
+
 /// Smallest signed difference a − b of two angles, in (−π, π].
 pub fn angle_difference(a: f64, b: f64) -> f64 {
     let d = (a - b).rem_euclid(std::f64::consts::TAU);

@@ -5,6 +5,7 @@
 
 use super::relay::RoundStart;
 use super::*;
+use sgm_model::geometry::Brief;
 
 /// A neighbour's object data as graph objects (its world).
 pub(super) fn graph_objects(data: &ObjectData) -> Vec<GraphObject> {
@@ -69,12 +70,13 @@ impl Matcher {
             entry.protocol = Some(n.matched(local_from_remote, pairs, now, &retry).into());
         }
         entry.round_via = via;
+        let at = Brief(&local_from_remote);
         match via {
             None => {
-                tracing::info!(robot = %self.robot, neighbour = %robot, matches = remote_ids.len(), "object graphs matched")
+                tracing::info!(robot = %self.robot, neighbour = %robot, matches = remote_ids.len(), local_from_remote = %at, "object graphs matched")
             }
             Some(via) => {
-                tracing::info!(robot = %self.robot, neighbour = %robot, %via, pairs = remote_ids.len(), "round from a relayed alignment")
+                tracing::info!(robot = %self.robot, neighbour = %robot, %via, pairs = remote_ids.len(), local_from_remote = %at, "round from a relayed alignment")
             }
         }
         if let Some(links) = &self.links {

@@ -5,7 +5,8 @@
 //! a round: the round's own registration decides, as it does for a graph match.
 
 use super::*;
-use sgm_model::matching::closure::ClosurePlan;
+use sgm_model::geometry::Brief;
+use sgm_model::matching::closure::{pairs_through, ClosurePlan};
 use sgm_model::matching::relay::{hinted_round, hints_for};
 
 /// Where an alignment round starts: the first estimate, the object pairs whose clouds are asked
@@ -77,9 +78,18 @@ impl Matcher {
                 let pairs = round.iter().map(|p| (p.local, p.remote)).collect();
                 Some(RoundStart { local_from_remote: hint.local_from_remote, pairs, via: Some(hint.via) })
             });
-        if start.is_none() && !hints.is_empty() {
-            tracing::debug!(robot = %self.robot, neighbour = %robot, hints = hints.len(),
-                "relayed alignments start no round (too few objects pair through them, or refuted recently)");
+        if start.is_none() && !hints.is_empty() && tracing::enabled!(tracing::Level::DEBUG) {
+            // Per hint: through whom, whether refuted recently, and how many objects pair through it.
+            let tried: Vec<String> = hints
+                .iter()
+                .map(|hint| {
+                    let pairs = pairs_through(local, remote, &hint.local_from_remote, &self.labels, plan.gate_m).len();
+                    let barred = if refuted_recently(refuted, &hint.local_from_remote, now) { " refuted" } else { "" };
+                    format!("{} [{}]: {pairs} pairs{barred}", hint.via, Brief(&hint.local_from_remote))
+                })
+                .collect();
+            tracing::debug!(robot = %self.robot, neighbour = %robot, hints = %tried.join(", "), need = plan.min_pairs,
+                "relayed alignments start no round (too few objects pair through them on one patch, or refuted recently)");
         }
         start
     }

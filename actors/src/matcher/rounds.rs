@@ -4,6 +4,7 @@
 //! `model::matching::alignment`: incomplete, refuted, or aligned with inter-robot factors.
 
 use super::*;
+use sgm_model::geometry::Brief;
 
 /// A local keyframe as registration sees it.
 pub(super) fn local_view(k: &ViewKeyframe) -> LocalView<'_> {
@@ -185,7 +186,8 @@ impl Matcher {
                 entry.match_again = true;
             }
             RoundVerdict::Refuted => {
-                tracing::info!(robot = %self.robot, neighbour = %robot, factors, "object match refuted");
+                tracing::info!(robot = %self.robot, neighbour = %robot, factors,
+                    local_from_remote = %Brief(&n.state.local_from_remote), "object match refuted");
                 match entry.round_via {
                     None => entry.refuted.push((n.state.local_from_remote, now)),
                     Some(_) => {
