@@ -61,10 +61,7 @@ pub fn hints_for(
 }
 
 /// The object pairs a hint gives for a first round: those within `gate_m` of each other through
-/// it, the best-supported patch of them (`radius_m` around its seed), when it has `min_pairs`;
-/// else all of them, when they are `min_pairs` spread wider than a patch. A hint places the whole
-/// map, as a graph match does, so pairs far apart support it together (two robots that crossed
-/// each other's paths at an angle share objects along a line longer than a patch).
+/// it, the best-supported patch of them (`radius_m` around its seed), when it has `min_pairs`.
 pub fn hinted_round(
     local: &[GraphObject],
     remote: &[GraphObject],
@@ -73,11 +70,7 @@ pub fn hinted_round(
     plan: &ClosurePlan,
 ) -> Option<Vec<ClosurePair>> {
     let pairs = pairs_through(local, remote, &hint.local_from_remote, labels, plan.gate_m);
-    match next_round(&pairs, &[], plan) {
-        Some((_, round)) => Some(round),
-        None if pairs.len() >= plan.min_pairs => Some(pairs),
-        None => None,
-    }
+    next_round(&pairs, &[], plan).map(|(_, round)| round)
 }
 
 #[cfg(test)]
@@ -153,11 +146,5 @@ mod tests {
         assert!(hinted_round(&local, &remote, &wrong, &labels, &plan).is_none());
         let few = ClosurePlan { min_pairs: 7, ..plan };
         assert!(hinted_round(&local, &remote, &right, &labels, &few).is_none());
-        // No patch of 1 m holds 4 of them, but the whole map holds 6: all of them, in local order.
-        let narrow = ClosurePlan { radius_m: 1.0, ..plan };
-        assert!(next_round(&pairs_through(&local, &remote, &local_from_remote, &labels, 1.0), &[], &narrow).is_none());
-        let spread = hinted_round(&local, &remote, &right, &labels, &narrow).unwrap();
-        assert_eq!(spread.iter().map(|p| p.local.0).collect::<Vec<_>>(), (0..6).collect::<Vec<_>>());
-        assert!(hinted_round(&local, &remote, &right, &labels, &ClosurePlan { min_pairs: 7, ..narrow }).is_none());
     }
 }
