@@ -36,10 +36,14 @@ def main():
     # rospy writes each connection's queue from its own thread and drops what is still queued
     # when the process exits: wait until every queue is written (a loaded machine or a veth can
     # take seconds), then a second for the last bytes to be read.
+    def queued():
+        return sum(len(getattr(c, "_queue", None) or ()) for p, _ in publishers.values() for c in p.impl.connections)
+
     deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and any(
-            getattr(c, "_queue", None) for p, _ in publishers.values() for c in p.impl.connections):
+    while queued() and time.monotonic() < deadline:
         time.sleep(0.05)
+    if queued():
+        print(f"{path}: {queued()} messages still queued after 60 s; they are lost", file=sys.stderr)
     time.sleep(1)
     print(f"{path}: {sent} messages published")
 
