@@ -7,7 +7,7 @@
 use super::*;
 use sgm_model::geometry::Brief;
 use sgm_model::matching::closure::{pairs_through, ClosurePlan};
-use sgm_model::matching::relay::{hinted_round, hints_for};
+use sgm_model::matching::relay::{hinted_round, hints_for, Reach};
 
 /// Where an alignment round starts: the first estimate, the object pairs whose clouds are asked
 /// for, and whose alignment it came from (`None`: object-graph matching).
@@ -51,8 +51,10 @@ impl Matcher {
     }
 
     /// The first hint for `robot` (not near a hint refuted recently) that pairs at least
-    /// `min_matched_objects` objects on one patch: its transform, the pairs, and whose
-    /// alignment it came from.
+    /// `min_matched_objects` objects: on one patch for a direct hint, whose round one
+    /// registration of ours settles (`min_round_factors`); on one patch or else over the whole
+    /// map for a relayed one, settled by as many registrations as a graph match. Its transform,
+    /// the pairs, and whose alignment it came from.
     pub(super) fn hinted(
         &self,
         robot: RobotId,
@@ -74,7 +76,8 @@ impl Matcher {
         let hints = hints_for(self.robot, robot, &ours, &self.hints);
         let start =
             hints.iter().filter(|hint| !refuted_recently(refuted, &hint.local_from_remote, now)).find_map(|hint| {
-                let round = hinted_round(local, remote, hint, &self.labels, &plan)?;
+                let reach = if hint.via == robot { Reach::Patch } else { Reach::WholeMap };
+                let round = hinted_round(local, remote, hint, &self.labels, &plan, reach)?;
                 let pairs = round.iter().map(|p| (p.local, p.remote)).collect();
                 Some(RoundStart { local_from_remote: hint.local_from_remote, pairs, via: Some(hint.via) })
             });
@@ -89,7 +92,7 @@ impl Matcher {
                 })
                 .collect();
             tracing::debug!(robot = %self.robot, neighbour = %robot, hints = %tried.join(", "), need = plan.min_pairs,
-                "relayed alignments start no round (too few objects pair through them on one patch, or refuted recently)");
+                "relayed alignments start no round (too few objects pair through them, or refuted recently)");
         }
         start
     }

@@ -11,9 +11,10 @@
 //!
 //! A hint is never taken as it comes: it only replaces graph matching as the first estimate. The
 //! objects are associated through it ([`hinted_round`]: mutual nearest of similar label within
-//! a gate, the best-supported 15 m patch, as a closure round plans) and the rest of the round is
-//! the receiver's own: object-cloud ICP, keyframe registration, the structure check and the
-//! round's verdict (`alignment::judge_round`). A wrong hint is refuted like a wrong match.
+//! a gate, the best-supported 15 m patch, as a closure round plans; for a relayed hint, else all
+//! of them, see [`Reach`]) and the rest of the round is the receiver's own: object-cloud ICP,
+//! keyframe registration, the structure check and the round's verdict (`alignment::judge_round`).
+//! A wrong hint is refuted like a wrong match.
 //!
 //! What this buys: two robots whose common objects are too few, or too alike, for graph
 //! matching to be significant still align when either of them — or a third robot that placed
@@ -60,17 +61,36 @@ pub fn hints_for(
     hints
 }
 
+/// Where a hint's first round may take its pairs from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reach {
+    /// One patch (`radius_m` around a seed): for a round that a single registration of ours
+    /// settles (a direct hint), which can only check the ground it covers.
+    Patch,
+    /// One patch, else the whole map: for a round settled by as many registrations as a graph
+    /// match (a relayed hint). A hint places the whole map, as a graph match does, so pairs far
+    /// apart support it together: two robots that crossed each other's paths at an angle share
+    /// objects along a line longer than a patch.
+    WholeMap,
+}
+
 /// The object pairs a hint gives for a first round: those within `gate_m` of each other through
-/// it, the best-supported patch of them (`radius_m` around its seed), when it has `min_pairs`.
+/// it, the best-supported patch of them (`radius_m` around its seed), when it has `min_pairs`;
+/// with [`Reach::WholeMap`], else all of them, when they are `min_pairs` spread wider than a patch.
 pub fn hinted_round(
     local: &[GraphObject],
     remote: &[GraphObject],
     hint: &Hint,
     labels: &LabelSimilarity,
     plan: &ClosurePlan,
+    reach: Reach,
 ) -> Option<Vec<ClosurePair>> {
     let pairs = pairs_through(local, remote, &hint.local_from_remote, labels, plan.gate_m);
-    next_round(&pairs, &[], plan).map(|(_, round)| round)
+    match next_round(&pairs, &[], plan) {
+        Some((_, round)) => Some(round),
+        None if reach == Reach::WholeMap && pairs.len() >= plan.min_pairs => Some(pairs),
+        None => None,
+    }
 }
 
 #[cfg(test)]
@@ -139,12 +159,21 @@ mod tests {
             .collect();
         let plan = ClosurePlan { gate_m: 1.0, radius_m: 15.0, spacing_m: 0.0, min_pairs: 4 };
         let right = Hint { via: RobotId(2), local_from_remote };
-        let round = hinted_round(&local, &remote, &right, &labels, &plan).unwrap();
+        let round = hinted_round(&local, &remote, &right, &labels, &plan, Reach::Patch).unwrap();
         assert_eq!(round.len(), 6);
         assert!(round.iter().all(|p| p.remote.0 == p.local.0 + 100));
         let wrong = Hint { via: RobotId(2), local_from_remote: pose(0.5, 13.0, -4.0) };
-        assert!(hinted_round(&local, &remote, &wrong, &labels, &plan).is_none());
+        assert!(hinted_round(&local, &remote, &wrong, &labels, &plan, Reach::WholeMap).is_none());
         let few = ClosurePlan { min_pairs: 7, ..plan };
-        assert!(hinted_round(&local, &remote, &right, &labels, &few).is_none());
+        assert!(hinted_round(&local, &remote, &right, &labels, &few, Reach::WholeMap).is_none());
+        // No patch of 1 m holds 4 of them, but the whole map holds 6: all of them, in local
+        // order, for a relayed hint; nothing for a direct one.
+        let narrow = ClosurePlan { radius_m: 1.0, ..plan };
+        assert!(next_round(&pairs_through(&local, &remote, &local_from_remote, &labels, 1.0), &[], &narrow).is_none());
+        assert!(hinted_round(&local, &remote, &right, &labels, &narrow, Reach::Patch).is_none());
+        let spread = hinted_round(&local, &remote, &right, &labels, &narrow, Reach::WholeMap).unwrap();
+        assert_eq!(spread.iter().map(|p| p.local.0).collect::<Vec<_>>(), (0..6).collect::<Vec<_>>());
+        let seven = ClosurePlan { min_pairs: 7, ..narrow };
+        assert!(hinted_round(&local, &remote, &right, &labels, &seven, Reach::WholeMap).is_none());
     }
 }
