@@ -5,13 +5,16 @@
 #                     `fail` naming the script, $SGM (default target/release/sgm), the ROS
 #                     package on ROS_PACKAGE_PATH and $SGM_PATH: a PATH on which roslaunch's
 #                     sgm_node finds $SGM (or SGM_BIN set);
-#   start_master      rosmaster --core on 127.0.0.1:11311 (refused if the port is busy);
+#   start_master      rosmaster --core on 127.0.0.1:$ROS_PORT (refused if the port is busy);
+#                     ROS_PORT is SGM_ROS_PORT, default 11311 (.ci/run gives a script that runs
+#                     beside another one a port of its own);
 #   team_key          a team key as the book makes it, in $WORK/team.key.
 ros_script() {
   SCRIPT_NAME=$1
   SGM=${SGM:-target/release/sgm}
   WORK=$(mktemp -d "/tmp/sgm-$1.XXXXXX")
-  export ROS_MASTER_URI=http://127.0.0.1:11311 ROS_IP=127.0.0.1 ROS_HOME=$WORK/roshome
+  ROS_PORT=${SGM_ROS_PORT:-11311}
+  export ROS_MASTER_URI=http://127.0.0.1:$ROS_PORT ROS_IP=127.0.0.1 ROS_HOME=$WORK/roshome
   mkdir -p "$ROS_HOME"
   PIDS=()
   trap ros_script_cleanup EXIT
@@ -33,8 +36,8 @@ ros_script_cleanup() {
 fail() { echo "$SCRIPT_NAME FAILED: $*" >&2; exit 1; }
 
 start_master() {
-  ss -ltn | grep ':11311 ' >/dev/null && fail "port 11311 busy"
-  rosmaster --core -p 11311 >"$ROS_HOME/master.log" 2>&1 & PIDS+=($!)
+  ss -ltn | grep ":$ROS_PORT " >/dev/null && fail "port $ROS_PORT busy"
+  rosmaster --core -p "$ROS_PORT" >"$ROS_HOME/master.log" 2>&1 & PIDS+=($!)
   for _ in $(seq 100); do rostopic list >/dev/null 2>&1 && return 0; sleep 0.1; done
   fail "rosmaster did not start"
 }
