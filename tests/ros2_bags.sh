@@ -13,10 +13,11 @@ cd "$(dirname "$0")/.."
 SGM=${SGM:-target/release/sgm}
 WORK=$(mktemp -d /tmp/sgm-ros2-bags.XXXXXX)
 trap 'rm -rf "$WORK"' EXIT
+# shellcheck source=tests/ros_common.sh
+. tests/ros_common.sh
 fail() { echo "ros2_bags FAILED: $*" >&2; exit 1; }
 export RUST_LOG=error
-sed 's/^duration_s = 90.0$/duration_s = 30.0/' scenarios/library/quickstart.toml >"$WORK/quickstart_30s.toml"
-grep -q "^duration_s = 30.0$" "$WORK/quickstart_30s.toml" || fail "quickstart.toml has no duration_s = 90.0 to shorten"
+short_quickstart 30.0 "$WORK/quickstart_30s.toml" || fail "quickstart cut to 30 s"
 
 venv=target/ros2-venv
 if ! "$venv/bin/python" -c "import rosbags" 2>/dev/null; then

@@ -21,17 +21,15 @@ cleanup() {
   [ "${CLOCK_KEEP:-0}" = 1 ] && echo "kept $WORK" || rm -rf "$WORK"
 }
 trap cleanup EXIT
+# shellcheck source=tests/ros_common.sh
+. tests/ros_common.sh
 fail() { echo "ros clock faults FAILED: $*" >&2; exit 1; }
 # quickstart cut to 45 s: nothing here needs an alignment, and the bag is played three times.
-sed 's/^duration_s = 90.0$/duration_s = 45.0/' scenarios/library/quickstart.toml >"$WORK/quickstart_45s.toml"
-grep -q "^duration_s = 45.0$" "$WORK/quickstart_45s.toml" || fail "quickstart.toml has no duration_s = 90.0 to shorten"
+short_quickstart 45.0 "$WORK/quickstart_45s.toml" || fail "quickstart cut to 45 s"
 "$SGM" run "$WORK/quickstart_45s.toml" --quiet --out "$WORK/run" --bag-out "$WORK/bags" --no-result-bag >/dev/null \
   || fail "sgm run quickstart (45 s)"
 # Clouds in the bag: every one must become a frame.
-FRAMES=$(rosbag info --yaml --key=topics "$WORK/bags/alpha.bag" | $PY -c '
-import sys, yaml
-print(next(t["messages"] for t in yaml.safe_load(sys.stdin) if t["topic"] == "/alpha/points"))') \
-  || fail "rosbag info alpha.bag"
+FRAMES=$(bag_messages "$WORK/bags/alpha.bag" /alpha/points) || fail "rosbag info alpha.bag"
 (umask 077 && head -c 32 /dev/urandom | od -An -vtx1 | tr -d ' \n' > "$WORK/team.key")
 ss -ltn | grep -q ':11321 ' && fail "port 11321 busy"
 rosmaster --core -p 11321 >"$WORK/master.log" 2>&1 & PIDS+=($!)

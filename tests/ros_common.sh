@@ -9,6 +9,11 @@
 #                     ROS_PORT is SGM_ROS_PORT, default 11311 (.ci/run gives a script that runs
 #                     beside another one a port of its own);
 #   team_key          a team key as the book makes it, in $WORK/team.key.
+# and, without ros_script (the scripts that only want these source this file before they
+# define their own `fail`):
+#   short_quickstart SECONDS FILE   scenarios/library/quickstart.toml cut to SECONDS of mission,
+#                     written to FILE (fails if the file no longer says duration_s = 90.0);
+#   bag_messages BAG TOPIC          how many messages BAG holds on TOPIC (rosbag info).
 ros_script() {
   SCRIPT_NAME=$1
   SGM=${SGM:-target/release/sgm}
@@ -44,4 +49,15 @@ start_master() {
 
 team_key() {
   (umask 077 && head -c 32 /dev/urandom | od -An -vtx1 | tr -d ' \n' > "$WORK/team.key")
+}
+
+short_quickstart() {
+  sed "s/^duration_s = 90.0$/duration_s = $1/" scenarios/library/quickstart.toml >"$2"
+  grep -q "^duration_s = $1$" "$2" || { echo "quickstart.toml has no duration_s = 90.0 to shorten" >&2; return 1; }
+}
+
+bag_messages() {
+  rosbag info --yaml --key=topics "$1" | /usr/bin/python3 -c '
+import sys, yaml
+print(next(t["messages"] for t in yaml.safe_load(sys.stdin) if t["topic"] == sys.argv[1]))' "$2"
 }

@@ -38,6 +38,8 @@ PY=/usr/bin/python3
 PIDS=()
 NETNS=()
 BRIDGE=sgmbr$$
+# shellcheck source=tests/ros_common.sh
+. tests/ros_common.sh
 fail() { echo "ros fleet FAILED: $*" >&2; exit 1; }
 stop_all() {
   for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
@@ -67,10 +69,7 @@ echo "== $N robots of $SCENARIO: bags"
 for r in "${ROBOTS[@]}"; do [ -f "$WORK/bags/$r.bag" ] || fail "$SCENARIO has no robot $r"; done
 # Clouds per robot: every one must become a frame (none lost to a dead peer).
 for r in "${ROBOTS[@]}"; do
-  rosbag info --yaml --key=topics "$WORK/bags/$r.bag" | $PY -c '
-import sys, yaml
-topics = yaml.safe_load(sys.stdin)
-print(next(t["messages"] for t in topics if t["topic"].endswith("/points")))' > "$WORK/$r.clouds"
+  bag_messages "$WORK/bags/$r.bag" "/$r/points" > "$WORK/$r.clouds" || fail "rosbag info $r.bag"
 done
 rosbag info --yaml --key=duration "$WORK/bags/r1.bag" > "$WORK/duration"
 (umask 077 && head -c 32 /dev/urandom | od -An -vtx1 | tr -d ' \n' > "$WORK/team.key")
