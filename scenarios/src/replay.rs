@@ -393,7 +393,7 @@ pub async fn replay_with(
         deskew: team.deskew_counts().await?,
         odometry,
     };
-    let timing = Timing::measure(wall, sim_s, decoding, memory, team.busy_time().await);
+    let timing = Timing::measure(wall, sim_s, (decoding, decoding), memory, team.busy_time().await);
     Ok(ReplayOutcome { run: RunOutcome { record, world, maps, timing, threads }, bags: bag_stats })
 }
 

@@ -62,6 +62,19 @@ impl Threads {
         }
     }
 
+    /// A rayon pool of this many threads that run only on cores nothing else wants (Linux's
+    /// idle scheduling class, [`run_in_background`]): for work that can wait, such as the
+    /// sensors of the next step.
+    pub fn background_pool(self) -> Result<rayon::ThreadPool, rayon::ThreadPoolBuildError> {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(self.get())
+            .thread_name(|k| format!("sgm-background-{k}"))
+            .start_handler(|_| {
+                run_in_background();
+            })
+            .build()
+    }
+
     /// [`Threads::pool`], shared: as the sensors' pool and as the [`Workers`] one robot's
     /// registrations split their work over, so a core that ran out of robots at a barrier helps
     /// the robot still running.
@@ -82,6 +95,26 @@ impl std::fmt::Display for Threads {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         self.0.fmt(f)
     }
+}
+
+/// Moves the calling thread into Linux's idle scheduling class (`SCHED_IDLE`): it runs only
+/// when a core would otherwise idle. Returns whether it was moved; elsewhere, or if refused,
+/// the thread keeps its priority (the work is the same, only the robots may be slowed by it).
+#[cfg(target_os = "linux")]
+pub fn run_in_background() -> bool {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: pid 0 is the calling thread; SCHED_IDLE takes priority 0, and lowering one's own
+    // policy needs no privilege. Nothing but this thread's scheduling changes.
+    let moved = unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) } == 0;
+    if !moved {
+        tracing::debug!("this thread stays at normal priority: {}", std::io::Error::last_os_error());
+    }
+    moved
+}
+
+#[cfg(not(target_os = "linux"))]
+pub fn run_in_background() -> bool {
+    false
 }
 
 fn cores() -> NonZeroUsize {

@@ -15,17 +15,22 @@ pub struct Timing {
     pub actor_busy_s: std::collections::BTreeMap<String, f64>,
     /// Time producing sensor frames (simulating, or reading and decoding bags), s.
     pub simulation_s: f64,
+    /// The part of it the robots waited for, s: all of it when the frames are made on the
+    /// runner's thread (one thread, bag replay); with more threads the sensors are simulated a
+    /// step ahead on otherwise idle cores, and only what did not fit there is waited for.
+    pub simulation_waited_s: f64,
     /// Resident memory at every observation, and its peak over the run, MiB (Linux).
     pub memory: Vec<MemorySample>,
     pub peak_resident_mb: Option<f64>,
 }
 
 impl Timing {
+    /// `(simulation, waited)`: time producing sensor frames, and the part of it waited for;
     /// `actor_busy`: time in handlers per actor kind, summed over the robots' threads.
     pub fn measure(
         wall: Instant,
         sim_s: f64,
-        simulation: Duration,
+        (simulation, waited): (Duration, Duration),
         memory: Vec<MemorySample>,
         actor_busy: std::collections::BTreeMap<&'static str, Duration>,
     ) -> Self {
@@ -38,6 +43,7 @@ impl Timing {
             realtime_factor: sim_s / wall_s.max(1e-9),
             actor_busy_s: actor_busy.into_iter().map(|(k, v)| (k.to_string(), v.as_secs_f64())).collect(),
             simulation_s: simulation.as_secs_f64(),
+            simulation_waited_s: waited.as_secs_f64(),
         }
     }
 }

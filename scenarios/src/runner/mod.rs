@@ -16,6 +16,7 @@
 
 use crate::bag_out::{BagRecorder, RecordedFrame, RecordedImage};
 mod sensing;
+mod sensors;
 
 use crate::observation::Observation;
 use crate::record::Timing;
@@ -32,13 +33,15 @@ use crate::sim::odometry::Odometry;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
 use crate::sim::segmenter_errors::SegmenterErrors;
 use crate::sim::setup::SimulatedWorld;
+use crate::sim::trajectory::Route;
 pub use crate::team::RunError;
 use crate::team::Team;
 use crate::threads::Threads;
 use indicatif::ProgressBar;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use sensing::{Sensed, Sensing, SimRobot};
+use sensing::{Sensed, SimRobot};
+use sensors::{SensorState, Sensors};
 use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_actors::transport::InProcessRadio;
 use sgm_model::geometry::Pose3;
@@ -80,14 +83,13 @@ pub async fn run_with(
     let bag_out = outputs.bag_out;
     let wall = Instant::now();
     let seed = scenario.scenario.seed;
-    let SimulatedWorld { routes, mut world, people } = SimulatedWorld::of(scenario);
+    let SimulatedWorld { routes, world, people } = SimulatedWorld::of(scenario);
     let segmenter_errors = SegmenterErrors::of_scenario(scenario);
     let shared = RadioShared::default();
     let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
     let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&scenario.radio, seed, shared.clone(), &names)));
-    // The robots' sensors are simulated on `threads` threads at once (none: on this one), and
-    // one robot's registrations split over the same threads.
-    let (pool, workers) = outputs.threads.shared_pool().map_err(RunError::Input)?;
+    // One robot's registrations split over `threads` threads (none: on its own).
+    let (_, workers) = outputs.threads.shared_pool().map_err(RunError::Input)?;
     let mut team = Team::new(names.clone(), radio, outputs.threads, workers);
     let mut false_factors =
         FalseFactors::new(&scenario.false_factors, seed, |name| names.iter().position(|n| n == name));
@@ -114,7 +116,7 @@ pub async fn run_with(
     // The camera speaks the configured segmenter's ids (`[classes]`); None: they are ours.
     let pixel_values = segmenter_ids(&scenario.classes, &label_map);
 
-    let mut robots: Vec<SimRobot> = routes
+    let robots: Vec<SimRobot> = routes
         .into_iter()
         .enumerate()
         .map(|(k, route)| SimRobot {
@@ -141,6 +143,8 @@ pub async fn run_with(
 
     let dt = scenario.scenario.frame_interval_s;
     let steps = (scenario.scenario.duration_s / dt).round() as u64;
+    // The routes as the false factors need them (the sensors keep their own).
+    let routes: Vec<Route> = robots.iter().map(|r| r.route.clone()).collect();
     let report_every = ((scenario.scenario.report_interval_s / dt).round() as u64).max(1);
     // The truth as the series needs it (the world's placement is kept up to date, the frame and
     // byte counts are filled in at the end).
@@ -158,7 +162,7 @@ pub async fn run_with(
     let mut series = Vec::new();
     let mut last = Observation::default();
     let mut memory = Vec::new();
-    let mut simulation = Duration::ZERO;
+    let (mut simulation, mut waited) = (Duration::ZERO, Duration::ZERO);
     if let Some(bar) = progress {
         bar.set_length(steps);
     }
@@ -166,25 +170,34 @@ pub async fn run_with(
     let internal = scenario.odometry.source == OdometrySourceSpec::Internal;
     let sweep_nanos = nanos_from_stamp(scenario.odometry.sweep_interval_s);
     let sweeps_per_frame = if internal { (dt_nanos / sweep_nanos.max(1)).max(1) } else { 1 };
+    let state = SensorState {
+        scenario: scenario.clone(),
+        world,
+        people,
+        robots,
+        segmenter_errors,
+        camera,
+        splat,
+        pixel_values,
+        dt_nanos,
+        sweep_nanos,
+        sweeps_per_frame,
+    };
+    // Where each robot's odometry started in the truth, as of the step the team is at.
+    let mut truth_from_world: Vec<Pose3> = truths.iter().map(|t| t.truth_from_world).collect();
+    let mut sensors = Sensors::start(state, outputs.threads)?;
     for step in 1..=steps {
         let t = stamp_from_nanos(step as i64 * dt_nanos);
-        let sim_started = Instant::now();
-        people.place(&mut world, t);
-        let sensing = Sensing {
-            scenario,
-            world: &world,
-            segmenter_errors: segmenter_errors.as_ref(),
-            camera: &camera,
-            splat,
-            pixel_values: pixel_values.as_deref(),
-            dt_nanos,
-            sweep_nanos,
-            sweeps_per_frame,
-        };
-        let sensed = sensing.sense_all(&mut robots, step, t, pool.as_deref());
-        simulation += sim_started.elapsed();
-        for (k, sensed) in sensed.into_iter().enumerate() {
-            let Some(Sensed { truth, odometry, down, sweeps, frame }) = sensed else { continue };
+        let waiting = Instant::now();
+        let sensed = sensors.step(step, steps).await?;
+        (simulation, waited) = (simulation + sensed.took, waited + waiting.elapsed());
+        for (k, sensed) in sensed.robots.into_iter().enumerate() {
+            let Some(Sensed { truth, odometry, truth_from_world: origin, down, sweeps, frame }) = sensed else {
+                continue;
+            };
+            if let Some(slot) = truth_from_world.get_mut(k) {
+                *slot = origin;
+            }
             team.advance(k, t);
             shared.set_position(RobotId::from_index(k), truth.translation.vector.into());
             if down {
@@ -247,7 +260,7 @@ pub async fn run_with(
         team.settle(t).await?;
         if false_factors.due(t) {
             let observation = team.observe(t).await?;
-            for (k, message) in false_factors.make(t, &observation, |k, s| robots.get(k)?.route.pose_at(s)) {
+            for (k, message) in false_factors.make(t, &observation, |k, s| routes.get(k)?.pose_at(s)) {
                 team.inject(k, message);
             }
             team.settle(t).await?;
@@ -264,13 +277,13 @@ pub async fn run_with(
                 true => team.odometry_statuses().await?.into_iter().map(|s| s.and_then(|s| s.origin_stamp)).collect(),
                 false => Vec::new(),
             };
-            for (k, (truth, robot)) in truths.iter_mut().zip(&robots).enumerate() {
+            for (k, (truth, simulated)) in truths.iter_mut().zip(&truth_from_world).enumerate() {
                 truth.truth_from_world = origins
                     .get(k)
                     .copied()
                     .flatten()
                     .and_then(|origin| truth.truth.odometry_origin(origin))
-                    .unwrap_or(robot.odometry.truth_from_world);
+                    .unwrap_or(*simulated);
             }
             series.push(series_point(&last, &truths));
             crate::memory::release_free_pages();
@@ -284,6 +297,7 @@ pub async fn run_with(
         recorder.finish()?;
     }
 
+    let SensorState { mut world, people, robots, .. } = sensors.finish()?;
     people.remove(&mut world);
     let maps = team.maps().await?;
     if let Some(result) = result {
@@ -295,7 +309,7 @@ pub async fn run_with(
         (truth.frames, truth.raw_bytes, truth.raw_max_bytes) = (robot.frames, robot.raw_bytes, robot.raw_max_bytes);
     }
     let sim_s = steps as f64 * dt;
-    let timing = Timing::measure(wall, sim_s, simulation, memory, team.busy_time().await);
+    let timing = Timing::measure(wall, sim_s, (simulation, waited), memory, team.busy_time().await);
     let record = RunRecord {
         scenario: scenario.scenario.name.clone(),
         seed,

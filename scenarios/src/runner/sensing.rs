@@ -64,6 +64,8 @@ pub(super) struct Sensing<'a> {
 pub(super) struct Sensed {
     pub truth: Pose3,
     pub odometry: Pose3,
+    /// Where the robot's odometry started, in the truth (set at its first step).
+    pub truth_from_world: Pose3,
     /// Crashed and not yet restarted: nothing else was simulated.
     pub down: bool,
     pub sweeps: Vec<Sweep>,
@@ -113,7 +115,8 @@ impl Sensing<'_> {
         let spec = scenario.robots.get(k)?;
         let crashed = spec.crash_s.is_some_and(|c| t >= c);
         if crashed && spec.restart_s.is_none_or(|r| t < r) {
-            return Some(Sensed { truth, odometry, down: true, sweeps: Vec::new(), frame: None });
+            let truth_from_world = robot.odometry.truth_from_world;
+            return Some(Sensed { truth, odometry, truth_from_world, down: true, sweeps: Vec::new(), frame: None });
         }
         let route = &robot.route;
         // The sweeps between the last frame and this one, for the internal odometry.
@@ -169,7 +172,8 @@ impl Sensing<'_> {
         let points = mount.as_told(&frame.points).unwrap_or(frame.points);
         let times = (!frame.times.is_empty()).then_some(frame.times);
         let frame = Frame { points, times, labels, recorded_labels, imu };
-        Some(Sensed { truth, odometry, down: false, sweeps, frame: Some(frame) })
+        let truth_from_world = robot.odometry.truth_from_world;
+        Some(Sensed { truth, odometry, truth_from_world, down: false, sweeps, frame: Some(frame) })
     }
 }
 
