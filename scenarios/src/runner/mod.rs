@@ -24,28 +24,19 @@ use crate::record::{RobotTruth, RunOutcome, RunRecord, TruthTrack};
 use crate::report::series_point;
 use crate::result_bag::ResultBag;
 use crate::scenario::{OdometrySourceSpec, Scenario};
-use crate::sim::camera::{camera_model, segmenter_ids, CameraMount};
 use crate::sim::false_factors::FalseFactors;
-use crate::sim::imu::Imu;
-use crate::sim::lidar::Lidar;
-use crate::sim::mount::LidarMount;
-use crate::sim::odometry::Odometry;
 use crate::sim::radio::{RadioShared, SimulatedRadio};
-use crate::sim::segmenter_errors::SegmenterErrors;
-use crate::sim::setup::SimulatedWorld;
 use crate::sim::trajectory::Route;
 pub use crate::team::RunError;
 use crate::team::Team;
 use crate::threads::Threads;
 use indicatif::ProgressBar;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use sensing::{Sensed, SimRobot};
+use sensing::Sensed;
 use sensors::{SensorState, Sensors};
 use sgm_actors::messages::{FrameLabels, SensorFrame};
 use sgm_actors::transport::InProcessRadio;
 use sgm_model::geometry::Pose3;
-use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos, RobotId};
+use sgm_model::scene_graph::{stamp_from_nanos, RobotId};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -83,8 +74,6 @@ pub async fn run_with(
     let bag_out = outputs.bag_out;
     let wall = Instant::now();
     let seed = scenario.scenario.seed;
-    let SimulatedWorld { routes, world, people } = SimulatedWorld::of(scenario);
-    let segmenter_errors = SegmenterErrors::of_scenario(scenario);
     let shared = RadioShared::default();
     let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
     let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&scenario.radio, seed, shared.clone(), &names)));
@@ -110,45 +99,17 @@ pub async fn run_with(
         Some(dir) => Some(BagRecorder::new(dir, &scenario.ros, names)?.with_imu(&scenario.imu)),
         None => None,
     };
-    let camera = camera_model(&scenario.camera);
-    let splat = splat_px(scenario, camera.fx);
-    let (_, label_map) = scenario.robot_config(0).class_tables().map_err(|e| RunError::Input(e.to_string()))?;
-    // The camera speaks the configured segmenter's ids (`[classes]`); None: they are ours.
-    let pixel_values = segmenter_ids(&scenario.classes, &label_map);
-
-    let robots: Vec<SimRobot> = routes
-        .into_iter()
-        .enumerate()
-        .map(|(k, route)| SimRobot {
-            name: scenario.robot_name(k),
-            route,
-            odometry: Odometry::new(&scenario.odometry),
-            lidar: Lidar::new(&scenario.lidar),
-            lidar_mount: LidarMount::new(&scenario.lidar, seed, k),
-            camera: CameraMount::new(&scenario.camera, seed, k),
-            imu: scenario.imu.enabled.then(|| {
-                (
-                    Imu::new(&scenario.imu),
-                    ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ (k as u64 + 1)),
-                )
-            }),
-            rng: ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (k as u64 + 1)),
-            segmenter_rng: ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x5E67_4D45_4E54_4552) ^ (k as u64 + 1)),
-            sweep_rng: ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x5357_4545_5053_0001) ^ (k as u64 + 1)),
-            frames: 0,
-            raw_bytes: 0,
-            raw_max_bytes: 0,
-        })
-        .collect();
+    let state = SensorState::of(scenario)?;
 
     let dt = scenario.scenario.frame_interval_s;
     let steps = (scenario.scenario.duration_s / dt).round() as u64;
     // The routes as the false factors need them (the sensors keep their own).
-    let routes: Vec<Route> = robots.iter().map(|r| r.route.clone()).collect();
+    let routes: Vec<Route> = state.robots.iter().map(|r| r.route.clone()).collect();
     let report_every = ((scenario.scenario.report_interval_s / dt).round() as u64).max(1);
     // The truth as the series needs it (the world's placement is kept up to date, the frame and
     // byte counts are filled in at the end).
-    let mut truths: Vec<RobotTruth> = robots
+    let mut truths: Vec<RobotTruth> = state
+        .robots
         .iter()
         .map(|robot| RobotTruth {
             name: robot.name.clone(),
@@ -166,23 +127,8 @@ pub async fn run_with(
     if let Some(bar) = progress {
         bar.set_length(steps);
     }
-    let dt_nanos = nanos_from_stamp(dt);
+    let dt_nanos = state.dt_nanos;
     let internal = scenario.odometry.source == OdometrySourceSpec::Internal;
-    let sweep_nanos = nanos_from_stamp(scenario.odometry.sweep_interval_s);
-    let sweeps_per_frame = if internal { (dt_nanos / sweep_nanos.max(1)).max(1) } else { 1 };
-    let state = SensorState {
-        scenario: scenario.clone(),
-        world,
-        people,
-        robots,
-        segmenter_errors,
-        camera,
-        splat,
-        pixel_values,
-        dt_nanos,
-        sweep_nanos,
-        sweeps_per_frame,
-    };
     // Where each robot's odometry started in the truth, as of the step the team is at.
     let mut truth_from_world: Vec<Pose3> = truths.iter().map(|t| t.truth_from_world).collect();
     let mut sensors = Sensors::start(state, outputs.threads)?;
@@ -364,20 +310,4 @@ impl Drop for SnapshotDir {
             let _ = std::fs::remove_dir_all(&self.path);
         }
     }
-}
-
-/// Half-size of a return's splat in the label image: half the scan pattern's spacing in pixels.
-fn splat_px(scenario: &Scenario, fx: f64) -> i64 {
-    let l = &scenario.lidar;
-    let spacing_deg = match l.pattern {
-        crate::scenario::LidarPattern::Spinning => {
-            let vertical = (l.vertical_fov_deg[1] - l.vertical_fov_deg[0]) / (l.beams.max(2) - 1) as f64;
-            vertical.max(l.azimuth_step_deg)
-        }
-        crate::scenario::LidarPattern::Livox => {
-            let area = 360.0 * (l.vertical_fov_deg[1] - l.vertical_fov_deg[0]);
-            (area / l.points_per_frame.max(1) as f64).sqrt()
-        }
-    };
-    ((spacing_deg.to_radians() * fx / 2.0).ceil() as i64).clamp(1, 8)
 }

@@ -9,14 +9,22 @@
 //! work is not slowed by them.
 
 use super::sensing::{Sensed, Sensing, SimRobot};
-use crate::scenario::Scenario;
+use crate::scenario::{OdometrySourceSpec, Scenario};
+use crate::sim::camera::{camera_model, segmenter_ids, CameraMount};
+use crate::sim::imu::Imu;
+use crate::sim::lidar::Lidar;
+use crate::sim::mount::LidarMount;
+use crate::sim::odometry::Odometry;
 use crate::sim::people::People;
 use crate::sim::segmenter_errors::SegmenterErrors;
+use crate::sim::setup::SimulatedWorld;
 use crate::sim::world::World;
 use crate::team::RunError;
 use crate::threads::Threads;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
 use sgm_model::perception::projection::CameraModel;
-use sgm_model::scene_graph::stamp_from_nanos;
+use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos};
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc::{unbounded_channel, UnboundedReceiver, UnboundedSender};
 
@@ -38,6 +46,53 @@ pub(super) struct SensorState {
 }
 
 impl SensorState {
+    /// The sensors of `scenario`'s robots and world, before the first step.
+    pub fn of(scenario: &Scenario) -> Result<Self, RunError> {
+        let seed = scenario.scenario.seed;
+        let SimulatedWorld { routes, world, people } = SimulatedWorld::of(scenario);
+        let camera = camera_model(&scenario.camera);
+        let splat = splat_px(scenario, camera.fx);
+        let (_, label_map) = scenario.robot_config(0).class_tables().map_err(|e| RunError::Input(e.to_string()))?;
+        // The camera speaks the configured segmenter's ids (`[classes]`); None: they are ours.
+        let pixel_values = segmenter_ids(&scenario.classes, &label_map);
+        let stream = |k: usize, salt: u64| ChaCha8Rng::seed_from_u64(seed.wrapping_mul(salt) ^ (k as u64 + 1));
+        let robots = routes
+            .into_iter()
+            .enumerate()
+            .map(|(k, route)| SimRobot {
+                name: scenario.robot_name(k),
+                route,
+                odometry: Odometry::new(&scenario.odometry),
+                lidar: Lidar::new(&scenario.lidar),
+                lidar_mount: LidarMount::new(&scenario.lidar, seed, k),
+                camera: CameraMount::new(&scenario.camera, seed, k),
+                imu: scenario.imu.enabled.then(|| (Imu::new(&scenario.imu), stream(k, 0x2545_F491_4F6C_DD1D))),
+                rng: stream(k, 0x9E37_79B9_7F4A_7C15),
+                segmenter_rng: stream(k, 0x5E67_4D45_4E54_4552),
+                sweep_rng: stream(k, 0x5357_4545_5053_0001),
+                frames: 0,
+                raw_bytes: 0,
+                raw_max_bytes: 0,
+            })
+            .collect();
+        let dt_nanos = nanos_from_stamp(scenario.scenario.frame_interval_s);
+        let sweep_nanos = nanos_from_stamp(scenario.odometry.sweep_interval_s);
+        let internal = scenario.odometry.source == OdometrySourceSpec::Internal;
+        Ok(Self {
+            scenario: scenario.clone(),
+            world,
+            people,
+            robots,
+            segmenter_errors: SegmenterErrors::of_scenario(scenario),
+            camera,
+            splat,
+            pixel_values,
+            dt_nanos,
+            sweep_nanos,
+            sweeps_per_frame: if internal { (dt_nanos / sweep_nanos.max(1)).max(1) } else { 1 },
+        })
+    }
+
     /// Step `step` of every robot (the people placed for it first), on `pool` if any, and the
     /// time it took.
     fn sense(&mut self, step: u64, pool: Option<&rayon::ThreadPool>) -> SensedStep {
@@ -172,5 +227,83 @@ impl Drop for Ahead {
             // Its state goes with the failed run; a panic was already reported by its hook.
             let _ = thread.join();
         }
+    }
+}
+
+/// Half-size of a return's splat in the label image: half the scan pattern's spacing in pixels.
+fn splat_px(scenario: &Scenario, fx: f64) -> i64 {
+    let l = &scenario.lidar;
+    let spacing_deg = match l.pattern {
+        crate::scenario::LidarPattern::Spinning => {
+            let vertical = (l.vertical_fov_deg[1] - l.vertical_fov_deg[0]) / (l.beams.max(2) - 1) as f64;
+            vertical.max(l.azimuth_step_deg)
+        }
+        crate::scenario::LidarPattern::Livox => {
+            let area = 360.0 * (l.vertical_fov_deg[1] - l.vertical_fov_deg[0]);
+            (area / l.points_per_frame.max(1) as f64).sqrt()
+        }
+    };
+    ((spacing_deg.to_radians() * fx / 2.0).ceil() as i64).clamp(1, 8)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::num::NonZeroUsize;
+
+    /// A step's frames, as bits: truth, odometry, every point and its time, the labels.
+    fn bits(step: &SensedStep) -> Vec<u64> {
+        let mut out = vec![step.step];
+        for sensed in step.robots.iter().flatten() {
+            let poses = [sensed.truth, sensed.odometry, sensed.truth_from_world];
+            out.extend(poses.iter().flat_map(|p| p.to_homogeneous().iter().map(|v| v.to_bits()).collect::<Vec<_>>()));
+            out.push(u64::from(sensed.down));
+            let frames = sensed
+                .sweeps
+                .iter()
+                .map(|s| (&s.points, &s.times))
+                .chain(sensed.frame.iter().map(|f| (&f.points, &f.times)));
+            for (points, times) in frames {
+                out.extend(points.iter().flat_map(|p| p.coords.iter().map(|v| v.to_bits())));
+                out.extend(times.iter().flatten().map(|t| u64::from(t.to_bits())));
+            }
+            if let Some(frame) = &sensed.frame {
+                out.extend(format!("{:?}", frame.labels).bytes().map(u64::from));
+            }
+        }
+        out
+    }
+
+    /// The handheld rig's scenario has all the sensors: people walking through, the camera's
+    /// label image, the IMU and the sweeps of internal odometry.
+    #[actix_rt::test]
+    async fn frames_simulated_ahead_are_the_frames_simulated_in_turn() {
+        let mut scenario = Scenario::load("handheld_indoor").expect("library scenario");
+        scenario.scenario.duration_s = 6.0 * scenario.scenario.frame_interval_s;
+        let steps = 6;
+        let mut here = Sensors::start(SensorState::of(&scenario).expect("sensors"), Threads::one()).expect("here");
+        let two = Threads::exactly(NonZeroUsize::new(2).expect("two"));
+        let mut ahead = Sensors::start(SensorState::of(&scenario).expect("sensors"), two).expect("ahead");
+        assert!(matches!(ahead, Sensors::Ahead(_)), "two threads simulate ahead");
+        for step in 1..=steps {
+            let (a, b) = (here.step(step, steps).await.expect("here"), ahead.step(step, steps).await.expect("ahead"));
+            assert!(a.robots.iter().flatten().any(|s| s.frame.is_some()), "step {step} has frames");
+            assert_eq!(bits(&a), bits(&b), "step {step}");
+        }
+        let (a, b) = (here.finish().expect("here"), ahead.finish().expect("ahead"));
+        let counts = |s: &SensorState| s.robots.iter().map(|r| (r.frames, r.raw_bytes)).collect::<Vec<_>>();
+        assert_eq!(counts(&a), counts(&b));
+        assert_eq!(a.world.solids.len(), b.world.solids.len());
+    }
+
+    #[actix_rt::test]
+    async fn a_step_out_of_turn_is_an_error_not_wrong_frames() {
+        let mut scenario = Scenario::load("quickstart").expect("library scenario");
+        scenario.scenario.duration_s = 4.0 * scenario.scenario.frame_interval_s;
+        let two = Threads::exactly(NonZeroUsize::new(2).expect("two"));
+        let mut ahead = Sensors::start(SensorState::of(&scenario).expect("sensors"), two).expect("ahead");
+        ahead.step(1, 4).await.expect("first");
+        let error = ahead.step(3, 4).await.err().expect("step 2 comes first");
+        assert!(error.to_string().contains("handed step 2 back for step 3"), "{error}");
     }
 }
