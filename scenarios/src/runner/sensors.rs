@@ -158,9 +158,10 @@ impl Sensors {
     }
 }
 
-/// How many steps the sensors may run ahead of the robots. More hides more of the simulation
-/// behind the robots' work (it runs only on cores they leave idle, and those come in bursts),
-/// at the cost of frames held meanwhile: on team_of_sixteen, about 1 MB a robot a step.
+/// How many steps the sensors may run ahead of the robots: enough to fill the idle cores of a
+/// few barriers in a row, at the cost of the frames held meanwhile. On team_of_sixteen (2
+/// threads), 4 steps left the robots waiting 5.7 s for frames and raised the peak resident
+/// memory by 22 MiB; 8 steps, 5.5 s and 54 MiB.
 pub(super) const STEPS_AHEAD: u64 = 4;
 
 /// The sensors' own thread and its queue: steps asked for go in, their frames come out.
