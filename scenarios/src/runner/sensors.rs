@@ -1,12 +1,13 @@
 //! The simulated sensors of the whole team, one step at a time, either on the runner's thread
-//! (one thread) or one step ahead of the robots on a thread of their own (more threads).
+//! (one thread) or up to [`STEPS_AHEAD`] steps ahead of the robots on threads of their own
+//! (more threads).
 //!
 //! A step's frames depend only on the world, the routes and each robot's own random streams,
 //! never on what the robots did with earlier frames ([`super::sensing`]). So while the team
-//! handles step k, the frames of step k + 1 can be simulated, and they are the same. The
-//! simulating threads run in Linux's idle scheduling class: they take a core only when no
-//! robot wants it — at a barrier, while one robot finishes its round alone — and the robots'
-//! work is not slowed by them.
+//! handles step k, the frames of steps k + 1, k + 2, … can be simulated, and they are the
+//! same. The simulating threads run in Linux's idle scheduling class: they take a core only
+//! when no robot wants it — at a barrier, while one robot finishes its round alone — and the
+//! robots' work is not slowed by them.
 
 use super::sensing::{Sensed, Sensing, SimRobot};
 use crate::scenario::{OdometrySourceSpec, Scenario};
@@ -125,9 +126,9 @@ pub(super) struct SensedStep {
 
 /// The team's sensors.
 pub(super) enum Sensors {
-    /// Simulated on the runner's thread when asked for (one thread; or no pool could be built).
+    /// Simulated on the runner's thread when asked for (one thread).
     Here(Box<SensorState>),
-    /// Simulated one step ahead on a thread of their own.
+    /// Simulated ahead on threads of their own.
     Ahead(Ahead),
 }
 
@@ -215,15 +216,18 @@ impl Ahead {
     /// Stops the thread once its last step is done, and takes the state back.
     fn finish(mut self) -> Result<SensorState, RunError> {
         drop(self.asks.take());
+        self.frames.close();
         let thread = self.thread.take().ok_or_else(|| stopped("was already finished"))?;
         thread.join().map_err(|_| stopped("panicked"))
     }
 }
 
 impl Drop for Ahead {
-    /// A run that ends early (an error) stops the thread too, after the step it is on.
+    /// A run that ends early (an error) stops the thread too, after the step it is on: closed,
+    /// the queue takes no more frames, and the steps still asked for are not simulated.
     fn drop(&mut self) {
         drop(self.asks.take());
+        self.frames.close();
         if let Some(thread) = self.thread.take() {
             // Its state goes with the failed run; a panic was already reported by its hook.
             let _ = thread.join();
