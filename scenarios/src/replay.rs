@@ -277,7 +277,7 @@ pub async fn replay_with(
                     spec.range_m = 0.0;
                 }
                 let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&spec, seed, shared.clone(), &names)));
-                let (_, workers) = threads.shared_pool().map_err(RunError::Input)?;
+                let workers = threads.workers().map_err(RunError::Input)?;
                 team.insert(Team::new(names.clone(), radio, threads, workers))
             }
         };

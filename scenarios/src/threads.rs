@@ -75,13 +75,11 @@ impl Threads {
             .build()
     }
 
-    /// [`Threads::pool`], shared: as the sensors' pool and as the [`Workers`] one robot's
-    /// registrations split their work over, so a core that ran out of robots at a barrier helps
-    /// the robot still running.
-    pub fn shared_pool(self) -> Result<(Option<Arc<rayon::ThreadPool>>, Workers), String> {
+    /// [`Threads::pool`] as the [`Workers`] one robot's registrations split their work over,
+    /// so a core that ran out of robots at a barrier helps the robot still running.
+    pub fn workers(self) -> Result<Workers, String> {
         let pool = self.pool().map_err(|e| format!("{self} threads: {e}"))?.map(Arc::new);
-        let workers = pool.clone().map_or_else(Workers::sequential, Workers::on);
-        Ok((pool, workers))
+        Ok(pool.map_or_else(Workers::sequential, Workers::on))
     }
 }
 
@@ -98,9 +96,10 @@ impl std::fmt::Display for Threads {
 }
 
 /// Moves the calling thread into Linux's idle scheduling class (`SCHED_IDLE`): it runs only
-/// when a core would otherwise idle. Returns whether it was moved; elsewhere, or if refused,
+/// when a core would otherwise idle. Returns whether it was moved; elsewhere (glibc's Linux
+/// only, as for the allocator calls of `memory.rs`), or if refused,
 /// the thread keeps its priority (the work is the same, only the robots may be slowed by it).
-#[cfg(target_os = "linux")]
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
 pub fn run_in_background() -> bool {
     let param = libc::sched_param { sched_priority: 0 };
     // SAFETY: pid 0 is the calling thread; SCHED_IDLE takes priority 0, and lowering one's own
@@ -112,7 +111,7 @@ pub fn run_in_background() -> bool {
     moved
 }
 
-#[cfg(not(target_os = "linux"))]
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 pub fn run_in_background() -> bool {
     false
 }

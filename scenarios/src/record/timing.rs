@@ -16,8 +16,10 @@ pub struct Timing {
     /// Time producing sensor frames (simulating, or reading and decoding bags), s.
     pub simulation_s: f64,
     /// The part of it the robots waited for, s: all of it when the frames are made on the
-    /// runner's thread (one thread, bag replay); with more threads the sensors are simulated a
-    /// step ahead on otherwise idle cores, and only what did not fit there is waited for.
+    /// runner's thread (one thread, bag replay). With more threads the sensors are simulated up
+    /// to four steps ahead on otherwise idle cores, and only what did not fit there is waited
+    /// for; `simulation_s` is then the wall time of a thread that yields to the robots, longer
+    /// than the same work on one thread.
     pub simulation_waited_s: f64,
     /// Resident memory at every observation, and its peak over the run, MiB (Linux).
     pub memory: Vec<MemorySample>,

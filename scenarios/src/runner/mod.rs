@@ -78,7 +78,7 @@ pub async fn run_with(
     let names: Vec<String> = (0..scenario.robots.len()).map(|k| scenario.robot_name(k)).collect();
     let radio = InProcessRadio::new(Box::new(SimulatedRadio::new(&scenario.radio, seed, shared.clone(), &names)));
     // One robot's registrations split over `threads` threads (none: on its own).
-    let (_, workers) = outputs.threads.shared_pool().map_err(RunError::Input)?;
+    let workers = outputs.threads.workers().map_err(RunError::Input)?;
     let mut team = Team::new(names.clone(), radio, outputs.threads, workers);
     let mut false_factors =
         FalseFactors::new(&scenario.false_factors, seed, |name| names.iter().position(|n| n == name));

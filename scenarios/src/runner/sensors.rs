@@ -133,7 +133,7 @@ pub(super) enum Sensors {
 }
 
 impl Sensors {
-    /// The sensors of `state`: one step ahead when `threads` allows more than one.
+    /// The sensors of `state`: ahead when `threads` allows more than one.
     pub fn start(state: SensorState, threads: Threads) -> Result<Self, RunError> {
         match threads.get() {
             1 => Ok(Self::Here(Box::new(state))),
@@ -206,11 +206,27 @@ impl Ahead {
             self.asked += 1;
             asks.send(self.asked).map_err(|_| stopped("ended before the run"))?;
         }
-        let sensed = self.frames.recv().await.ok_or_else(|| stopped("ended before the run (a panic?)"))?;
+        let Some(sensed) = self.frames.recv().await else { return Err(self.why_it_ended()) };
         if sensed.step != step {
             return Err(stopped(&format!("handed step {} back for step {step}", sensed.step)));
         }
         Ok(sensed)
+    }
+
+    /// Why the thread stopped handing frames back before the run's end: its panic's message.
+    fn why_it_ended(&mut self) -> RunError {
+        let Some(thread) = self.thread.take() else { return stopped("was already finished") };
+        match thread.join() {
+            Ok(_) => stopped("ended before the run"),
+            Err(panic) => {
+                let message = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_else(|| "no message".into());
+                stopped(&format!("panicked: {message}"))
+            }
+        }
     }
 
     /// Stops the thread once its last step is done, and takes the state back.
@@ -224,14 +240,12 @@ impl Ahead {
 
 impl Drop for Ahead {
     /// A run that ends early (an error) stops the thread too, after the step it is on: closed,
-    /// the queue takes no more frames, and the steps still asked for are not simulated.
+    /// the queue takes no more frames, and the steps still asked for are not simulated. It is
+    /// not waited for: its state goes with the failed run, and at idle priority its step may
+    /// wait long for a core while the robots are still being torn down.
     fn drop(&mut self) {
         drop(self.asks.take());
         self.frames.close();
-        if let Some(thread) = self.thread.take() {
-            // Its state goes with the failed run; a panic was already reported by its hook.
-            let _ = thread.join();
-        }
     }
 }
 
