@@ -97,16 +97,21 @@ impl std::fmt::Display for Threads {
 
 /// Moves the calling thread into Linux's idle scheduling class (`SCHED_IDLE`): it runs only
 /// when a core would otherwise idle. Returns whether it was moved; elsewhere (glibc's Linux
-/// only, as for the allocator calls of `memory.rs`), or if refused,
-/// the thread keeps its priority (the work is the same, only the robots may be slowed by it).
+/// only, as for the allocator calls of `memory.rs`), or if refused, the thread keeps its
+/// priority: the work is the same, only the robots may be slowed by it, and a refusal is
+/// logged once as a warning.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 pub fn run_in_background() -> bool {
+    static REFUSED: std::sync::Once = std::sync::Once::new();
     let param = libc::sched_param { sched_priority: 0 };
     // SAFETY: pid 0 is the calling thread; SCHED_IDLE takes priority 0, and lowering one's own
     // policy needs no privilege. Nothing but this thread's scheduling changes.
     let moved = unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) } == 0;
     if !moved {
-        tracing::debug!("this thread stays at normal priority: {}", std::io::Error::last_os_error());
+        let why = std::io::Error::last_os_error();
+        REFUSED.call_once(|| {
+            tracing::warn!("background threads stay at normal priority ({why}): the robots share their cores with them")
+        });
     }
     moved
 }

@@ -127,7 +127,7 @@ pub async fn run_with(
     if let Some(bar) = progress {
         bar.set_length(steps);
     }
-    let dt_nanos = state.dt_nanos;
+    let dt_nanos = state.sensing.dt_nanos;
     let internal = scenario.odometry.source == OdometrySourceSpec::Internal;
     // Where each robot's odometry started in the truth, as of the step the team is at.
     let mut truth_from_world: Vec<Pose3> = truths.iter().map(|t| t.truth_from_world).collect();

@@ -44,16 +44,15 @@ pub(super) struct SimRobot {
     pub raw_max_bytes: u64,
 }
 
-/// What every robot's sensors share at a step.
-pub(super) struct Sensing<'a> {
-    pub scenario: &'a Scenario,
-    pub world: &'a World,
-    pub segmenter_errors: Option<&'a SegmenterErrors>,
-    pub camera: &'a CameraModel,
+/// What every robot's sensors share, at every step.
+pub(super) struct Sensing {
+    pub scenario: Scenario,
+    pub segmenter_errors: Option<SegmenterErrors>,
+    pub camera: CameraModel,
     /// Half-size of a return's splat in the label image, px.
     pub splat: i64,
     /// The configured segmenter's id for each of our classes (`None`: ours).
-    pub pixel_values: Option<&'a [u16]>,
+    pub pixel_values: Option<Vec<u16>>,
     pub dt_nanos: i64,
     pub sweep_nanos: i64,
     /// Sweeps per frame (internal odometry; 1: none between frames).
@@ -91,25 +90,26 @@ pub(super) struct Frame {
     pub imu: Vec<ImuSample>,
 }
 
-impl Sensing<'_> {
-    /// Every robot's step `step` (at `t`), on at most `threads` threads; `None` for a robot that
+impl Sensing {
+    /// Every robot's step `step` (at `t`) in `world`, on `pool` if any; `None` for a robot that
     /// is not on (before its start or after its route).
     pub fn sense_all(
         &self,
+        world: &World,
         robots: &mut [SimRobot],
         step: u64,
         t: Stamp,
         pool: Option<&rayon::ThreadPool>,
     ) -> Vec<Option<Sensed>> {
-        let work = |(k, robot): (usize, &mut SimRobot)| self.sense(robot, k, step, t);
+        let work = |(k, robot): (usize, &mut SimRobot)| self.sense(world, robot, k, step, t);
         match pool {
             Some(pool) => pool.install(|| robots.par_iter_mut().enumerate().map(work).collect()),
             None => robots.iter_mut().enumerate().map(work).collect(),
         }
     }
 
-    fn sense(&self, robot: &mut SimRobot, k: usize, step: u64, t: Stamp) -> Option<Sensed> {
-        let scenario = self.scenario;
+    fn sense(&self, world: &World, robot: &mut SimRobot, k: usize, step: u64, t: Stamp) -> Option<Sensed> {
+        let scenario = &self.scenario;
         let truth = robot.route.pose_at(t)?;
         let odometry = robot.odometry.step(&truth, &mut robot.rng);
         let spec = scenario.robots.get(k)?;
@@ -129,7 +129,7 @@ impl Sensing<'_> {
                 None => Vec::new(),
             };
             let mount = robot.lidar_mount;
-            let sweep = sweep_in_body(&mut robot.lidar, &mount, self.world, route, s, &truth_s, &mut robot.sweep_rng);
+            let sweep = sweep_in_body(&mut robot.lidar, &mount, world, route, s, &truth_s, &mut robot.sweep_rng);
             let points = mount.as_told(&sweep.points).unwrap_or(sweep.points);
             let times = (!sweep.times.is_empty()).then_some(sweep.times);
             sweeps.push(Sweep { stamp: s, points, times, imu });
@@ -140,12 +140,13 @@ impl Sensing<'_> {
             None => Vec::new(),
         };
         let mount = robot.lidar_mount;
-        let mut frame = sweep_in_body(&mut robot.lidar, &mount, self.world, route, t, &truth, &mut robot.rng);
-        if let Some(errors) = self.segmenter_errors {
+        let mut frame = sweep_in_body(&mut robot.lidar, &mount, world, route, t, &truth, &mut robot.rng);
+        if let Some(errors) = &self.segmenter_errors {
             errors.apply(&mut frame, &truth, &mut robot.segmenter_rng);
         }
-        let wrong = mislabels(&frame, scenario.camera.mislabel_rate, &self.world.matchable_labels, &mut robot.rng);
-        let as_pixel = |id: u16| self.pixel_values.map_or(id, |v| v.get(usize::from(id)).copied().unwrap_or(NO_LABEL));
+        let wrong = mislabels(&frame, scenario.camera.mislabel_rate, &world.matchable_labels, &mut robot.rng);
+        let as_pixel =
+            |id: u16| self.pixel_values.as_deref().map_or(id, |v| v.get(usize::from(id)).copied().unwrap_or(NO_LABEL));
         let (labels, recorded_labels) = if scenario.camera.enabled {
             let shot = camera_shot(&scenario.camera, robot.camera.camera_from_body, route, t, &truth);
             let mut image = render(&scenario.camera, &frame, &wrong, self.splat, &shot, &mut robot.rng);

@@ -24,26 +24,16 @@ use crate::team::RunError;
 use crate::threads::Threads;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use sgm_model::perception::projection::CameraModel;
 use sgm_model::scene_graph::{nanos_from_stamp, stamp_from_nanos};
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc::{unbounded_channel, UnboundedReceiver, UnboundedSender};
 
 /// Everything the sensors need, owned, so that it can move to a thread of its own.
 pub(super) struct SensorState {
-    pub scenario: Scenario,
+    pub sensing: Sensing,
     pub world: World,
     pub people: People,
     pub robots: Vec<SimRobot>,
-    pub segmenter_errors: Option<SegmenterErrors>,
-    pub camera: CameraModel,
-    /// Half-size of a return's splat in the label image, px.
-    pub splat: i64,
-    /// The configured segmenter's id for each of our classes (`None`: ours).
-    pub pixel_values: Option<Vec<u16>>,
-    pub dt_nanos: i64,
-    pub sweep_nanos: i64,
-    pub sweeps_per_frame: i64,
 }
 
 impl SensorState {
@@ -79,11 +69,8 @@ impl SensorState {
         let dt_nanos = nanos_from_stamp(scenario.scenario.frame_interval_s);
         let sweep_nanos = nanos_from_stamp(scenario.odometry.sweep_interval_s);
         let internal = scenario.odometry.source == OdometrySourceSpec::Internal;
-        Ok(Self {
+        let sensing = Sensing {
             scenario: scenario.clone(),
-            world,
-            people,
-            robots,
             segmenter_errors: SegmenterErrors::of_scenario(scenario),
             camera,
             splat,
@@ -91,27 +78,17 @@ impl SensorState {
             dt_nanos,
             sweep_nanos,
             sweeps_per_frame: if internal { (dt_nanos / sweep_nanos.max(1)).max(1) } else { 1 },
-        })
+        };
+        Ok(Self { sensing, world, people, robots })
     }
 
     /// Step `step` of every robot (the people placed for it first), on `pool` if any, and the
     /// time it took.
     fn sense(&mut self, step: u64, pool: Option<&rayon::ThreadPool>) -> SensedStep {
         let started = Instant::now();
-        let t = stamp_from_nanos(step as i64 * self.dt_nanos);
+        let t = stamp_from_nanos(step as i64 * self.sensing.dt_nanos);
         self.people.place(&mut self.world, t);
-        let sensing = Sensing {
-            scenario: &self.scenario,
-            world: &self.world,
-            segmenter_errors: self.segmenter_errors.as_ref(),
-            camera: &self.camera,
-            splat: self.splat,
-            pixel_values: self.pixel_values.as_deref(),
-            dt_nanos: self.dt_nanos,
-            sweep_nanos: self.sweep_nanos,
-            sweeps_per_frame: self.sweeps_per_frame,
-        };
-        let robots = sensing.sense_all(&mut self.robots, step, t, pool);
+        let robots = self.sensing.sense_all(&self.world, &mut self.robots, step, t, pool);
         SensedStep { step, robots, took: started.elapsed() }
     }
 }
