@@ -196,6 +196,47 @@ async fn a_robot_that_cannot_match_graphs_aligns_from_its_neighbours_alignments(
     assert_eq!(sent.get(MessageKind::Alignments).count, 0);
 }
 
+/// A robot that no graph match and no direct hint can serve (both need more objects than any
+/// overlap holds) still aligns with both neighbours through the hints chained through the third
+/// robot: a few pairs only say where the keyframes to register are, and its own registrations
+/// decide (`matcher.relay.min_relayed_pairs`). Needing more pairs than the ground holds, it
+/// stays unaligned.
+#[actix_rt::test]
+async fn a_chained_hint_with_few_objects_through_it_aligns_by_registration() {
+    let a = vec![Point3::new(-25.0, -10.0, 0.0), Point3::new(25.0, -10.0, 0.0)];
+    let b = vec![Point3::new(20.0, 15.0, 0.0), Point3::new(-20.0, 15.0, 0.0), Point3::new(-20.0, -15.0, 0.0)];
+    let c = vec![Point3::new(0.0, -25.0, 0.0), Point3::new(0.0, 25.0, 0.0)];
+    let paths = || {
+        vec![
+            (a.clone(), Pose3::identity()),
+            (b.clone(), pose_from_yaw_translation(0.8, Vector3::new(12.0, -7.0, 0.0))),
+            (c.clone(), pose_from_yaw_translation(-2.0, Vector3::new(-5.0, 20.0, 0.0))),
+        ]
+    };
+    let starved = |min_relayed_pairs: usize| {
+        move |c: &mut RobotConfig| {
+            if c.robot.id == 3 {
+                c.matcher.matching.min_matches = 1000;
+                c.matcher.min_matched_objects = 1000;
+                c.matcher.relay.min_relayed_pairs = min_relayed_pairs;
+            }
+        }
+    };
+    let robots = run_team_with(paths(), 45, None, starved(1)).await;
+    let mut all = Vec::new();
+    for r in &robots {
+        all.push(r.handle.matcher.send(GetNeighbours).await.unwrap());
+    }
+    assert_aligned(&robots, &all);
+    for n in &all[2] {
+        let via = n.aligned_via.expect("robot 3 can only have been told");
+        assert_ne!(via, n.robot, "a direct hint needs min_matched_objects pairs: {n:?}");
+    }
+    let strict = run_team_with(paths(), 45, None, starved(1000)).await;
+    let alone = strict[2].handle.matcher.send(GetNeighbours).await.unwrap();
+    assert!(alone.iter().all(|n| n.state != Some(ProtocolStage::Aligned)), "{alone:?}");
+}
+
 /// Once aligned, the robots keep closing over ground no round covered: closure rounds run, each
 /// neighbour keyframe is asked for once, their factors reach the pose graph and the transform
 /// the Matcher reports is the pose graph's. With closures off, the first round's factors are

@@ -97,11 +97,17 @@ pub struct RelaySection {
     /// same evidence seen from its side); a hint chained through a third robot needs
     /// `min_keyframe_factors`. Default 1.
     pub min_own_factors: usize,
+    /// Objects that must pair through a hint chained through a third robot for its round to
+    /// start (a direct hint needs `min_matched_objects`). They only choose which keyframes are
+    /// asked for: the round's `min_keyframe_factors` registrations are its evidence, so two
+    /// robots whose shared ground holds one object still align when a third placed both.
+    /// Default 1.
+    pub min_relayed_pairs: usize,
 }
 
 impl Default for RelaySection {
     fn default() -> Self {
-        Self { enabled: true, gate_m: 1.5, min_own_factors: 1 }
+        Self { enabled: true, gate_m: 1.5, min_own_factors: 1, min_relayed_pairs: 1 }
     }
 }
 
@@ -109,7 +115,8 @@ impl RelaySection {
     fn validate(&self) -> Result<(), ConfigError> {
         let g = self.gate_m;
         check(g.is_finite() && g > 0.0 && g <= 10.0, "matcher.relay.gate_m", g, "0 < x ≤ 10 m")?;
-        check(self.min_own_factors >= 1, "matcher.relay.min_own_factors", self.min_own_factors, "≥ 1")
+        check(self.min_own_factors >= 1, "matcher.relay.min_own_factors", self.min_own_factors, "≥ 1")?;
+        check(self.min_relayed_pairs >= 1, "matcher.relay.min_relayed_pairs", self.min_relayed_pairs, "≥ 1")
     }
 }
 

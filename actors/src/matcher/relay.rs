@@ -53,8 +53,9 @@ impl Matcher {
     /// The first hint for `robot` (not near a hint refuted recently) that pairs at least
     /// `min_matched_objects` objects: on one patch for a direct hint, whose round one
     /// registration of ours settles (`min_round_factors`); on one patch or else over the whole
-    /// map for a relayed one, settled by as many registrations as a graph match. Its transform,
-    /// the pairs, and whose alignment it came from.
+    /// map for a relayed one, settled by as many registrations as a graph match, or else its
+    /// best patch of at least `relay.min_relayed_pairs`. Its transform, the pairs, and whose
+    /// alignment it came from.
     pub(super) fn hinted(
         &self,
         robot: RobotId,
@@ -76,8 +77,16 @@ impl Matcher {
         let hints = hints_for(self.robot, robot, &ours, &self.hints);
         let start =
             hints.iter().filter(|hint| !refuted_recently(refuted, &hint.local_from_remote, now)).find_map(|hint| {
-                let reach = if hint.via == robot { Reach::Patch } else { Reach::WholeMap };
-                let round = hinted_round(local, remote, hint, &self.labels, &plan, reach)?;
+                let round = if hint.via == robot {
+                    hinted_round(local, remote, hint, &self.labels, &plan, Reach::Patch)
+                } else {
+                    // As many pairs as a graph match, on a patch or over the whole map; else the
+                    // patch with the most of at least `min_relayed_pairs`, which only say where
+                    // the keyframes to register are.
+                    let few = ClosurePlan { min_pairs: self.config.relay.min_relayed_pairs, ..plan.clone() };
+                    hinted_round(local, remote, hint, &self.labels, &plan, Reach::WholeMap)
+                        .or_else(|| hinted_round(local, remote, hint, &self.labels, &few, Reach::Patch))
+                }?;
                 let pairs = round.iter().map(|p| (p.local, p.remote)).collect();
                 Some(RoundStart { local_from_remote: hint.local_from_remote, pairs, via: Some(hint.via) })
             });

@@ -56,7 +56,8 @@ impl Matcher {
 
     /// Object-cloud ICP of the matched pairs (remote object points, remote world, onto ours,
     /// local world) from `initial`: the refined transform (`initial` when ICP does not
-    /// converge), and the neighbour keyframes that observed each matched remote object.
+    /// converge or the pairs are fewer than three), and the neighbour keyframes that observed
+    /// each matched remote object.
     pub(super) fn object_cloud_icp(
         &self,
         pairs: &[(ObjectId, ObjectId)],
@@ -76,6 +77,11 @@ impl Matcher {
             if let Some(object) = self.map.objects.objects.iter().find(|o| o.id == *local_id) {
                 target.extend(self.local_object_cloud(object));
             }
+        }
+        // Fewer than three objects leave a turn about them free (one object: any turn about its
+        // centroid): the first estimate stands, and the keyframes' registrations refine it.
+        if pairs.len() < 3 {
+            return (*initial, observed_in);
         }
         let icp = &self.config.icp;
         let registered =
