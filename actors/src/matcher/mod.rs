@@ -161,6 +161,7 @@ impl Matcher {
             round_via: None,
             aligned_via: None,
             refuted_hints: Vec::new(),
+            refuted_few: Vec::new(),
         })
     }
 

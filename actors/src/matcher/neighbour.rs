@@ -63,6 +63,9 @@ pub(super) struct NeighbourEntry {
     /// refuted graph match does not bar a hint: a neighbour that registered the same transform
     /// from its side is new evidence.)
     pub(super) refuted_hints: Vec<(Pose3, Stamp)>,
+    /// Hints whose rounds from fewer pairs than a graph match needs were refuted, and when: such
+    /// a round is not tried again within `REFUTED_FOR_S`, while one with enough pairs still is.
+    pub(super) refuted_few: Vec<(Pose3, Stamp)>,
 }
 
 /// Closure rounds with one aligned neighbour so far (`matcher.closures`).

@@ -42,6 +42,12 @@ impl Matcher {
             .collect()
     }
 
+    /// The pairs a hint's round needs when they are evidence, as a graph match's are; a round
+    /// from fewer (a chained hint's, `relay.min_relayed_pairs`) only looks for registrations.
+    pub(super) fn min_hinted_pairs(&self) -> usize {
+        self.config.min_matched_objects.max(3)
+    }
+
     /// Our registrations the current round with `robot` needs to align.
     pub(super) fn min_round_factors(&self, robot: RobotId) -> usize {
         match self.neighbours.get(&robot).and_then(|e| e.round_via) {
@@ -66,13 +72,14 @@ impl Matcher {
         if !self.relaying() {
             return None;
         }
-        let refuted = &self.neighbours.get(&robot)?.refuted_hints;
+        let entry = self.neighbours.get(&robot)?;
+        let (refuted, refuted_few) = (&entry.refuted_hints, &entry.refuted_few);
         let ours: BTreeMap<RobotId, Pose3> = self.aligned().into_iter().collect();
         let plan = ClosurePlan {
             gate_m: self.config.relay.gate_m,
             radius_m: self.config.closures.radius_m,
             spacing_m: 0.0,
-            min_pairs: self.config.min_matched_objects.max(3),
+            min_pairs: self.min_hinted_pairs(),
         };
         let hints = hints_for(self.robot, robot, &ours, &self.hints);
         let start =
@@ -84,8 +91,11 @@ impl Matcher {
                     // patch with the most of at least `min_relayed_pairs`, which only say where
                     // the keyframes to register are.
                     let few = ClosurePlan { min_pairs: self.config.relay.min_relayed_pairs, ..plan.clone() };
-                    hinted_round(local, remote, hint, &self.labels, &plan, Reach::WholeMap)
-                        .or_else(|| hinted_round(local, remote, hint, &self.labels, &few, Reach::Patch))
+                    hinted_round(local, remote, hint, &self.labels, &plan, Reach::WholeMap).or_else(|| {
+                        (!refuted_recently(refuted_few, &hint.local_from_remote, now))
+                            .then(|| hinted_round(local, remote, hint, &self.labels, &few, Reach::Patch))
+                            .flatten()
+                    })
                 }?;
                 let pairs = round.iter().map(|p| (p.local, p.remote)).collect();
                 Some(RoundStart { local_from_remote: hint.local_from_remote, pairs, via: Some(hint.via) })

@@ -102,9 +102,17 @@ impl Matcher {
         };
         let (local_from_remote, observed_in) =
             self.object_cloud_icp(&matched.state.pairs, &msg.clouds, &matched.state.local_from_remote);
-        // Neighbour keyframes that observed the matched objects, ± the neighbourhood.
-        let around = neighbourhood(observed_in.values().flatten().copied(), self.config.keyframe_neighbourhood as u32);
-        let round = evenly(around, self.config.max_keyframes_per_alignment);
+        // Neighbour keyframes that observed the matched objects, ± the neighbourhood; a round
+        // from few pairs (a chained hint's, `relay.min_relayed_pairs`) asks only for those that
+        // observed them, as many as twice the registrations it needs: most such rounds find no
+        // overlap, and the bytes are spent before that is known.
+        let (spread, cap) = if matched.state.pairs.len() < self.min_hinted_pairs() {
+            (0, 2 * self.config.min_keyframe_factors)
+        } else {
+            (self.config.keyframe_neighbourhood as u32, self.config.max_keyframes_per_alignment)
+        };
+        let around = neighbourhood(observed_in.values().flatten().copied(), spread);
+        let round = evenly(around, cap);
         let retry = self.retry.clone();
         let entry = self.entry(msg.robot);
         entry.observed_in = observed_in;
@@ -180,6 +188,7 @@ impl Matcher {
         let round = entry.keyframes.iter().filter(|(id, _)| entry.round.contains(id)).map(|(_, k)| remote_view(k));
         let registered = register_round(&targets, round, &local_from_remote, &self.round_config(&keyframe_icp));
         let min_factors = self.min_round_factors(robot);
+        let few = n.state.pairs.len() < self.min_hinted_pairs();
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
         let factors = registered.factors.len();
         match judge_round(&registered, min_factors, entry.round_incomplete, &local_from_remote) {
@@ -197,8 +206,9 @@ impl Matcher {
                 match entry.round_via {
                     None => entry.refuted.push((n.state.local_from_remote, now)),
                     Some(_) => {
-                        entry.refuted_hints.retain(|(_, t)| now - t < REFUTED_FOR_S);
-                        entry.refuted_hints.push((n.state.local_from_remote, now));
+                        let list = if few { &mut entry.refuted_few } else { &mut entry.refuted_hints };
+                        list.retain(|(_, t)| now - t < REFUTED_FOR_S);
+                        list.push((n.state.local_from_remote, now));
                     }
                 }
                 if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
