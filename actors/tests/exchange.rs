@@ -129,23 +129,23 @@ fn assert_aligned_within(robots: &[Robot], neighbours: &[Vec<sgm_actors::matcher
     }
 }
 
-#[actix_rt::test]
-async fn three_robots_align_pairwise() {
-    let off = std::env::var("OFF").is_ok();
+/// Three robots crossing one another's ground: each robot's waypoints and its world in the
+/// true one.
+fn three_paths() -> Vec<(Vec<Point3<f64>>, Pose3)> {
     let a = vec![Point3::new(-25.0, -10.0, 0.0), Point3::new(25.0, -10.0, 0.0)];
     let b = vec![Point3::new(20.0, 15.0, 0.0), Point3::new(-20.0, 15.0, 0.0), Point3::new(-20.0, -15.0, 0.0)];
     let c = vec![Point3::new(0.0, -25.0, 0.0), Point3::new(0.0, 25.0, 0.0)];
-    let robots = run_team_with(
-        vec![
-            (a, Pose3::identity()),
-            (b, pose_from_yaw_translation(0.8, Vector3::new(12.0, -7.0, 0.0))),
-            (c, pose_from_yaw_translation(-2.0, Vector3::new(-5.0, 20.0, 0.0))),
-        ],
-        45,
-        None,
-        |c| c.matcher.closures.enabled = !off,
-    )
-    .await;
+    vec![
+        (a, Pose3::identity()),
+        (b, pose_from_yaw_translation(0.8, Vector3::new(12.0, -7.0, 0.0))),
+        (c, pose_from_yaw_translation(-2.0, Vector3::new(-5.0, 20.0, 0.0))),
+    ]
+}
+
+#[actix_rt::test]
+async fn three_robots_align_pairwise() {
+    let off = std::env::var("OFF").is_ok();
+    let robots = run_team_with(three_paths(), 45, None, |c| c.matcher.closures.enabled = !off).await;
     let mut all = Vec::new();
     for r in &robots {
         let n = r.handle.matcher.send(GetNeighbours).await.unwrap();
@@ -160,16 +160,6 @@ async fn three_robots_align_pairwise() {
 /// the others align by graph matching as before. With `matcher.relay` off it stays unaligned.
 #[actix_rt::test]
 async fn a_robot_that_cannot_match_graphs_aligns_from_its_neighbours_alignments() {
-    let a = vec![Point3::new(-25.0, -10.0, 0.0), Point3::new(25.0, -10.0, 0.0)];
-    let b = vec![Point3::new(20.0, 15.0, 0.0), Point3::new(-20.0, 15.0, 0.0), Point3::new(-20.0, -15.0, 0.0)];
-    let c = vec![Point3::new(0.0, -25.0, 0.0), Point3::new(0.0, 25.0, 0.0)];
-    let paths = || {
-        vec![
-            (a.clone(), Pose3::identity()),
-            (b.clone(), pose_from_yaw_translation(0.8, Vector3::new(12.0, -7.0, 0.0))),
-            (c.clone(), pose_from_yaw_translation(-2.0, Vector3::new(-5.0, 20.0, 0.0))),
-        ]
-    };
     let blind = |relay: bool| {
         move |c: &mut RobotConfig| {
             c.matcher.relay.enabled = relay;
@@ -178,7 +168,7 @@ async fn a_robot_that_cannot_match_graphs_aligns_from_its_neighbours_alignments(
             }
         }
     };
-    let robots = run_team_with(paths(), 45, None, blind(true)).await;
+    let robots = run_team_with(three_paths(), 45, None, blind(true)).await;
     let mut all = Vec::new();
     for r in &robots {
         all.push(r.handle.matcher.send(GetNeighbours).await.unwrap());
@@ -189,7 +179,7 @@ async fn a_robot_that_cannot_match_graphs_aligns_from_its_neighbours_alignments(
     }
     let sent = robots[0].handle.comms.send(GetCommsStatus).await.unwrap().sent;
     assert!(sent.get(MessageKind::Alignments).count > 0);
-    let unrelayed = run_team_with(paths(), 45, None, blind(false)).await;
+    let unrelayed = run_team_with(three_paths(), 45, None, blind(false)).await;
     let alone = unrelayed[2].handle.matcher.send(GetNeighbours).await.unwrap();
     assert!(alone.iter().all(|n| n.state != Some(ProtocolStage::Aligned)), "{alone:?}");
     let sent = unrelayed[0].handle.comms.send(GetCommsStatus).await.unwrap().sent;
@@ -203,16 +193,6 @@ async fn a_robot_that_cannot_match_graphs_aligns_from_its_neighbours_alignments(
 /// stays unaligned.
 #[actix_rt::test]
 async fn a_chained_hint_with_few_objects_through_it_aligns_by_registration() {
-    let a = vec![Point3::new(-25.0, -10.0, 0.0), Point3::new(25.0, -10.0, 0.0)];
-    let b = vec![Point3::new(20.0, 15.0, 0.0), Point3::new(-20.0, 15.0, 0.0), Point3::new(-20.0, -15.0, 0.0)];
-    let c = vec![Point3::new(0.0, -25.0, 0.0), Point3::new(0.0, 25.0, 0.0)];
-    let paths = || {
-        vec![
-            (a.clone(), Pose3::identity()),
-            (b.clone(), pose_from_yaw_translation(0.8, Vector3::new(12.0, -7.0, 0.0))),
-            (c.clone(), pose_from_yaw_translation(-2.0, Vector3::new(-5.0, 20.0, 0.0))),
-        ]
-    };
     let starved = |min_relayed_pairs: usize| {
         move |c: &mut RobotConfig| {
             if c.robot.id == 3 {
@@ -222,7 +202,7 @@ async fn a_chained_hint_with_few_objects_through_it_aligns_by_registration() {
             }
         }
     };
-    let robots = run_team_with(paths(), 45, None, starved(1)).await;
+    let robots = run_team_with(three_paths(), 45, None, starved(1)).await;
     let mut all = Vec::new();
     for r in &robots {
         all.push(r.handle.matcher.send(GetNeighbours).await.unwrap());
@@ -232,7 +212,7 @@ async fn a_chained_hint_with_few_objects_through_it_aligns_by_registration() {
         let via = n.aligned_via.expect("robot 3 can only have been told");
         assert_ne!(via, n.robot, "a direct hint needs min_matched_objects pairs: {n:?}");
     }
-    let strict = run_team_with(paths(), 45, None, starved(1000)).await;
+    let strict = run_team_with(three_paths(), 45, None, starved(1000)).await;
     let alone = strict[2].handle.matcher.send(GetNeighbours).await.unwrap();
     assert!(alone.iter().all(|n| n.state != Some(ProtocolStage::Aligned)), "{alone:?}");
 }
