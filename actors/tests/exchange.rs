@@ -205,7 +205,9 @@ async fn a_chained_hint_with_few_objects_through_it_aligns_by_registration() {
     let robots = run_team_with(three_paths(), 45, None, starved(1)).await;
     let mut all = Vec::new();
     for r in &robots {
-        all.push(r.handle.matcher.send(GetNeighbours).await.unwrap());
+        let neighbours = r.handle.matcher.send(GetNeighbours).await.unwrap();
+        assert_eq!(neighbours.len(), 2, "{neighbours:?}");
+        all.push(neighbours);
     }
     assert_aligned(&robots, &all);
     for n in &all[2] {
@@ -214,6 +216,7 @@ async fn a_chained_hint_with_few_objects_through_it_aligns_by_registration() {
     }
     let strict = run_team_with(three_paths(), 45, None, starved(1000)).await;
     let alone = strict[2].handle.matcher.send(GetNeighbours).await.unwrap();
+    assert_eq!(alone.len(), 2, "{alone:?}");
     assert!(alone.iter().all(|n| n.state != Some(ProtocolStage::Aligned)), "{alone:?}");
 }
 

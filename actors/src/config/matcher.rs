@@ -41,12 +41,13 @@ pub struct MatcherSection {
     pub match_interval_s: f64,
     /// Object-cloud ICP (paper §IV-D).
     pub icp: IcpConfig,
-    /// Neighbour keyframes around each observing keyframe that are requested (paper: ±5).
-    /// Default 5.
+    /// Neighbour keyframes around each observing keyframe that are requested (paper: ±5; none
+    /// for a round from few pairs, `relay.min_relayed_pairs`). Default 5.
     pub keyframe_neighbourhood: usize,
     /// Neighbour keyframes registered per alignment round, at most (spread evenly over those
-    /// the neighbourhood names): bounds radio bytes and ICP time. Default 8 (16 cost twice the bytes for
-    /// the same alignments: book, evaluation chapter).
+    /// the neighbourhood names; a round from few pairs asks for at most twice
+    /// `min_keyframe_factors` of them): bounds radio bytes and ICP time. Default 8 (16 cost twice
+    /// the bytes for the same alignments: book, evaluation chapter).
     pub max_keyframes_per_alignment: usize,
     /// Voxel size of keyframe-to-keyframe ICP (`icp.voxel_m` is for object clouds), m.
     /// Default 0.3.

@@ -4,6 +4,9 @@
 //! neighbour keyframes that observed the matched objects, ± `keyframe_neighbourhood` → each
 //! registered by ICP to the nearest local keyframe that observed a matched object → inter-robot
 //! factors and the neighbour keyframes (with their marginal covariances) to the Optimiser.
+//! A round from a chained hint with fewer pairs than that (`matcher.relay.min_relayed_pairs`)
+//! skips object-cloud ICP below three pairs and asks only for the observing keyframes
+//! (`relay.rs`).
 //!
 //! With `association = "scan_context"` (the evaluation's Swarm-SC baseline) the first two
 //! steps differ: every local keyframe's Scan Context descriptor goes to Comms for broadcast;

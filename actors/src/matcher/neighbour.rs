@@ -59,7 +59,8 @@ pub(super) struct NeighbourEntry {
     pub(super) round_via: Option<RobotId>,
     /// The first alignment came from a neighbour's: whose.
     pub(super) aligned_via: Option<RobotId>,
-    /// Hints whose rounds were refuted, and when: not tried again within `REFUTED_FOR_S`. (A
+    /// Hints whose rounds (with as many pairs as a graph match) were refuted, and when: not
+    /// tried again within `REFUTED_FOR_S`; those of rounds from fewer are in `refuted_few`. (A
     /// refuted graph match does not bar a hint: a neighbour that registered the same transform
     /// from its side is new evidence.)
     pub(super) refuted_hints: Vec<(Pose3, Stamp)>,

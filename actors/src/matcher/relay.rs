@@ -56,7 +56,8 @@ impl Matcher {
         }
     }
 
-    /// The first hint for `robot` (not near a hint refuted recently) that pairs at least
+    /// The first hint for `robot` (not near a hint whose round was refuted recently; a round
+    /// from few pairs is also barred by one from few pairs refuted recently) that pairs at least
     /// `min_matched_objects` objects: on one patch for a direct hint, whose round one
     /// registration of ours settles (`min_round_factors`); on one patch or else over the whole
     /// map for a relayed one, settled by as many registrations as a graph match, or else its
@@ -106,11 +107,18 @@ impl Matcher {
                 .iter()
                 .map(|hint| {
                     let pairs = pairs_through(local, remote, &hint.local_from_remote, &self.labels, plan.gate_m).len();
-                    let barred = if refuted_recently(refuted, &hint.local_from_remote, now) { " refuted" } else { "" };
+                    let barred = if refuted_recently(refuted, &hint.local_from_remote, now) {
+                        " refuted"
+                    } else if refuted_recently(refuted_few, &hint.local_from_remote, now) {
+                        " refuted from few pairs"
+                    } else {
+                        ""
+                    };
                     format!("{} [{}]: {pairs} pairs{barred}", hint.via, Brief(&hint.local_from_remote))
                 })
                 .collect();
             tracing::debug!(robot = %self.robot, neighbour = %robot, hints = %tried.join(", "), need = plan.min_pairs,
+                need_chained = self.config.relay.min_relayed_pairs,
                 "relayed alignments start no round (too few objects pair through them, or refuted recently)");
         }
         start

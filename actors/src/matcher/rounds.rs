@@ -104,10 +104,11 @@ impl Matcher {
             self.object_cloud_icp(&matched.state.pairs, &msg.clouds, &matched.state.local_from_remote);
         // Neighbour keyframes that observed the matched objects, ± the neighbourhood; a round
         // from few pairs (a chained hint's, `relay.min_relayed_pairs`) asks only for those that
-        // observed them, as many as twice the registrations it needs: most such rounds find no
+        // observed them, as many as twice the registrations it needs (within
+        // `max_keyframes_per_alignment`): most such rounds find no
         // overlap, and the bytes are spent before that is known.
         let (spread, cap) = if matched.state.pairs.len() < self.min_hinted_pairs() {
-            (0, 2 * self.config.min_keyframe_factors)
+            (0, self.config.min_keyframe_factors.saturating_mul(2).min(self.config.max_keyframes_per_alignment))
         } else {
             (self.config.keyframe_neighbourhood as u32, self.config.max_keyframes_per_alignment)
         };

@@ -14,7 +14,10 @@
 //! a gate, the best-supported 15 m patch, as a closure round plans; for a relayed hint, else all
 //! of them, see [`Reach`]) and the rest of the round is the receiver's own: object-cloud ICP,
 //! keyframe registration, the structure check and the round's verdict (`alignment::judge_round`).
-//! A wrong hint is refuted like a wrong match.
+//! A wrong hint is refuted like a wrong match. When fewer objects pair through a chained hint
+//! than a graph match needs, the receiver may still start a round from its best patch (the
+//! Matcher's `matcher.relay.min_relayed_pairs`): the pairs then only pick the keyframes to
+//! register, object-cloud ICP is skipped below three, and the registrations decide.
 //!
 //! What this buys: two robots whose common objects are too few, or too alike, for graph
 //! matching to be significant still align when either of them — or a third robot that placed
@@ -65,7 +68,9 @@ pub fn hints_for(
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Reach {
     /// One patch (`radius_m` around a seed): for a round that a single registration of ours
-    /// settles (a direct hint), which can only check the ground it covers.
+    /// settles (a direct hint), which can only check the ground it covers; also for a chained
+    /// hint's round from fewer pairs than a graph match needs, whose pairs only say where its
+    /// registrations look.
     Patch,
     /// One patch, else the whole map: for a round settled by as many registrations as a graph
     /// match (a relayed hint). A hint places the whole map, as a graph match does, so pairs far
