@@ -142,16 +142,22 @@ fn three_paths() -> Vec<(Vec<Point3<f64>>, Pose3)> {
     ]
 }
 
+/// Each robot's neighbours, asserted to be `count` of them.
+async fn neighbours_of_each(robots: &[Robot], count: usize) -> Vec<Vec<sgm_actors::matcher::NeighbourStatus>> {
+    let mut all = Vec::new();
+    for r in robots {
+        let n = r.handle.matcher.send(GetNeighbours).await.unwrap();
+        assert_eq!(n.len(), count, "{n:?}");
+        all.push(n);
+    }
+    all
+}
+
 #[actix_rt::test]
 async fn three_robots_align_pairwise() {
     let off = std::env::var("OFF").is_ok();
     let robots = run_team_with(three_paths(), 45, None, |c| c.matcher.closures.enabled = !off).await;
-    let mut all = Vec::new();
-    for r in &robots {
-        let n = r.handle.matcher.send(GetNeighbours).await.unwrap();
-        assert_eq!(n.len(), 2, "{n:?}");
-        all.push(n);
-    }
+    let all = neighbours_of_each(&robots, 2).await;
     assert_aligned(&robots, &all);
 }
 
@@ -203,12 +209,7 @@ async fn a_chained_hint_with_few_objects_through_it_aligns_by_registration() {
         }
     };
     let robots = run_team_with(three_paths(), 45, None, starved(1)).await;
-    let mut all = Vec::new();
-    for r in &robots {
-        let neighbours = r.handle.matcher.send(GetNeighbours).await.unwrap();
-        assert_eq!(neighbours.len(), 2, "{neighbours:?}");
-        all.push(neighbours);
-    }
+    let all = neighbours_of_each(&robots, 2).await;
     assert_aligned(&robots, &all);
     for n in &all[2] {
         let via = n.aligned_via.expect("robot 3 can only have been told");

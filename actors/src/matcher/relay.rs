@@ -82,20 +82,22 @@ impl Matcher {
             spacing_m: 0.0,
             min_pairs: self.min_hinted_pairs(),
         };
+        // A chained hint's last resort: the patch with the most of at least `min_relayed_pairs`,
+        // which only say where the keyframes to register are.
+        let few = ClosurePlan { min_pairs: self.config.relay.min_relayed_pairs, ..plan.clone() };
         let hints = hints_for(self.robot, robot, &ours, &self.hints);
         let start =
             hints.iter().filter(|hint| !refuted_recently(refuted, &hint.local_from_remote, now)).find_map(|hint| {
                 let round = if hint.via == robot {
                     hinted_round(local, remote, hint, &self.labels, &plan, Reach::Patch)
                 } else {
-                    // As many pairs as a graph match, on a patch or over the whole map; else the
-                    // patch with the most of at least `min_relayed_pairs`, which only say where
-                    // the keyframes to register are.
-                    let few = ClosurePlan { min_pairs: self.config.relay.min_relayed_pairs, ..plan.clone() };
+                    // As many pairs as a graph match, on a patch or over the whole map; else few.
                     hinted_round(local, remote, hint, &self.labels, &plan, Reach::WholeMap).or_else(|| {
-                        (!refuted_recently(refuted_few, &hint.local_from_remote, now))
-                            .then(|| hinted_round(local, remote, hint, &self.labels, &few, Reach::Patch))
-                            .flatten()
+                        if refuted_recently(refuted_few, &hint.local_from_remote, now) {
+                            None
+                        } else {
+                            hinted_round(local, remote, hint, &self.labels, &few, Reach::Patch)
+                        }
                     })
                 }?;
                 let pairs = round.iter().map(|p| (p.local, p.remote)).collect();
