@@ -20,8 +20,22 @@ pub(super) fn graph_objects(data: &ObjectData) -> Vec<GraphObject> {
         .collect()
 }
 
+/// Whether two object lists are the same to the bit (graph matching gives the same outcome).
+pub(super) fn same_objects(a: &[GraphObject], b: &[GraphObject]) -> bool {
+    let bits = |p: &Point3<f64>| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+    let size_bits = |s: &Option<nalgebra::Vector3<f64>>| s.map(|s| [s.x.to_bits(), s.y.to_bits(), s.z.to_bits()]);
+    a.len() == b.len()
+        && a.iter().zip(b).all(|(a, b)| {
+            a.id == b.id
+                && a.label == b.label
+                && bits(&a.centroid) == bits(&b.centroid)
+                && size_bits(&a.size) == size_bits(&b.size)
+        })
+}
+
 impl Matcher {
     /// Matches the neighbour's latest object data against ours; asks for object clouds on success.
+    /// Unchanged inputs since the last attempt reuse its outcome.
     pub(super) fn try_match(&mut self, robot: RobotId) {
         let now = self.clock.now();
         let min_matched = self.config.min_matched_objects;
@@ -40,12 +54,19 @@ impl Matcher {
             return;
         };
         let refuted = entry.refuted.clone();
+        let (local_objects, remote_revision) = (self.objects_revision, data.revision);
+        let outcome = match entry.last_match.as_ref() {
+            Some(last) if last.local_objects == local_objects && last.remote_revision == remote_revision => {
+                last.outcome.clone()
+            }
+            _ => match_graphs(&local, &remote, &self.labels, &self.config.matching).outcome,
+        };
         if let Some(entry) = self.neighbours.get_mut(&robot) {
             entry.last_attempt = Some(now);
             entry.match_again = false;
+            entry.last_match = Some(LastMatch { local_objects, remote_revision, outcome: outcome.clone() });
         }
-        let report = match_graphs(&local, &remote, &self.labels, &self.config.matching);
-        let matched = match report.outcome {
+        let matched = match outcome {
             MatchOutcome::Aligned(alignment) if alignment.matches.len() < min_matched => None,
             MatchOutcome::Aligned(alignment) if refuted_recently(&refuted, &alignment.local_from_remote, now) => None,
             MatchOutcome::Aligned(alignment) => {
@@ -161,5 +182,41 @@ impl Matcher {
         } else if let Some(links) = &self.links {
             links.request_keyframes.do_send(RequestKeyframes { robot, keyframes: wanted.into_iter().collect() });
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sgm_model::scene_graph::LabelId;
+
+    fn objects() -> Vec<GraphObject> {
+        (0..4)
+            .map(|k| GraphObject {
+                id: ObjectId(k),
+                label: LabelId(k as u16 % 2),
+                centroid: Point3::new(k as f64, 2.0 * k as f64, 0.5),
+                size: Some(nalgebra::Vector3::new(0.5, 0.5, 1.0)),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn objects_are_the_same_only_to_the_bit() {
+        let a = objects();
+        assert!(same_objects(&a, &a.clone()));
+        let mut moved = a.clone();
+        moved[2].centroid.x = f64::from_bits(moved[2].centroid.x.to_bits() + 1);
+        assert!(!same_objects(&a, &moved), "one ulp apart");
+        let mut signed = a.clone();
+        signed[0].centroid.x = -0.0;
+        assert!(!same_objects(&a, &signed), "0 and −0 compare equal but are different bits");
+        let mut relabelled = a.clone();
+        relabelled[1].label = LabelId(7);
+        assert!(!same_objects(&a, &relabelled));
+        let mut resized = a.clone();
+        resized[3].size = None;
+        assert!(!same_objects(&a, &resized));
+        assert!(!same_objects(&a, &a[..3]));
     }
 }

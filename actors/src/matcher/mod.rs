@@ -48,7 +48,8 @@ use sgm_model::workers::Workers;
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
-use neighbour::{hold_at_most, NeighbourEntry};
+use association::same_objects;
+use neighbour::{hold_at_most, LastMatch, NeighbourEntry};
 
 /// Where the Matcher sends what it produces.
 #[derive(Clone)]
@@ -79,6 +80,8 @@ pub struct Matcher {
     hints: BTreeMap<RobotId, Vec<(RobotId, Pose3)>>,
     /// Threads a registration may split its work over (the same answers for any number).
     workers: Workers,
+    /// Counts the changes of the map's matchable objects (`LastMatch`).
+    objects_revision: u64,
 }
 
 impl Matcher {
@@ -101,6 +104,7 @@ impl Matcher {
             neighbours: BTreeMap::new(),
             hints: BTreeMap::new(),
             workers: Workers::sequential(),
+            objects_revision: 0,
         }
     }
 
@@ -134,6 +138,7 @@ impl Matcher {
             let entry = self.entry(memory.robot);
             entry.protocol = memory.protocol.map(|p| p.settled(now)).or(entry.protocol.take());
             entry.objects = memory.objects;
+            entry.last_match = None;
             entry.keyframes = memory.keyframes.into_iter().map(|k| (k.id, k)).collect();
             entry.first_aligned = memory.first_aligned;
             entry.refuted = memory.refuted;
@@ -165,6 +170,7 @@ impl Matcher {
             aligned_via: None,
             refuted_hints: Vec::new(),
             refuted_few: Vec::new(),
+            last_match: None,
         })
     }
 
@@ -221,6 +227,9 @@ impl Handler<MapChanged> for Matcher {
     fn handle(&mut self, msg: MapChanged, ctx: &mut Context<Self>) {
         contained(ctx, "matcher", || {
             let changes = msg.0.changes_since(&self.map);
+            if !same_objects(&msg.0.objects.objects, &self.map.objects.objects) {
+                self.objects_revision += 1;
+            }
             self.map = msg.0;
             if self.config.association == Association::ScanContext {
                 for id in changes.added {

@@ -67,6 +67,17 @@ pub(super) struct NeighbourEntry {
     /// Hints whose rounds from fewer pairs than a graph match needs were refuted, and when: such
     /// a round is not tried again within `REFUTED_FOR_S`, while one with enough pairs still is.
     pub(super) refuted_few: Vec<(Pose3, Stamp)>,
+    /// The last graph match and what it was made from: the same local objects against the same
+    /// object data give the same outcome (`match_graphs` is a pure function), so it is reused.
+    pub(super) last_match: Option<LastMatch>,
+}
+
+/// A graph match's outcome, and its inputs: the Matcher's local objects (`Matcher::objects_revision`)
+/// and the neighbour's object-data revision.
+pub(super) struct LastMatch {
+    pub(super) local_objects: u64,
+    pub(super) remote_revision: u32,
+    pub(super) outcome: MatchOutcome,
 }
 
 /// Closure rounds with one aligned neighbour so far (`matcher.closures`).
