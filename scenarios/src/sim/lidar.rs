@@ -34,6 +34,36 @@ pub struct Lidar {
     next: u64,
 }
 
+/// The azimuth bin of the horizontal direction (x, y), ⌊(atan2(y, x) mod 2π) / w⌋ for bins w
+/// wide, to within one bin: the arctangent is the minimax polynomial of Abramowitz & Stegun
+/// 4.4.49, |error| ≤ 1e-5 rad on the octant (bins are 8.7e-3 rad), about 5× cheaper than
+/// libm's `atan2` on every ray. Within one bin is all the culling needs: a solid covers the bins
+/// of its footprint's sector widened by a whole bin on each side, so a ray that can hit it
+/// finds it in this bin as in the exact one (and the nearest hit is the same).
+fn azimuth_bin(x: f64, y: f64, bin_width: f64) -> usize {
+    use std::f64::consts::{FRAC_PI_2, PI, TAU};
+    let (ax, ay) = (x.abs(), y.abs());
+    let (lo, hi) = (ax.min(ay), ax.max(ay));
+    // Also NaN (a ray never has one): bin 0, as atan2 gives.
+    if hi.is_nan() || hi == 0.0 {
+        return 0;
+    }
+    // atan(a), a ∈ [0, 1]: a (c1 + c3 a² + c5 a⁴ + c7 a⁶ + c9 a⁸).
+    let a = lo / hi;
+    let s = a * a;
+    let mut theta = a * (0.999_866 + s * (-0.330_299_5 + s * (0.180_141 + s * (-0.085_133 + s * 0.020_835_1))));
+    if ay > ax {
+        theta = FRAC_PI_2 - theta;
+    }
+    if x < 0.0 {
+        theta = PI - theta;
+    }
+    if y < 0.0 {
+        theta = -theta;
+    }
+    (theta.rem_euclid(TAU) / bin_width) as usize % BINS
+}
+
 fn direction(azimuth: f64, elevation: f64) -> Vector3<f64> {
     let (se, ce) = elevation.sin_cos();
     let (sa, ca) = azimuth.sin_cos();
@@ -163,7 +193,7 @@ impl Lidar {
                 (0.0, origin, rotation)
             };
             let dw = rotation * d;
-            let bin = (dw.y.atan2(dw.x).rem_euclid(std::f64::consts::TAU) / bin_width) as usize % BINS;
+            let bin = azimuth_bin(dw.x, dw.y, bin_width);
             let mut best = (f64::INFINITY, world.ground_label, u32::MAX);
             let flat = world.terrain.is_flat();
             if flat && dw.z < -1e-9 {
@@ -223,6 +253,39 @@ mod tests {
             }],
             ground_label: 0,
             ..World::default()
+        }
+    }
+
+    proptest::proptest! {
+        /// The culling's premise: the polynomial's bin is libm's, or one of its two neighbours.
+        #[test]
+        fn azimuth_bins_are_within_one_of_atan2s(x in -100.0f64..100.0, y in -100.0f64..100.0, scale in -12i32..12) {
+            let (x, y) = (x * 2f64.powi(scale), y * 2f64.powi(scale));
+            let w = std::f64::consts::TAU / BINS as f64;
+            let exact = (y.atan2(x).rem_euclid(std::f64::consts::TAU) / w) as usize % BINS;
+            let fast = azimuth_bin(x, y, w);
+            let apart = exact.abs_diff(fast).min(BINS - exact.abs_diff(fast));
+            proptest::prop_assert!(apart <= 1, "({x}, {y}): {exact} against {fast}");
+        }
+    }
+
+    #[test]
+    fn azimuth_bins_of_the_axes_and_diagonals() {
+        let w = std::f64::consts::TAU / BINS as f64;
+        for (x, y) in [
+            (1.0, 0.0),
+            (1.0, 1.0),
+            (0.0, 1.0),
+            (-1.0, 1.0),
+            (-1.0, 0.0),
+            (-1.0, -1.0),
+            (0.0, -1.0),
+            (1.0, -1.0),
+            (0.0, 0.0),
+        ] {
+            let exact = (f64::atan2(y, x).rem_euclid(std::f64::consts::TAU) / w) as usize % BINS;
+            let fast = azimuth_bin(x, y, w);
+            assert!(exact.abs_diff(fast).min(BINS - exact.abs_diff(fast)) <= 1, "({x}, {y}): {exact} {fast}");
         }
     }
 
