@@ -54,18 +54,26 @@ impl Matcher {
             return;
         };
         let refuted = entry.refuted.clone();
-        let (local_objects, remote_revision) = (self.objects_revision, data.revision);
-        let outcome = match entry.last_match.as_ref() {
-            Some(last) if last.local_objects == local_objects && last.remote_revision == remote_revision => {
-                last.outcome.clone()
-            }
-            _ => match_graphs(&local, &remote, &self.labels, &self.config.matching).outcome,
-        };
+        let (local_objects, remote_revision) = (self.local_objects_revision, data.revision);
+        let reused = entry
+            .last_match
+            .as_ref()
+            .filter(|last| last.local_objects == local_objects && last.remote_revision == remote_revision)
+            .map(|last| last.outcome.clone());
         if let Some(entry) = self.neighbours.get_mut(&robot) {
             entry.last_attempt = Some(now);
             entry.match_again = false;
-            entry.last_match = Some(LastMatch { local_objects, remote_revision, outcome: outcome.clone() });
         }
+        let outcome = match reused {
+            Some(outcome) => outcome,
+            None => {
+                let outcome = match_graphs(&local, &remote, &self.labels, &self.config.matching).outcome;
+                if let Some(entry) = self.neighbours.get_mut(&robot) {
+                    entry.last_match = Some(LastMatch { local_objects, remote_revision, outcome: outcome.clone() });
+                }
+                outcome
+            }
+        };
         let matched = match outcome {
             MatchOutcome::Aligned(alignment) if alignment.matches.len() < min_matched => None,
             MatchOutcome::Aligned(alignment) if refuted_recently(&refuted, &alignment.local_from_remote, now) => None,

@@ -81,7 +81,7 @@ pub struct Matcher {
     /// Threads a registration may split its work over (the same answers for any number).
     workers: Workers,
     /// Counts the changes of the map's matchable objects (`LastMatch`).
-    objects_revision: u64,
+    local_objects_revision: u64,
 }
 
 impl Matcher {
@@ -104,7 +104,7 @@ impl Matcher {
             neighbours: BTreeMap::new(),
             hints: BTreeMap::new(),
             workers: Workers::sequential(),
-            objects_revision: 0,
+            local_objects_revision: 0,
         }
     }
 
@@ -228,7 +228,7 @@ impl Handler<MapChanged> for Matcher {
         contained(ctx, "matcher", || {
             let changes = msg.0.changes_since(&self.map);
             if !same_objects(&msg.0.objects.objects, &self.map.objects.objects) {
-                self.objects_revision += 1;
+                self.local_objects_revision += 1;
             }
             self.map = msg.0;
             if self.config.association == Association::ScanContext {

@@ -72,8 +72,8 @@ pub(super) struct NeighbourEntry {
     pub(super) last_match: Option<LastMatch>,
 }
 
-/// A graph match's outcome, and its inputs: the Matcher's local objects (`Matcher::objects_revision`)
-/// and the neighbour's object-data revision.
+/// A graph match's outcome, and its inputs: the revision of the Matcher's local objects
+/// (`Matcher::local_objects_revision`) and the neighbour's object-data revision.
 pub(super) struct LastMatch {
     pub(super) local_objects: u64,
     pub(super) remote_revision: u32,

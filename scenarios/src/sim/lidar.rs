@@ -35,18 +35,17 @@ pub struct Lidar {
 }
 
 /// The azimuth bin of the horizontal direction (x, y), ⌊(atan2(y, x) mod 2π) / w⌋ for bins w
-/// wide, to within one bin: the arctangent is the minimax polynomial of Abramowitz & Stegun
-/// 4.4.49, |error| ≤ 1e-5 rad on the octant (bins are 8.7e-3 rad), about 5× cheaper than
-/// libm's `atan2` on every ray. Within one bin is all the culling needs: a solid covers the bins
-/// of its footprint's sector widened by a whole bin on each side, so a ray that can hit it
-/// finds it in this bin as in the exact one (and the nearest hit is the same).
+/// wide, exactly libm's, at a fifth of its cost on almost every ray: the arctangent is the
+/// minimax polynomial of Abramowitz & Stegun 4.4.48 (|error| ≤ 1.2e-5 rad on the octant), whose
+/// bin is libm's wherever it lies farther than [`POLY_MARGIN_RAD`] from a bin edge; within it
+/// (about 1 % of rays at 720 bins), and for zero or NaN, libm decides.
 fn azimuth_bin(x: f64, y: f64, bin_width: f64) -> usize {
     use std::f64::consts::{FRAC_PI_2, PI, TAU};
+    let exact = || (y.atan2(x).rem_euclid(TAU) / bin_width) as usize % BINS;
     let (ax, ay) = (x.abs(), y.abs());
     let (lo, hi) = (ax.min(ay), ax.max(ay));
-    // Also NaN (a ray never has one): bin 0, as atan2 gives.
-    if hi.is_nan() || hi == 0.0 {
-        return 0;
+    if x.is_nan() || y.is_nan() || hi == 0.0 {
+        return exact();
     }
     // atan(a), a ∈ [0, 1]: a (c1 + c3 a² + c5 a⁴ + c7 a⁶ + c9 a⁸).
     let a = lo / hi;
@@ -61,8 +60,17 @@ fn azimuth_bin(x: f64, y: f64, bin_width: f64) -> usize {
     if y < 0.0 {
         theta = -theta;
     }
-    (theta.rem_euclid(TAU) / bin_width) as usize % BINS
+    let u = theta.rem_euclid(TAU) / bin_width;
+    // Distance to the nearest bin edge (0 and BINS included: the cut at 2π is one), in bins.
+    if (u - u.round()).abs() * bin_width <= POLY_MARGIN_RAD {
+        return exact();
+    }
+    u as usize % BINS
 }
+
+/// How near a bin edge the polynomial arctangent leaves the bin to libm: over three times its
+/// largest error (1.14e-5 rad at 45°).
+const POLY_MARGIN_RAD: f64 = 4e-5;
 
 fn direction(azimuth: f64, elevation: f64) -> Vector3<f64> {
     let (se, ce) = elevation.sin_cos();
@@ -257,35 +265,34 @@ mod tests {
     }
 
     proptest::proptest! {
-        /// The culling's premise: the polynomial's bin is libm's, or one of its two neighbours.
+        /// The bin is libm's, to the index, at any scale.
         #[test]
-        fn azimuth_bins_are_within_one_of_atan2s(x in -100.0f64..100.0, y in -100.0f64..100.0, scale in -12i32..12) {
+        fn azimuth_bins_are_atan2s(x in -100.0f64..100.0, y in -100.0f64..100.0, scale in -12i32..12) {
             let (x, y) = (x * 2f64.powi(scale), y * 2f64.powi(scale));
             let w = std::f64::consts::TAU / BINS as f64;
-            let exact = (y.atan2(x).rem_euclid(std::f64::consts::TAU) / w) as usize % BINS;
-            let fast = azimuth_bin(x, y, w);
-            let apart = exact.abs_diff(fast).min(BINS - exact.abs_diff(fast));
-            proptest::prop_assert!(apart <= 1, "({x}, {y}): {exact} against {fast}");
+            proptest::prop_assert_eq!(azimuth_bin(x, y, w), atan2_bin(x, y, w), "({}, {})", x, y);
+        }
+
+        /// Directions a hair from a bin edge, where the polynomial alone could be a bin off.
+        #[test]
+        fn azimuth_bins_at_the_edges_are_atan2s(edge in 0usize..=BINS, off in -1e-4f64..1e-4) {
+            let w = std::f64::consts::TAU / BINS as f64;
+            let (y, x) = (edge as f64 * w + off).sin_cos();
+            proptest::prop_assert_eq!(azimuth_bin(x, y, w), atan2_bin(x, y, w), "({}, {})", x, y);
         }
     }
 
+    fn atan2_bin(x: f64, y: f64, w: f64) -> usize {
+        (y.atan2(x).rem_euclid(std::f64::consts::TAU) / w) as usize % BINS
+    }
+
     #[test]
-    fn azimuth_bins_of_the_axes_and_diagonals() {
+    fn azimuth_bins_of_the_axes_diagonals_zeros_and_nan() {
         let w = std::f64::consts::TAU / BINS as f64;
-        for (x, y) in [
-            (1.0, 0.0),
-            (1.0, 1.0),
-            (0.0, 1.0),
-            (-1.0, 1.0),
-            (-1.0, 0.0),
-            (-1.0, -1.0),
-            (0.0, -1.0),
-            (1.0, -1.0),
-            (0.0, 0.0),
-        ] {
-            let exact = (f64::atan2(y, x).rem_euclid(std::f64::consts::TAU) / w) as usize % BINS;
-            let fast = azimuth_bin(x, y, w);
-            assert!(exact.abs_diff(fast).min(BINS - exact.abs_diff(fast)) <= 1, "({x}, {y}): {exact} {fast}");
+        let axes = [(1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (-1.0, 1.0), (-1.0, 0.0), (-1.0, -0.0), (-1.0, -1.0)];
+        let more = [(0.0, -1.0), (1.0, -1.0), (0.0, 0.0), (-0.0, 0.0), (-0.0, -0.0), (f64::NAN, 1.0), (1.0, f64::NAN)];
+        for (x, y) in axes.into_iter().chain(more) {
+            assert_eq!(azimuth_bin(x, y, w), atan2_bin(x, y, w), "({x}, {y})");
         }
     }
 
