@@ -103,6 +103,7 @@ mod tests {
             first_aligned: Some(1.0),
             closures: Default::default(),
             aligned_via: None,
+            contradicted_by: Vec::new(),
             keyframes_held: 0,
             objects_revision: None,
         }

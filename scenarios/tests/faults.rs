@@ -22,6 +22,8 @@ fn assert_converged_and_nothing_lost(report: &Report) {
     for a in &report.alignments {
         assert_eq!(a.state, "Aligned", "{} ← {}", a.local, a.remote);
         assert!(a.translation_error_m.unwrap() < 0.5, "{} ← {}: {:?}", a.local, a.remote, a.translation_error_m);
+        // Right alignments close their cycles (`matcher.relay.contradiction_m`).
+        assert!(a.contradicted_by.is_empty(), "{} ← {} flagged by {:?}", a.local, a.remote, a.contradicted_by);
     }
     assert_eq!(report.ledger.pairs.len(), robots * (robots - 1));
     for p in &report.ledger.pairs {

@@ -104,11 +104,24 @@ pub struct RelaySection {
     /// robots whose shared ground holds one object still align when a third placed both.
     /// Default 1.
     pub min_relayed_pairs: usize,
+    /// A neighbour's alignments contradict ours of a robot when the transform they imply
+    /// (`model::matching::relay::contradicting`) places that robot's origin this far from ours,
+    /// m (the status and the report then name them: `contradicted_by`). Default 2.0.
+    pub contradiction_m: f64,
+    /// ... or turns it by this much about any axis, degrees. Default 5.0.
+    pub contradiction_deg: f64,
 }
 
 impl Default for RelaySection {
     fn default() -> Self {
-        Self { enabled: true, gate_m: 1.5, min_own_factors: 1, min_relayed_pairs: 1 }
+        Self {
+            enabled: true,
+            gate_m: 1.5,
+            min_own_factors: 1,
+            min_relayed_pairs: 1,
+            contradiction_m: 2.0,
+            contradiction_deg: 5.0,
+        }
     }
 }
 
@@ -117,7 +130,10 @@ impl RelaySection {
         let g = self.gate_m;
         check(g.is_finite() && g > 0.0 && g <= 10.0, "matcher.relay.gate_m", g, "0 < x ≤ 10 m")?;
         check(self.min_own_factors >= 1, "matcher.relay.min_own_factors", self.min_own_factors, "≥ 1")?;
-        check(self.min_relayed_pairs >= 1, "matcher.relay.min_relayed_pairs", self.min_relayed_pairs, "≥ 1")
+        check(self.min_relayed_pairs >= 1, "matcher.relay.min_relayed_pairs", self.min_relayed_pairs, "≥ 1")?;
+        let (m, deg) = (self.contradiction_m, self.contradiction_deg);
+        check(m.is_finite() && m > 0.0, "matcher.relay.contradiction_m", m, "finite and > 0 m")?;
+        check(deg.is_finite() && deg > 0.0 && deg <= 180.0, "matcher.relay.contradiction_deg", deg, "0 < x ≤ 180°")
     }
 }
 
@@ -349,6 +365,9 @@ mod tests {
         refused(|m| m.relay.gate_m = 0.0, "matcher.relay.gate_m = 0");
         refused(|m| m.relay.gate_m = f64::INFINITY, "matcher.relay.gate_m = inf");
         refused(|m| m.relay.min_own_factors = 0, "matcher.relay.min_own_factors = 0");
+        refused(|m| m.relay.contradiction_m = f64::NAN, "matcher.relay.contradiction_m = NaN");
+        refused(|m| m.relay.contradiction_m = 0.0, "matcher.relay.contradiction_m = 0");
+        refused(|m| m.relay.contradiction_deg = 181.0, "matcher.relay.contradiction_deg = 181");
         refused(|m| m.factor_sigma_floor_deg = -0.1, "matcher.factor_sigma_floor_deg = -0.1");
         refused(|m| m.factor_sigma_floor_m = f64::INFINITY, "matcher.factor_sigma_floor_m = inf");
         let plan = MatcherSection::default().closures.plan();

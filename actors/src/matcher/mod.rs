@@ -413,6 +413,7 @@ impl Handler<GetNeighbours> for Matcher {
             self.neighbours
                 .iter()
                 .map(|(robot, e)| NeighbourStatus {
+                    contradicted_by: self.contradicted_by(*robot),
                     robot: *robot,
                     state: e.protocol.as_ref().map(Protocol::stage),
                     local_from_remote: e.protocol.as_ref().and_then(|p| p.local_from_remote().copied()),

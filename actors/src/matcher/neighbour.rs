@@ -23,6 +23,10 @@ pub struct NeighbourStatus {
     pub keyframes_held: usize,
     /// Revision of the neighbour's object data held (`None`: none received).
     pub objects_revision: Option<u32>,
+    /// While aligned: the robots whose relayed alignments put this neighbour elsewhere (around a
+    /// cycle of alignments, beyond `matcher.relay.contradiction_m` / `_deg`): one of the cycle's
+    /// alignments is wrong (`model::matching::relay::contradicting`).
+    pub contradicted_by: Vec<RobotId>,
 }
 
 pub(super) struct NeighbourEntry {

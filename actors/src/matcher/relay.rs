@@ -7,7 +7,7 @@
 use super::*;
 use sgm_model::geometry::Brief;
 use sgm_model::matching::closure::{pairs_through, ClosurePlan};
-use sgm_model::matching::relay::{hinted_round, hints_for, Reach};
+use sgm_model::matching::relay::{contradicting, hinted_round, hints_for, Reach};
 
 /// Where an alignment round starts: the first estimate, the object pairs whose clouds are asked
 /// for, and whose alignment it came from (`None`: object-graph matching).
@@ -30,6 +30,19 @@ impl Matcher {
         if let Some(links) = &self.links {
             links.share_alignments.do_send(ShareAlignments(self.aligned()));
         }
+    }
+
+    /// The robots whose relayed alignments contradict ours of `robot` (none while it is not
+    /// aligned, or without relaying).
+    pub(super) fn contradicted_by(&self, robot: RobotId) -> Vec<RobotId> {
+        let own = self.neighbours.get(&robot).and_then(|e| match &e.protocol {
+            Some(p @ Protocol::Aligned(_)) => p.local_from_remote().copied(),
+            _ => None,
+        });
+        let Some(own) = own.filter(|_| self.relaying()) else { return Vec::new() };
+        let ours: BTreeMap<RobotId, Pose3> = self.aligned().into_iter().collect();
+        let relay = &self.config.relay;
+        contradicting(self.robot, robot, &own, &ours, &self.hints, relay.contradiction_m, relay.contradiction_deg)
     }
 
     fn aligned(&self) -> Vec<(RobotId, Pose3)> {

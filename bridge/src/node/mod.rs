@@ -340,6 +340,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                     "state": n.state,
                     "first_aligned": n.first_aligned,
                     "aligned_via": n.aligned_via.map(|r| r.0),
+                    "contradicted_by": n.contradicted_by.iter().map(|r| r.0).collect::<Vec<_>>(),
                     "closures": n.closures,
                     "local_from_remote": n.local_from_remote.map(|p| {
                         let (t, q) = (p.translation.vector, p.rotation.quaternion());

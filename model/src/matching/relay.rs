@@ -25,7 +25,7 @@
 
 use super::closure::{next_round, pairs_through, ClosurePair, ClosurePlan};
 use super::{GraphObject, LabelSimilarity};
-use crate::geometry::Pose3;
+use crate::geometry::{pose_error, Pose3};
 use crate::scene_graph::RobotId;
 use std::collections::BTreeMap;
 
@@ -62,6 +62,38 @@ pub fn hints_for(
         }
     }
     hints
+}
+
+/// The robots whose alignments contradict ours of `remote` (`own`: its world in ours): every
+/// hint for it ([`hints_for`]) that lands farther than `tolerance_m` (the remote origin's
+/// displacement) or `tolerance_deg` (rotation about any axis) from `own`, through whom it came,
+/// in the order of the hints. Around a cycle of alignments each transform should be the product
+/// of the others; a wrong one (symmetric rooms that a half turn maps onto themselves) breaks
+/// every cycle it is on:
+///
+/// ```text
+/// contradicted by s  ⇔  ‖T_{r←j} ⊖ T_{r←s} · T_{s←j}‖ > tolerance    (or T_{j←r}⁻¹ when s = j)
+/// ```
+///
+/// A cycle does not say which of its alignments is wrong: on a cycle of three, each robot sees
+/// each of its two alignments contradicted through the other. It flags; the rounds decide.
+pub fn contradicting(
+    me: RobotId,
+    remote: RobotId,
+    own: &Pose3,
+    ours: &BTreeMap<RobotId, Pose3>,
+    theirs: &BTreeMap<RobotId, Vec<(RobotId, Pose3)>>,
+    tolerance_m: f64,
+    tolerance_deg: f64,
+) -> Vec<RobotId> {
+    hints_for(me, remote, ours, theirs)
+        .into_iter()
+        .filter(|hint| {
+            let e = pose_error(&hint.local_from_remote, own);
+            !(e.translation_m <= tolerance_m && e.max_axis_rotation_deg() <= tolerance_deg)
+        })
+        .map(|hint| hint.via)
+        .collect()
 }
 
 /// Where a hint's first round may take its pairs from.
@@ -111,6 +143,41 @@ mod tests {
 
     fn close(a: &Pose3, b: &Pose3) -> bool {
         (a.translation.vector - b.translation.vector).norm() < 1e-9 && a.rotation.angle_to(&b.rotation) < 1e-9
+    }
+
+    /// Three robots, one wrong alignment (robot 2's world turned by a half turn and shifted, as
+    /// symmetric rooms allow): each cycle through it is broken, the others are not.
+    #[test]
+    fn a_wrong_alignment_is_contradicted_around_its_cycle() {
+        let (me, two, three) = (RobotId(1), RobotId(2), RobotId(3));
+        let world: BTreeMap<RobotId, Pose3> =
+            [(me, pose(0.3, 4.0, -2.0)), (two, pose(-1.1, 20.0, 7.0)), (three, pose(2.0, -9.0, 1.0))].into();
+        let t = |a: RobotId, b: RobotId| world[&a].inverse() * world[&b];
+        let wrong = pose(std::f64::consts::PI, 28.0, 16.0) * t(me, two);
+        // Robot 3 placed us and robot 2 right; robot 2 took our wrong alignment, inverted, and
+        // placed robot 3 right.
+        let theirs: BTreeMap<RobotId, Vec<(RobotId, Pose3)>> = [
+            (three, vec![(me, t(three, me)), (two, t(three, two))]),
+            (two, vec![(me, wrong.inverse()), (three, t(two, three))]),
+        ]
+        .into();
+        let ours: BTreeMap<RobotId, Pose3> = [(two, wrong), (three, t(me, three))].into();
+        let check = |remote: RobotId| contradicting(me, remote, &ours[&remote], &ours, &theirs, 2.0, 5.0);
+        // Our alignment of robot 2: robot 2 agrees (it took ours), robot 3's path does not.
+        assert_eq!(check(two), vec![three]);
+        // Our right alignment of robot 3: robot 3 agrees; the path through our wrong one does not.
+        // The cycle cannot say which is wrong.
+        assert_eq!(check(three), vec![two]);
+        // All right: no contradiction, even with a drift of 1 m and 1° along a chain.
+        let drift = pose(1f64.to_radians(), 0.7, -0.7);
+        let right: BTreeMap<RobotId, Pose3> = [(two, t(me, two)), (three, t(me, three))].into();
+        let theirs: BTreeMap<RobotId, Vec<(RobotId, Pose3)>> =
+            [(three, vec![(me, t(three, me)), (two, drift * t(three, two))]), (two, vec![(me, t(two, me))])].into();
+        for remote in [two, three] {
+            assert!(contradicting(me, remote, &right[&remote], &right, &theirs, 2.0, 5.0).is_empty());
+        }
+        // Past the tolerance, the drifted chain counts.
+        assert_eq!(contradicting(me, two, &right[&two], &right, &theirs, 0.5, 5.0), vec![three]);
     }
 
     /// Three worlds placed in a common frame W: each transform is W_a⁻¹ · W_b, so any chain of

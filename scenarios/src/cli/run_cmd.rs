@@ -121,7 +121,7 @@ pub fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
     for a in &report.alignments {
         let _ = writeln!(
             s,
-            "  {} ← {}: {}{}{}",
+            "  {} ← {}: {}{}{}{}",
             a.local,
             a.remote,
             a.state,
@@ -136,7 +136,8 @@ pub fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
                     a.closures.factors, a.closures.rounds
                 ),
                 (n, bad) => format!(", {n} inter-robot factors, {bad} INCONSISTENT (not used)"),
-            }
+            },
+            a.contradiction_note()
         );
     }
     let total: u64 = report.messages.values().map(|m| m.bytes_total).sum();

@@ -78,12 +78,24 @@ pub struct AlignmentReport {
     pub inconsistent_factors: usize,
     /// Times the consistent set's transform moved the alignment.
     pub realigned: u32,
+    /// The robots whose alignments, relayed around a cycle, put the remote elsewhere (the
+    /// local robot's status, `matcher.relay.contradiction_m`): one alignment of the cycle is
+    /// wrong.
+    pub contradicted_by: Vec<String>,
 }
 
 impl AlignmentReport {
     /// " (relayed by NAME)" when the first alignment started from that robot's, else "".
     pub fn relayed_note(&self) -> String {
         self.aligned_via.as_ref().map_or(String::new(), |v| format!(" (relayed by {v})"))
+    }
+
+    /// ", contradicted through NAME, NAME" when robots' relayed alignments contradict it, else "".
+    pub fn contradiction_note(&self) -> String {
+        if self.contradicted_by.is_empty() {
+            return String::new();
+        }
+        format!(", contradicted through {}", self.contradicted_by.join(", "))
     }
 }
 
@@ -366,6 +378,11 @@ pub fn compute(record: &RunRecord) -> Report {
                 inter_robot_factors: held.map_or(0, |h| h.factors),
                 inconsistent_factors: held.map_or(0, |h| h.inconsistent),
                 realigned: held.map_or(0, |h| h.realigned),
+                contradicted_by: n
+                    .contradicted_by
+                    .iter()
+                    .filter_map(|v| Some(record.robots.get(v.index()?)?.name.clone()))
+                    .collect(),
             });
         }
     }

@@ -173,10 +173,11 @@ pub fn render(report: &Report, timing: &Timing) -> String {
     for a in &report.alignments {
         let _ = writeln!(
             s,
-            "| {} ← {} | {} | {} | {} | {} | {} | {} ({}) |",
+            "| {} ← {} | {}{} | {} | {} | {} | {} | {} ({}) |",
             a.local,
             a.remote,
             a.state,
+            a.contradiction_note(),
             a.first_aligned_s.map_or("—".into(), |t| format!("{t:.1}{}", a.relayed_note())),
             metres(a.translation_error_m),
             a.rotation_error_deg.map_or("—".into(), |v| format!("{v:.2}")),

@@ -1,0 +1,53 @@
+//! Cycles of alignments flag a wrong one (`matcher.relay.contradiction_m`): in the indoor world
+//! whose room grid a half turn maps onto itself, seed 2 aligns alpha and bravo turned by 180°,
+//! and charlie's right alignments contradict that around the cycle; on seed 1, where every
+//! alignment is right, nothing is flagged. A cycle cannot say which of its alignments is wrong,
+//! so the right ones on a broken cycle are flagged too.
+
+use sgm_scenarios::report::{compute, AlignmentReport, Report};
+use sgm_scenarios::runner::run;
+use sgm_scenarios::scenario::Scenario;
+
+fn indoor(seed: u64, duration_s: f64) -> Report {
+    let mut scenario = Scenario::load_with_env("indoor_three_robots", "SGM_CONTRADICTIONS_TEST").unwrap().with_seed(seed);
+    scenario.scenario.duration_s = duration_s;
+    let outcome = actix_rt::System::new().block_on(run(&scenario, None)).unwrap();
+    compute(&outcome.record)
+}
+
+fn wrong(a: &AlignmentReport) -> bool {
+    a.translation_error_m.unwrap() > 2.0 || a.rotation_error_deg.unwrap() > 5.0
+}
+
+/// Every direction aligned, and the flags name the robot that closes each direction's cycle.
+fn all_aligned(report: &Report) {
+    assert_eq!(report.alignments.len(), 6);
+    for a in &report.alignments {
+        assert_eq!(a.state, "Aligned", "{} ← {}", a.local, a.remote);
+        for by in &a.contradicted_by {
+            assert!(by != &a.local && by != &a.remote, "{} ← {}: {by}", a.local, a.remote);
+        }
+    }
+}
+
+#[test]
+fn a_wrong_alignment_among_symmetric_rooms_is_flagged_around_its_cycle() {
+    let report = indoor(2, 70.0);
+    all_aligned(&report);
+    let wrong_ones: Vec<&AlignmentReport> = report.alignments.iter().filter(|a| wrong(a)).collect();
+    assert!(!wrong_ones.is_empty(), "seed 2 no longer aligns wrongly: choose another case for this test");
+    // Three robots make one cycle: a wrong alignment on it breaks it for every direction.
+    for a in &report.alignments {
+        assert!(!a.contradicted_by.is_empty(), "{} ← {} is not flagged", a.local, a.remote);
+    }
+}
+
+#[test]
+fn right_alignments_are_not_flagged() {
+    let report = indoor(1, 80.0);
+    all_aligned(&report);
+    for a in &report.alignments {
+        assert!(!wrong(a), "{} ← {}: {:?} m", a.local, a.remote, a.translation_error_m);
+        assert!(a.contradicted_by.is_empty(), "{} ← {} flagged by {:?}", a.local, a.remote, a.contradicted_by);
+    }
+}
