@@ -108,7 +108,8 @@ pub struct RelaySection {
     /// (`model::matching::relay::contradicting`) places that robot's origin this far from ours,
     /// m (the status and the report then name them: `contradicted_by`). Default 2.0.
     pub contradiction_m: f64,
-    /// ... or turns it by this much about any axis, degrees. Default 5.0.
+    /// ... or turns it by this much (the angle of the rotation between the two), degrees.
+    /// Default 5.0. Without relaying nothing is heard, so nothing is flagged.
     pub contradiction_deg: f64,
 }
 

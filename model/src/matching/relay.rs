@@ -66,7 +66,8 @@ pub fn hints_for(
 
 /// The robots whose alignments contradict ours of `remote` (`own`: its world in ours): every
 /// hint for it ([`hints_for`]) that lands farther than `tolerance_m` (the remote origin's
-/// displacement) or `tolerance_deg` (rotation about any axis) from `own`, through whom it came,
+/// displacement) or `tolerance_deg` (the angle of the rotation between them) from `own`
+/// (NaN counts as farther), through whom it came,
 /// in the order of the hints. Around a cycle of alignments each transform should be the product
 /// of the others; a wrong one (symmetric rooms that a half turn maps onto themselves) breaks
 /// every cycle it is on:
@@ -89,8 +90,10 @@ pub fn contradicting(
     hints_for(me, remote, ours, theirs)
         .into_iter()
         .filter(|hint| {
+            // The whole rotation between them (a turn about a diagonal axis counts in full).
             let e = pose_error(&hint.local_from_remote, own);
-            !(e.translation_m <= tolerance_m && e.max_axis_rotation_deg() <= tolerance_deg)
+            let turn_deg = hint.local_from_remote.rotation.angle_to(&own.rotation).to_degrees();
+            !(e.translation_m <= tolerance_m && turn_deg <= tolerance_deg)
         })
         .map(|hint| hint.via)
         .collect()
@@ -178,6 +181,19 @@ mod tests {
         }
         // Past the tolerance, the drifted chain counts.
         assert_eq!(contradicting(me, two, &right[&two], &right, &theirs, 0.5, 5.0), vec![three]);
+        // A turn about the remote origin, 4° about x and y each (5.7° in all): only the rotation
+        // gate sees it, and in full.
+        let tilt = nalgebra::UnitQuaternion::from_euler_angles(4f64.to_radians(), 4f64.to_radians(), 0.0);
+        let turned = Pose3::from_parts(right[&two].translation, right[&two].rotation * tilt);
+        assert_eq!(contradicting(me, two, &turned, &right, &theirs, 2.0, 5.0), vec![two, three]);
+        assert!(contradicting(me, two, &turned, &right, &theirs, 2.0, 6.0).is_empty());
+        // Robot 2's own alignment of us disagreeing names robot 2 itself (a cycle of two).
+        let theirs: BTreeMap<RobotId, Vec<(RobotId, Pose3)>> =
+            [(two, vec![(me, pose(0.5, 9.0, 0.0) * t(two, me))])].into();
+        assert_eq!(contradicting(me, two, &right[&two], &right, &theirs, 2.0, 5.0), vec![two]);
+        // A NaN alignment is never taken for agreement.
+        let nan = Pose3::from_parts(nalgebra::Translation3::new(f64::NAN, 0.0, 0.0), right[&two].rotation);
+        assert_eq!(contradicting(me, two, &nan, &right, &theirs, 2.0, 5.0), vec![two]);
     }
 
     /// Three worlds placed in a common frame W: each transform is W_a⁻¹ · W_b, so any chain of

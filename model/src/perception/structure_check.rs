@@ -61,7 +61,8 @@ impl Default for StructureCheck {
 /// within `LEVEL_RANGE_M` is level, m.
 const LEVEL_M: f64 = 0.15;
 
-/// The level test reads the points this close to the sensor (horizontally), m.
+/// The level test reads the points this close to the sensor (horizontally), m; all of them when
+/// none this close has a local ground.
 const LEVEL_RANGE_M: f64 = 15.0;
 
 /// The points of `scan` (body frame, z up) above its local ground.
@@ -81,12 +82,19 @@ fn structure(scan: &[Point3<f64>], check: &StructureCheck) -> Vec<Point3<f64>> {
     let above = heights_above_ground(&points, &params);
     // A level scan (the local ground under 95 % of the near points within LEVEL_M of the scan's
     // low percentile) keeps the single threshold: local planes would only add noise there.
-    let mut offsets: Vec<f64> = points
-        .iter()
-        .zip(&above)
-        .filter(|(p, _)| p.x.hypot(p.y) <= LEVEL_RANGE_M)
-        .filter_map(|(p, h)| h.map(|h| (p.z - h - low).abs()))
-        .collect();
+    // (All points when no near point has a local ground: a scan that sees no ground near it.)
+    let offsets_within = |range: f64| -> Vec<f64> {
+        points
+            .iter()
+            .zip(&above)
+            .filter(|(p, _)| p.x.hypot(p.y) <= range)
+            .filter_map(|(p, h)| h.map(|h| (p.z - h - low).abs()))
+            .collect()
+    };
+    let mut offsets = offsets_within(LEVEL_RANGE_M);
+    if offsets.is_empty() {
+        offsets = offsets_within(f64::INFINITY);
+    }
     offsets.sort_unstable_by(f64::total_cmp);
     let level = offsets.get(offsets.len() * 19 / 20).is_none_or(|&q| q <= LEVEL_M);
     points
