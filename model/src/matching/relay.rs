@@ -148,14 +148,20 @@ mod tests {
         (a.translation.vector - b.translation.vector).norm() < 1e-9 && a.rotation.angle_to(&b.rotation) < 1e-9
     }
 
+    /// Robots 1, 2 and 3 with worlds placed in a common frame W, and their true transforms
+    /// t(a, b) = W_a⁻¹ · W_b.
+    fn three_worlds() -> ([RobotId; 3], impl Fn(RobotId, RobotId) -> Pose3) {
+        let robots = [RobotId(1), RobotId(2), RobotId(3)];
+        let world: BTreeMap<RobotId, Pose3> =
+            robots.into_iter().zip([pose(0.3, 4.0, -2.0), pose(-1.1, 20.0, 7.0), pose(2.0, -9.0, 1.0)]).collect();
+        (robots, move |a: RobotId, b: RobotId| world[&a].inverse() * world[&b])
+    }
+
     /// Three robots, one wrong alignment (robot 2's world turned by a half turn and shifted, as
     /// symmetric rooms allow): each cycle through it is broken, the others are not.
     #[test]
     fn a_wrong_alignment_is_contradicted_around_its_cycle() {
-        let (me, two, three) = (RobotId(1), RobotId(2), RobotId(3));
-        let world: BTreeMap<RobotId, Pose3> =
-            [(me, pose(0.3, 4.0, -2.0)), (two, pose(-1.1, 20.0, 7.0)), (three, pose(2.0, -9.0, 1.0))].into();
-        let t = |a: RobotId, b: RobotId| world[&a].inverse() * world[&b];
+        let ([me, two, three], t) = three_worlds();
         let wrong = pose(std::f64::consts::PI, 28.0, 16.0) * t(me, two);
         // Robot 3 placed us and robot 2 right; robot 2 took our wrong alignment, inverted, and
         // placed robot 3 right.
@@ -200,10 +206,7 @@ mod tests {
     /// hints must give it back exactly.
     #[test]
     fn direct_and_relayed_hints_compose_to_the_true_transform() {
-        let (me, two, three) = (RobotId(1), RobotId(2), RobotId(3));
-        let world: BTreeMap<RobotId, Pose3> =
-            [(me, pose(0.3, 4.0, -2.0)), (two, pose(-1.1, 20.0, 7.0)), (three, pose(2.0, -9.0, 1.0))].into();
-        let t = |a: RobotId, b: RobotId| world[&a].inverse() * world[&b];
+        let ([me, two, three], t) = three_worlds();
         // Robot 2 placed us and robot 3; robot 3 placed robot 2.
         let theirs: BTreeMap<RobotId, Vec<(RobotId, Pose3)>> =
             [(two, vec![(me, t(two, me)), (three, t(two, three))]), (three, vec![(two, t(three, two))])].into();
