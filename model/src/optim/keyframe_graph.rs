@@ -214,7 +214,9 @@ impl KeyframeGraph {
     }
 
     /// Adds `robot`'s keyframes (pose in its world, marginal covariance; a keyframe already
-    /// held keeps its variable and factor) and the inter-robot factors (local keyframe, its
+    /// held keeps its variable, and its tie to the anchor takes the new pose and covariance
+    /// only if they are the more informative, see [`KeyframeGraph::keep_more_informative`])
+    /// and the inter-robot factors (local keyframe, its
     /// keyframe, measured local_from_neighbour-keyframe pose, information). `local_from_remote`
     /// places the neighbour's anchor when it is new; afterwards the anchor is what the solves
     /// make of it.
@@ -240,7 +242,8 @@ impl KeyframeGraph {
         let anchor_value = self.graph.values[anchor];
         for (keyframe, pose_in_remote, covariance) in keyframes {
             let r = KeyframeRef::Remote { robot, keyframe: *keyframe };
-            if self.index.contains_key(&r) {
+            if let Some(&i) = self.index.get(&r) {
+                self.keep_more_informative(anchor, i, pose_in_remote, covariance);
                 continue;
             }
             let i = self.variable(r, anchor_value * pose_in_remote);
@@ -259,6 +262,48 @@ impl KeyframeGraph {
                 information: *information,
             };
             self.add_edge(&edge);
+        }
+    }
+
+    /// A neighbour keyframe held already, received again with `pose_in_remote` and
+    /// `covariance`: its tie to the anchor takes them if their information Ω = Σ⁻¹ has the
+    /// larger determinant (|det S|, Sᵀ S = Ω), else keeps what it has. A neighbour's marginals
+    /// only shrink as its graph grows, so the more informative is its later estimate; and a
+    /// keyframe first met through a claim that knew little of it (a false factor's, see
+    /// `sim::false_factors`) takes the neighbour's own prior when that arrives, instead of
+    /// keeping the first for the rest of the mission. A covariance that is not positive
+    /// definite changes nothing.
+    fn keep_more_informative(
+        &mut self,
+        anchor: usize,
+        variable: usize,
+        pose_in_remote: &Pose3,
+        covariance: &Matrix6<f64>,
+    ) {
+        let Some(tie) = Prior::from_covariance(variable, *pose_in_remote, covariance) else { return };
+        let held = self
+            .graph
+            .betweens
+            .iter_mut()
+            .zip(&self.candidates)
+            .find(|(b, candidate)| !**candidate && b.from == anchor && b.to == variable);
+        match held {
+            Some((b, _)) => {
+                if tie.sqrt_information.determinant().abs() > b.sqrt_information.determinant().abs() {
+                    b.measured = *pose_in_remote;
+                    b.sqrt_information = tie.sqrt_information;
+                }
+            }
+            // Held without a tie (its first covariance was not positive definite).
+            None => {
+                self.graph.betweens.push(Between {
+                    from: anchor,
+                    to: variable,
+                    measured: *pose_in_remote,
+                    sqrt_information: tie.sqrt_information,
+                });
+                self.candidates.push(false);
+            }
         }
     }
 
@@ -567,6 +612,58 @@ mod tests {
         for (k, pose) in &solved.poses {
             assert!((pose.translation.vector - truth[k.0 as usize].translation.vector).norm() < 1e-3);
         }
+    }
+
+    #[test]
+    fn a_neighbour_keyframe_received_again_keeps_its_more_informative_prior() {
+        let (_, truth) = straight_chain(6);
+        let local_from_remote = pose_from_yaw_translation(0.2, Vector3::new(10.0, 0.0, 0.0));
+        let measured = pose_from_yaw_translation(0.0, Vector3::new(0.0, 2.0, 0.0));
+        let honest_pose = local_from_remote.inverse() * truth[3] * measured;
+        let honest = (KeyframeId(103), honest_pose, Matrix6::identity() * 0.01);
+        // A claim that knew little of the keyframe: 3 m off, and next to no information.
+        let vague_pose = honest_pose * pose_from_yaw_translation(0.3, Vector3::new(3.0, 0.0, 0.0));
+        let vague_cov = Matrix6::from_diagonal(&nalgebra::Vector6::new(1.0, 1.0, 1.0, 1e4, 1e4, 1e4));
+        let vague = (KeyframeId(103), vague_pose, vague_cov);
+        let not_positive = (KeyframeId(103), vague_pose, Matrix6::identity() * f64::NAN);
+        let factors = [(KeyframeId(1), KeyframeId(103), measured, information())];
+        let factor_of_5 = [(KeyframeId(5), KeyframeId(105), measured, information())];
+        let other = (KeyframeId(105), local_from_remote.inverse() * truth[5] * measured, Matrix6::identity() * 0.01);
+        // Every arrival order ends as the graph that only ever got the honest prior.
+        let solved = |arrivals: &[(KeyframeId, Pose3, Matrix6<f64>)]| {
+            let (mut graph, _) = straight_chain(6);
+            for (n, a) in arrivals.iter().enumerate() {
+                let with = if n + 1 == arrivals.len() { &factors[..] } else { &[] };
+                graph.add_neighbour(RobotId(2), &local_from_remote, &[*a], with);
+            }
+            graph.add_neighbour(RobotId(2), &local_from_remote, &[other], &factor_of_5);
+            let anchor = graph.solve(false, 0).expect("solves").anchors[0].1;
+            let state = graph.freeze();
+            let ties: Vec<(Pose3, Matrix6<f64>)> = state
+                .graph
+                .betweens
+                .iter()
+                .zip(&state.candidates)
+                .filter(|(b, c)| !**c && b.from == state.anchors[0].1)
+                .map(|(b, _)| (b.measured, b.sqrt_information))
+                .collect();
+            (anchor, ties)
+        };
+        let (anchor, ties) = solved(&[honest]);
+        assert_eq!(ties.len(), 2);
+        for arrivals in
+            [vec![vague, honest], vec![honest, vague], vec![not_positive, honest], vec![honest, not_positive]]
+        {
+            let (a, t) = solved(&arrivals);
+            assert_eq!(t, ties, "the ties to the anchor");
+            // The same problem from other starting values (the variable was made at the vague
+            // pose): the same answer to LM's tolerance.
+            let e = crate::geometry::pose_error(&a, &anchor);
+            assert!(e.translation_m < 1e-3 && e.max_axis_rotation_deg() < 1e-2, "{e:?}");
+        }
+        // Alone, the vague claim is what the graph has of the keyframe.
+        let (_, t) = solved(&[vague]);
+        assert_eq!(t[0].0, vague_pose);
     }
 
     #[test]

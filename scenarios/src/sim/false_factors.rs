@@ -6,9 +6,19 @@
 //! z = (T_L⁻¹ T_R) · Exp(δ), T the true body poses at the keyframes' stamps and δ = (ω, v) with
 //! ‖ω‖ = `rotation_deg` and ‖v‖ = `translation_m` about random axes: a measurement exactly that
 //! wrong, claimed as confident as an ICP registration (σ = 1°, 5 cm). R's pose in the
-//! neighbour's world and the robot's own `local_from_remote` come with it, as with a real match,
-//! so the back end must tell the lie from the factor alone. Injection waits until `robot` has
-//! aligned `neighbour` (before that there is nothing in its graph to corrupt).
+//! neighbour's world (its map's estimate now) and the robot's own `local_from_remote` come with
+//! it, as with a real match, so the back end must tell the lie from the factor alone. Injection
+//! waits until `robot` has aligned `neighbour` (before that there is nothing in its graph to
+//! corrupt).
+//!
+//! R's pose comes with a covariance that claims next to nothing (1 rad², 10⁴ m²): the
+//! simulation does not know the neighbour's marginal, and a claimed one tighter than it would
+//! be a second lie, one no outlier test can reach (a prior is not a candidate for rejection).
+//! It was one: with σ = 0.57°, 0.1 m, about 12 times tighter than the honest marginals on
+//! `faults/clean`, the keyframe stayed pinned where the injection put it for the rest of the
+//! mission (the graph kept a keyframe's first prior), and the team ATE of `sgm bench outliers`
+//! moved by 20 % with every false factor rejected. When the neighbour's own keyframe arrives
+//! later, its prior replaces this one (`KeyframeGraph::add_neighbour`).
 
 use crate::observation::Observation;
 use crate::scenario::FalseFactorSpec;
@@ -24,8 +34,9 @@ use sgm_model::scene_graph::{KeyframeId, RobotId};
 
 /// Standard deviations a false factor claims: rotation (rad), translation (m).
 const CLAIMED_SIGMAS: (f64, f64) = (0.017_45, 0.05);
-/// Covariance of a neighbour keyframe the robot did not hold yet (rotation rad², translation m²).
-const PRIOR_VARIANCES: (f64, f64) = (1e-4, 1e-2);
+/// Covariance claimed for the neighbour keyframe (rotation rad², translation m²): next to
+/// nothing, see the module's documentation.
+const PRIOR_VARIANCES: (f64, f64) = (1.0, 1e4);
 
 /// One factor injected: which robot got it, tying which keyframes, when.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
