@@ -70,6 +70,7 @@ fn bench_all_writes_every_table_with_its_rows() {
     let outliers = json["outliers"]["rows"].as_array().unwrap();
     assert_eq!(outliers.len(), 15);
     assert_eq!((outliers[0]["kind"].as_str(), outliers[0]["false_injected"].as_u64()), (Some("none"), Some(0)));
+    assert_eq!(outliers[0]["honest_rejected"].as_u64(), Some(0), "the clean run rejected a correct factor");
     for r in &outliers[1..] {
         assert!(r["false_rejected"].as_u64() <= r["false_injected"].as_u64(), "{r}");
     }

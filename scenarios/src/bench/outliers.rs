@@ -6,7 +6,8 @@
 //! inter-robot factors are wrong. They come at once, 5 s after the pair first aligned, when
 //! the pair holds only its first round's factors: early on the wrong ones are even more of
 //! them. The table gives the team ATE against the clean run's, how many of the false factors
-//! the back end rejected (PCM, then GNC-TLS), and the pairs still aligned right.
+//! the back end rejected (PCM, then GNC-TLS), how many honest factors it rejected with them,
+//! and the pairs still aligned right.
 
 use super::{aligned_right, duration_arg, load_cut, or_dash, run_all, Job, Section};
 use serde::Serialize;
@@ -26,6 +27,9 @@ pub struct Row {
     pub fraction: f64,
     pub false_injected: usize,
     pub false_rejected: usize,
+    /// Honest factors rejected (intra-robot loop closures and true inter-robot factors): what
+    /// the defence cost.
+    pub honest_rejected: usize,
     /// Inter-robot factors outside the largest consistent sets (PCM), all pairs.
     pub inconsistent: usize,
     pub pairs: usize,
@@ -71,6 +75,7 @@ fn row(kind: &str, fraction: f64, report: &Report, clean_ate: Option<f64>) -> Ro
         fraction,
         false_injected: report.back_end.false_factors_injected,
         false_rejected: report.back_end.false_factors_rejected,
+        honest_rejected: report.back_end.rejected_factors.saturating_sub(report.back_end.false_factors_rejected),
         inconsistent: report.alignments.iter().map(|a| a.inconsistent_factors).sum(),
         pairs: report.alignments.len(),
         aligned_right: report.alignments.iter().filter(|a| aligned_right(a)).count(),
@@ -106,7 +111,7 @@ pub fn run_bench(scenario_name: &str, duration: Option<f64>) -> anyhow::Result<S
     }
     let command = format!("sgm bench outliers --scenario {scenario_name}{}", duration_arg(duration));
     let mut md = format!("# Wrong inter-robot closures\n\nCommand: `{command}`.\n\n");
-    md.push_str("| False factors | Wrong | Injected | Rejected | Inconsistent (PCM) | Pairs aligned | Team ATE | vs clean |\n|---|---|---|---|---|---|---|---|\n");
+    md.push_str("| False factors | Wrong | Injected | Rejected | Inconsistent (PCM) | Honest rejected | Pairs aligned | Team ATE | vs clean |\n|---|---|---|---|---|---|---|---|---|\n");
     for r in &out {
         let how = KINDS
             .iter()
@@ -114,11 +119,12 @@ pub fn run_bench(scenario_name: &str, duration: Option<f64>) -> anyhow::Result<S
             .map_or("—".to_string(), |k| format!("{} ({} m, {}°)", k.0, k.1, k.2));
         let _ = writeln!(
             md,
-            "| {how} | {:.0} % | {} | {} | {} | {}/{} | {} m | {} |",
+            "| {how} | {:.0} % | {} | {} | {} | {} | {}/{} | {} m | {} |",
             r.fraction * 100.0,
             r.false_injected,
             r.false_rejected,
             r.inconsistent,
+            r.honest_rejected,
             r.aligned_right,
             r.pairs,
             or_dash(r.team_ate_m, 3),
