@@ -7,6 +7,37 @@
 use sgm_scenarios::report::{compute, AlignmentReport, Report};
 use sgm_scenarios::runner::run;
 use sgm_scenarios::scenario::Scenario;
+use std::sync::{Arc, Mutex, OnceLock};
+
+/// Everything logged at info and above by any test of this file (the robots run on threads of
+/// their own, so the subscriber is the process's).
+fn logs() -> Arc<Mutex<Vec<u8>>> {
+    static LOGS: OnceLock<Arc<Mutex<Vec<u8>>>> = OnceLock::new();
+    LOGS.get_or_init(|| {
+        let buffer = Arc::new(Mutex::new(Vec::new()));
+        let writer = buffer.clone();
+        let subscriber = tracing_subscriber::fmt()
+            .with_max_level(tracing::Level::INFO)
+            .with_ansi(false)
+            .with_writer(move || Captured(writer.clone()))
+            .finish();
+        tracing::subscriber::set_global_default(subscriber).expect("no other subscriber in this test binary");
+        buffer
+    })
+    .clone()
+}
+
+struct Captured(Arc<Mutex<Vec<u8>>>);
+
+impl std::io::Write for Captured {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+        self.0.lock().expect("log buffer").extend_from_slice(bytes);
+        Ok(bytes.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
 
 fn indoor(seed: u64, duration_s: f64) -> Report {
     let mut scenario =
@@ -32,6 +63,7 @@ fn all_aligned(report: &Report) {
 
 #[test]
 fn a_wrong_alignment_among_symmetric_rooms_is_flagged_around_its_cycle() {
+    let logs = logs();
     let report = indoor(2, 70.0);
     all_aligned(&report);
     let wrong_ones: Vec<&AlignmentReport> = report.alignments.iter().filter(|a| wrong(a)).collect();
@@ -40,6 +72,12 @@ fn a_wrong_alignment_among_symmetric_rooms_is_flagged_around_its_cycle() {
     for a in &report.alignments {
         assert!(!a.contradicted_by.is_empty(), "{} ← {} is not flagged", a.local, a.remote);
     }
+    // And the log said so, once per robot and neighbour when it began (the other test of this
+    // file flags nothing, so every such line is this run's).
+    let text = String::from_utf8_lossy(&logs.lock().unwrap()).into_owned();
+    let warned: Vec<&str> =
+        text.lines().filter(|l| l.contains("our alignment of the neighbour is contradicted")).collect();
+    assert!(warned.len() >= 6 && warned.iter().all(|l| l.contains("WARN") && l.contains("through=")), "{warned:#?}");
 }
 
 #[test]

@@ -78,6 +78,9 @@ pub struct Matcher {
     /// Each neighbour's latest alignments (`[matcher.relay]`): hints, not kept in snapshots (they
     /// come again within `comms.alignments_refresh_s`).
     hints: BTreeMap<RobotId, Vec<(RobotId, Pose3)>>,
+    /// The robots last logged as contradicting our alignment of each neighbour (a warning when
+    /// this changes; not kept in snapshots, so a restarted robot warns again).
+    contradictions: BTreeMap<RobotId, Vec<RobotId>>,
     /// Threads a registration may split its work over (the same answers for any number).
     workers: Workers,
     /// Counts the changes of the map's matchable objects (`LastMatch`).
@@ -103,6 +106,7 @@ impl Matcher {
             places: EvenPlaces::default(),
             neighbours: BTreeMap::new(),
             hints: BTreeMap::new(),
+            contradictions: BTreeMap::new(),
             workers: Workers::sequential(),
             local_objects_revision: 0,
         }

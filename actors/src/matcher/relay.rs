@@ -45,6 +45,28 @@ impl Matcher {
         contradicting(self.robot, robot, &own, &ours, &self.hints, relay.contradiction_m, relay.contradiction_deg)
     }
 
+    /// Logs where the robots contradicting our alignment of a neighbour changed: a warning
+    /// naming them when the set grows or moves, a note when it empties. The status and the
+    /// report hold the set at all times; the log says when it changed. One of the alignments
+    /// on such a cycle is wrong, and which one is not settled here.
+    pub(super) fn log_contradictions(&mut self) {
+        let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
+        for robot in robots {
+            let now = self.contradicted_by(robot);
+            if self.contradictions.get(&robot).map_or(now.is_empty(), |before| *before == now) {
+                continue;
+            }
+            if now.is_empty() {
+                tracing::info!(robot = %self.robot, neighbour = %robot, "our alignment of the neighbour is no longer contradicted");
+                self.contradictions.remove(&robot);
+            } else {
+                let through = now.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ");
+                tracing::warn!(robot = %self.robot, neighbour = %robot, %through, "our alignment of the neighbour is contradicted by the alignments of the robots named: one of them is wrong");
+                self.contradictions.insert(robot, now);
+            }
+        }
+    }
+
     fn aligned(&self) -> Vec<(RobotId, Pose3)> {
         self.neighbours
             .iter()
@@ -150,6 +172,7 @@ impl Handler<NeighbourAlignments> for Matcher {
             // The latest per neighbour: what it holds now replaces what it held (bounded by the
             // envelope's `limits.max_ids`).
             self.hints.insert(msg.robot, msg.alignments);
+            self.log_contradictions();
             let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
             for robot in robots {
                 self.try_match(robot);

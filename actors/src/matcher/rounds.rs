@@ -250,6 +250,7 @@ impl Matcher {
                     });
                 }
                 self.share_alignments();
+                self.log_contradictions();
             }
         }
     }
