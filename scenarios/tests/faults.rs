@@ -95,8 +95,10 @@ fn false_inter_robot_factors_are_rejected_and_team_ate_holds() {
     // aligned, when the pair holds only its first round's factors. Rejected, they leave the
     // estimate the clean run's: the graphs differ only by factors that weigh nothing (a false
     // factor's claim on its neighbour keyframe is vague, and the keyframe's own prior replaces
-    // it when it arrives). With the injection's earlier σ = 0.1 m claim this fails (0.04210 m
-    // against 0.04214 m; on the bench the team ATE was 20 % off).
+    // it when it arrives). Runs are deterministic, so the two missions differ only by that;
+    // 1e-5 m leaves room for solves started from other values. With the injection's earlier
+    // σ = 0.1 m claim this fails (0.04210 m against 0.04214 m; on the bench the team ATE was
+    // 20 % off).
     let mut early = load();
     early.false_factors = clean
         .alignments
@@ -114,5 +116,5 @@ fn false_inter_robot_factors_are_rejected_and_team_ate_holds() {
     let b = &early.back_end;
     assert_eq!((b.false_factors_injected, b.false_factors_rejected), (12, 12), "{b:?}");
     let early_ate = early.team_ate_rmse_m.unwrap();
-    assert!((early_ate - clean_ate).abs() < 1e-6, "team ATE {early_ate} m against {clean_ate} m clean");
+    assert!((early_ate - clean_ate).abs() < 1e-5, "team ATE {early_ate} m against {clean_ate} m clean");
 }

@@ -80,7 +80,7 @@ pub struct Matcher {
     hints: BTreeMap<RobotId, Vec<(RobotId, Pose3)>>,
     /// The robots last logged as contradicting our alignment of each neighbour (a warning when
     /// this changes; not kept in snapshots, so a restarted robot warns again).
-    contradictions: BTreeMap<RobotId, Vec<RobotId>>,
+    contradictions: BTreeMap<RobotId, relay::LoggedContradiction>,
     /// Threads a registration may split its work over (the same answers for any number).
     workers: Workers,
     /// Counts the changes of the map's matchable objects (`LastMatch`).

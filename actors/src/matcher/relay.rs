@@ -9,6 +9,15 @@ use sgm_model::geometry::Brief;
 use sgm_model::matching::closure::{pairs_through, ClosurePlan};
 use sgm_model::matching::relay::{contradicting, hinted_round, hints_for, Reach};
 
+/// Least time between two log lines about the robots contradicting one alignment, s.
+const CONTRADICTION_LOG_INTERVAL_S: f64 = 60.0;
+
+/// What was last logged of the robots contradicting our alignment of a neighbour, and when.
+pub(super) struct LoggedContradiction {
+    robots: Vec<RobotId>,
+    at_s: f64,
+}
+
 /// Where an alignment round starts: the first estimate, the object pairs whose clouds are asked
 /// for, and whose alignment it came from (`None`: object-graph matching).
 pub(super) struct RoundStart {
@@ -47,23 +56,37 @@ impl Matcher {
 
     /// Logs where the robots contradicting our alignment of a neighbour changed: a warning
     /// naming them when the set grows or moves, a note when it empties. The status and the
-    /// report hold the set at all times; the log says when it changed. One of the alignments
-    /// on such a cycle is wrong, and which one is not settled here.
+    /// report hold the set at all times; the log says when it changed, at most once per
+    /// neighbour every `CONTRADICTION_LOG_INTERVAL_S` (a hint near the tolerance may flip the
+    /// set at every solve): a change within it is logged at the first event after it, if it
+    /// still holds. A neighbour no longer aligned is forgotten without a line (its alignment
+    /// went, nothing was settled). One of the alignments on such a cycle is wrong, and which
+    /// one is not settled here.
     pub(super) fn log_contradictions(&mut self) {
+        let now_s = self.clock.now();
         let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
         for robot in robots {
+            let aligned =
+                matches!(self.neighbours.get(&robot).and_then(|e| e.protocol.as_ref()), Some(Protocol::Aligned(_)));
+            if !aligned {
+                self.contradictions.remove(&robot);
+                continue;
+            }
             let now = self.contradicted_by(robot);
-            if self.contradictions.get(&robot).map_or(now.is_empty(), |before| *before == now) {
+            let logged = self.contradictions.get(&robot);
+            if logged.map_or(now.is_empty(), |l| l.robots == now) {
+                continue;
+            }
+            if logged.is_some_and(|l| now_s - l.at_s < CONTRADICTION_LOG_INTERVAL_S) {
                 continue;
             }
             if now.is_empty() {
                 tracing::info!(robot = %self.robot, neighbour = %robot, "our alignment of the neighbour is no longer contradicted");
-                self.contradictions.remove(&robot);
             } else {
                 let through = now.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ");
                 tracing::warn!(robot = %self.robot, neighbour = %robot, %through, "our alignment of the neighbour is contradicted by the alignments of the robots named: one of them is wrong");
-                self.contradictions.insert(robot, now);
             }
+            self.contradictions.insert(robot, LoggedContradiction { robots: now, at_s: now_s });
         }
     }
 

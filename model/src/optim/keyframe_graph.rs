@@ -215,11 +215,10 @@ impl KeyframeGraph {
 
     /// Adds `robot`'s keyframes (pose in its world, marginal covariance; a keyframe already
     /// held keeps its variable, and its tie to the anchor takes the new pose and covariance
-    /// only if they are the more informative, see [`KeyframeGraph::keep_more_informative`])
-    /// and the inter-robot factors (local keyframe, its
-    /// keyframe, measured local_from_neighbour-keyframe pose, information). `local_from_remote`
-    /// places the neighbour's anchor when it is new; afterwards the anchor is what the solves
-    /// make of it.
+    /// only if they are at least as informative, see [`KeyframeGraph::keep_more_informative`])
+    /// and the inter-robot factors (local keyframe, its keyframe, measured
+    /// local_from_neighbour-keyframe pose, information). `local_from_remote` places the
+    /// neighbour's anchor when it is new; afterwards the anchor is what the solves make of it.
     pub fn add_neighbour(
         &mut self,
         robot: RobotId,
@@ -266,13 +265,14 @@ impl KeyframeGraph {
     }
 
     /// A neighbour keyframe held already, received again with `pose_in_remote` and
-    /// `covariance`: its tie to the anchor takes them if their information Ω = Σ⁻¹ has the
-    /// larger determinant (|det S|, Sᵀ S = Ω), else keeps what it has. A neighbour's marginals
-    /// only shrink as its graph grows, so the more informative is its later estimate; and a
-    /// keyframe first met through a claim that knew little of it (a false factor's, see
+    /// `covariance`: its tie to the anchor takes them if their information Ω = Σ⁻¹ has at
+    /// least the determinant of the held one (|det S|, Sᵀ S = Ω; the later estimate wins a
+    /// tie), else keeps what it has. A neighbour's marginals mostly shrink as its graph grows,
+    /// and a keyframe first met through a claim that knew little of it (a false factor's, see
     /// `sim::false_factors`) takes the neighbour's own prior when that arrives, instead of
     /// keeping the first for the rest of the mission. A covariance that is not positive
-    /// definite changes nothing.
+    /// definite changes nothing. The protocol asks for a keyframe once, so an honest mission
+    /// never comes here.
     fn keep_more_informative(
         &mut self,
         anchor: usize,
@@ -289,7 +289,7 @@ impl KeyframeGraph {
             .find(|(b, candidate)| !**candidate && b.from == anchor && b.to == variable);
         match held {
             Some((b, _)) => {
-                if tie.sqrt_information.determinant().abs() > b.sqrt_information.determinant().abs() {
+                if tie.sqrt_information.determinant().abs() >= b.sqrt_information.determinant().abs() {
                     b.measured = *pose_in_remote;
                     b.sqrt_information = tie.sqrt_information;
                 }
@@ -625,7 +625,8 @@ mod tests {
         let vague_pose = honest_pose * pose_from_yaw_translation(0.3, Vector3::new(3.0, 0.0, 0.0));
         let vague_cov = Matrix6::from_diagonal(&nalgebra::Vector6::new(1.0, 1.0, 1.0, 1e4, 1e4, 1e4));
         let vague = (KeyframeId(103), vague_pose, vague_cov);
-        let not_positive = (KeyframeId(103), vague_pose, Matrix6::identity() * f64::NAN);
+        let not_finite = (KeyframeId(103), vague_pose, Matrix6::identity() * f64::NAN);
+        let not_positive = (KeyframeId(103), vague_pose, -Matrix6::identity());
         let factors = [(KeyframeId(1), KeyframeId(103), measured, information())];
         let factor_of_5 = [(KeyframeId(5), KeyframeId(105), measured, information())];
         let other = (KeyframeId(105), local_from_remote.inverse() * truth[5] * measured, Matrix6::identity() * 0.01);
@@ -651,9 +652,17 @@ mod tests {
         };
         let (anchor, ties) = solved(&[honest]);
         assert_eq!(ties.len(), 2);
-        for arrivals in
-            [vec![vague, honest], vec![honest, vague], vec![not_positive, honest], vec![honest, not_positive]]
-        {
+        // As informative as the honest one, from an earlier estimate: the later one wins.
+        let earlier = (KeyframeId(103), vague_pose, Matrix6::identity() * 0.01);
+        for arrivals in [
+            vec![vague, honest],
+            vec![honest, vague],
+            vec![not_finite, honest],
+            vec![honest, not_finite],
+            vec![not_positive, honest],
+            vec![honest, not_positive],
+            vec![earlier, honest],
+        ] {
             let (a, t) = solved(&arrivals);
             assert_eq!(t, ties, "the ties to the anchor");
             // The same problem from other starting values (the variable was made at the vague

@@ -4,8 +4,12 @@
 
 use crate::record::RunRecord;
 use serde::Serialize;
+use sgm_model::scene_graph::KeyframeId;
 use sgm_model::scene_graph::RobotId;
-use std::collections::BTreeSet;
+use std::collections::BTreeMap;
+
+/// A factor's ends: robot index, neighbour, its keyframe, the neighbour's keyframe.
+type Ends = (usize, RobotId, KeyframeId, KeyframeId);
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct BackEndReport {
@@ -21,17 +25,23 @@ pub struct BackEndReport {
 
 pub fn compute(record: &RunRecord) -> BackEndReport {
     let mut report = BackEndReport { false_factors_injected: record.false_factors.len(), ..Default::default() };
-    let mut rejected = BTreeSet::new();
+    // Factors are told apart by their ends, counted with multiplicity: two false factors may
+    // tie the same keyframes, and only as many of them count as rejected as the Optimiser
+    // rejected with those ends.
+    let mut rejected: BTreeMap<Ends, usize> = BTreeMap::new();
     for (k, status) in record.optimisers.iter().enumerate() {
         let Some(status) = status else { continue };
         report.candidate_factors += status.candidate_factors;
         report.rejected_factors += status.rejected_factors;
-        rejected.extend(status.rejected_inter_robot.iter().map(|(robot, local, remote)| (k, *robot, *local, *remote)));
+        for (robot, local, remote) in &status.rejected_inter_robot {
+            *rejected.entry((k, *robot, *local, *remote)).or_default() += 1;
+        }
     }
-    report.false_factors_rejected = record
-        .false_factors
-        .iter()
-        .filter(|f| rejected.contains(&(f.robot, RobotId::from_index(f.neighbour), f.local, f.remote)))
-        .count();
+    let mut injected: BTreeMap<Ends, usize> = BTreeMap::new();
+    for f in &record.false_factors {
+        *injected.entry((f.robot, RobotId::from_index(f.neighbour), f.local, f.remote)).or_default() += 1;
+    }
+    report.false_factors_rejected =
+        injected.iter().map(|(ends, n)| (*n).min(rejected.get(ends).copied().unwrap_or(0))).sum();
     report
 }
