@@ -247,9 +247,7 @@ impl KeyframeGraph {
             }
             let i = self.variable(r, anchor_value * pose_in_remote);
             if let Some(tie) = Prior::from_covariance(i, *pose_in_remote, covariance) {
-                let sqrt_information = tie.sqrt_information;
-                self.graph.betweens.push(Between { from: anchor, to: i, measured: *pose_in_remote, sqrt_information });
-                self.candidates.push(false);
+                self.push_tie(anchor, &tie);
             }
         }
         for (local, remote, measured, information) in factors {
@@ -295,16 +293,16 @@ impl KeyframeGraph {
                 }
             }
             // Held without a tie (its first covariance was not positive definite).
-            None => {
-                self.graph.betweens.push(Between {
-                    from: anchor,
-                    to: variable,
-                    measured: *pose_in_remote,
-                    sqrt_information: tie.sqrt_information,
-                });
-                self.candidates.push(false);
-            }
+            None => self.push_tie(anchor, &tie),
         }
+    }
+
+    /// Ties a neighbour keyframe to its robot's anchor: the neighbour's estimate of it, with its
+    /// marginal covariance (never a candidate for rejection).
+    fn push_tie(&mut self, anchor: usize, tie: &Prior<Pose3, 6>) {
+        let (measured, sqrt_information) = (tie.mean, tie.sqrt_information);
+        self.graph.betweens.push(Between { from: anchor, to: tie.variable, measured, sqrt_information });
+        self.candidates.push(false);
     }
 
     /// Solves (GNC-TLS over the candidate factors with `reject_outliers`, else least squares),
