@@ -126,6 +126,15 @@ pub struct NeighbourKeyframe {
     pub cloud_bytes: u64,
 }
 
+/// Comms → Optimiser: a neighbour's new estimates (its world) of keyframes it served us, valid
+/// poses only: the priors of those we hold take them.
+#[derive(Message, Clone, Debug, PartialEq)]
+#[rtype(result = "()")]
+pub struct NeighbourKeyframePoses {
+    pub robot: RobotId,
+    pub poses: Vec<(KeyframeId, Pose3)>,
+}
+
 /// Optimiser → Matcher: each aligned neighbour's local_from_remote as the last solve of the
 /// pose graph estimates it (its anchor), from every inter-robot factor so far.
 #[derive(Message, Clone, Debug, PartialEq)]

@@ -4,7 +4,9 @@
 //! through `local_from_remote`), and inter-robot factors from ICP — solved by
 //! Levenberg–Marquardt on faer. Publishes optimised poses and marginal covariances to the
 //! Tracker, which applies them to the map (the Matcher sees them in the next map snapshot), and
-//! each neighbour's transform as the graph now estimates it (its anchor) to the Matcher.
+//! each neighbour's transform as the graph now estimates it (its anchor) to the Matcher. A
+//! neighbour's later estimates of keyframes it served us (`KeyframePoses`, through Comms) move
+//! the means of their priors, and the graph is solved again.
 //!
 //! A wrong loop closure or inter-robot factor (a false match that passed every check) would
 //! bend the whole trajectory toward it. With `reject_outliers`, each solve is GNC-TLS over those
@@ -119,6 +121,19 @@ impl Handler<InterRobotConstraints> for Optimiser {
         contained(ctx, "optimiser", || {
             self.graph.add_neighbour(msg.robot, &msg.local_from_remote, &msg.neighbour_keyframes, &msg.factors);
             self.solve_and_publish();
+        });
+    }
+}
+
+impl Handler<NeighbourKeyframePoses> for Optimiser {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourKeyframePoses, ctx: &mut Context<Self>) {
+        contained(ctx, "optimiser", || {
+            let moved = self.graph.refresh_neighbour(msg.robot, &msg.poses);
+            tracing::debug!(robot = %self.robot, neighbour = %msg.robot, told = msg.poses.len(), moved, "neighbour keyframe poses");
+            if moved > 0 {
+                self.solve_and_publish();
+            }
         });
     }
 }

@@ -217,6 +217,7 @@ mod tests {
                 rejected: Vec::new(),
                 anchors: Vec::new(),
                 realigned: Vec::new(),
+                refreshed: Vec::new(),
             },
             comms: CommsState { sequence: 99, ..CommsState::default() },
         }

@@ -213,6 +213,7 @@ pub fn start_robot_restored(
         alignments: matcher.clone().recipient(),
         serve: tracker.clone().recipient(),
         link: matcher.clone().recipient(),
+        keyframe_poses: optimiser.clone().recipient(),
     }));
     tracker.do_send(Connect(TrackerLinks {
         optimiser: optimiser.clone().recipient(),

@@ -61,6 +61,8 @@ struct Heard {
     /// Descriptor deliveries: (sender, keyframe ids).
     descriptors: Vec<(RobotId, Vec<KeyframeId>)>,
     links: Vec<LinkChanged>,
+    /// Pose updates delivered: (sender, keyframe poses).
+    poses: Vec<NeighbourKeyframePoses>,
 }
 
 struct Recorder(Arc<Mutex<Heard>>);
@@ -97,6 +99,12 @@ impl Handler<NeighbourDescriptors> for Recorder {
     fn handle(&mut self, msg: NeighbourDescriptors, _: &mut Context<Self>) {
         let ids = msg.descriptors.iter().map(|d| d.0).collect();
         self.0.lock().unwrap().descriptors.push((msg.robot, ids));
+    }
+}
+impl Handler<NeighbourKeyframePoses> for Recorder {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourKeyframePoses, _: &mut Context<Self>) {
+        self.0.lock().unwrap().poses.push(msg);
     }
 }
 impl Handler<NeighbourAlignments> for Recorder {
@@ -185,6 +193,7 @@ fn pair(model: Box<dyn RadioModel>, config: &CommsConfig) -> Pair {
         alignments: recorder.clone().recipient(),
         serve,
         link: recorder.clone().recipient(),
+        keyframe_poses: recorder.clone().recipient(),
     };
     requester.do_send(Connect(links(recorder.clone().recipient())));
     server.do_send(Connect(links(map.recipient())));
@@ -358,6 +367,7 @@ async fn descriptors_are_batched_broadcast_and_delivered() {
             alignments: recorder.clone().recipient(),
             serve: recorder.clone().recipient(),
             link: recorder.clone().recipient(),
+            keyframe_poses: recorder.clone().recipient(),
         }));
         robots.push(comms);
     }
@@ -397,6 +407,57 @@ async fn descriptors_are_batched_broadcast_and_delivered() {
     assert!(heard.descriptors.iter().all(|(from, _)| *from == REQUESTER));
     assert_eq!(status.sent.get(sgm_model::wire::MessageKind::KeyframeDescriptors).count, 3);
     assert_eq!(status.sent.get(sgm_model::wire::MessageKind::ObjectData).count, 0);
+}
+
+#[actix_rt::test]
+async fn served_keyframes_that_a_solve_moves_are_told_to_the_neighbour_holding_them() {
+    use sgm_model::geometry::pose_from_rpy_translation;
+    let Pair { radio, clock, requester, server, heard } = pair(Box::new(PerfectLinks), &CommsConfig::default());
+    let step = |now: f64| {
+        clock.advance_to(now);
+        for comms in [&requester, &server] {
+            comms.do_send(Tick { now });
+        }
+    };
+    requester.do_send(RequestKeyframes { robot: SERVER, keyframes: (0..4).map(KeyframeId).collect() });
+    for k in 0..20 {
+        step(f64::from(k) * 0.1);
+        settle().await;
+        radio.deliver_due(f64::from(k) * 0.1);
+        settle().await;
+    }
+    assert_eq!(heard.lock().unwrap().served.len(), 4, "served at the identity");
+    // The server's solve moves keyframe 1 by 0.3 m and turns keyframe 2 by 1°; 0 and 3 stay.
+    let moved = |id: u32| match id {
+        1 => pose_from_rpy_translation(0.0, 0.0, 0.0, nalgebra::Vector3::new(0.3, 0.0, 0.0)),
+        2 => pose_from_rpy_translation(0.0, 0.0, 1f64.to_radians(), nalgebra::Vector3::zeros()),
+        _ => Pose3::identity(),
+    };
+    let scan = Arc::new(sgm_model::scene_graph::SemanticScan::default());
+    let keyframes = (0..4)
+        .map(|id| {
+            (KeyframeId(id), sgm_actors::map_view::ViewKeyframe { world_from_body: moved(id), scan: scan.clone() })
+        })
+        .collect();
+    server.do_send(MapChanged(Arc::new(sgm_actors::map_view::MapView { keyframes, ..Default::default() })));
+    for k in 20..40 {
+        step(f64::from(k) * 0.1);
+        settle().await;
+        radio.deliver_due(f64::from(k) * 0.1);
+        settle().await;
+    }
+    let heard = std::mem::take(&mut *heard.lock().unwrap());
+    assert_eq!(heard.poses.len(), 1, "one update, once");
+    assert_eq!(heard.poses[0].robot, SERVER);
+    let told: Vec<u32> = heard.poses[0].poses.iter().map(|(k, _)| k.0).collect();
+    assert_eq!(told, [1, 2]);
+    for (k, pose) in &heard.poses[0].poses {
+        let truth = moved(k.0);
+        assert!((pose.translation.vector - truth.translation.vector).norm() < 1e-6);
+        assert!((pose.rotation.inverse() * truth.rotation).angle() < 1e-6);
+    }
+    let status = server.send(GetCommsStatus).await.unwrap();
+    assert_eq!(status.sent.get(sgm_model::wire::MessageKind::KeyframePoses).count, 1);
 }
 
 /// A map snapshot holding only `objects`, as the Tracker shares it.

@@ -24,8 +24,10 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// Version 1: the layout above. Version 2: the same frame; the robot snapshot's optimiser state
 /// also keeps its outlier decisions (a version-1 file is refused by name, not misread).
 /// Version 3: the scene graph's semantic layer is a bounded cloud store (each scan marked
-/// compacted or not, and the count evicted).
-pub const FORMAT_VERSION: u32 = 4;
+/// compacted or not, and the count evicted). Version 4: replay windows per sender incarnation.
+/// Version 5: Comms keeps the pose each neighbour was last told of each keyframe we served, and
+/// the optimiser counts the neighbour priors those poses refreshed.
+pub const FORMAT_VERSION: u32 = 5;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).

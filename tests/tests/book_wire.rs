@@ -14,9 +14,9 @@ use sgm_actors::protocol::RetryConfig;
 use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId};
 use sgm_model::wire::cloud_codec::{self, CodecError};
 use sgm_model::wire::messages::{
-    Alignments, KeyframeDescriptors, KeyframeRefusal, KeyframeRefusalReason, KeyframeRequest, KeyframeResponse,
-    ObjectCloudRequest, ObjectCloudResponse, ObjectData, WireAlignment, WireDescriptor, WireObject, WirePose,
-    DESCRIPTOR_HEIGHT_STEP_M, SIZE_STEP_M,
+    Alignments, KeyframeDescriptors, KeyframePoses, KeyframeRefusal, KeyframeRefusalReason, KeyframeRequest,
+    KeyframeResponse, ObjectCloudRequest, ObjectCloudResponse, ObjectData, WireAlignment, WireDescriptor,
+    WireKeyframePose, WireObject, WirePose, DESCRIPTOR_HEIGHT_STEP_M, SIZE_STEP_M,
 };
 use sgm_model::wire::team_key::{KDF_LANES, KDF_MEMORY_KIB, KDF_PASSES};
 use sgm_model::wire::{
@@ -155,6 +155,7 @@ fn sample(kind: MessageKind) -> Message {
         }
         MessageKind::KeyframeDescriptors => Message::KeyframeDescriptors(KeyframeDescriptors { descriptors: vec![] }),
         MessageKind::Alignments => Message::Alignments(Alignments { alignments: vec![] }),
+        MessageKind::KeyframePoses => Message::KeyframePoses(KeyframePoses { poses: vec![] }),
     }
 }
 
@@ -190,6 +191,12 @@ fn largest(kind: MessageKind, limits: &WireLimits) -> Option<Envelope> {
                     robot: RobotId(u16::MAX),
                     sender_from_robot: WirePose { translation: [1.0; 3], rotation: [0.0, 0.0, 0.0, 1.0] }
                 };
+                limits.max_ids
+            ],
+        }),
+        MessageKind::KeyframePoses => Message::KeyframePoses(KeyframePoses {
+            poses: vec![
+                WireKeyframePose { keyframe: KeyframeId(u32::MAX), translation: [1.0; 3], rotation: [0.0; 3] };
                 limits.max_ids
             ],
         }),

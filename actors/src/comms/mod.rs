@@ -14,6 +14,9 @@
 //!   down: its requests are neither retried nor given up until it is heard again, when they are
 //!   asked for afresh;
 //! - [`responses`]: keyframe responses paced per tick, never queued twice;
+//! - [`served`]: keyframes we served, told again (`KeyframePoses`) when our solves move them,
+//!   so a neighbour's priors on them do not go stale; the poses a neighbour tells us go to the
+//!   Optimiser;
 //! - [`status`]: every message accounted by type, and what a snapshot keeps.
 
 pub mod broadcast;
@@ -21,6 +24,7 @@ pub mod door;
 pub mod link_watch;
 pub mod requests;
 pub mod responses;
+pub mod served;
 pub mod status;
 
 pub use status::{CommsState, CommsStatus, GetCommsStatus, KeyframeLedger};
@@ -37,12 +41,14 @@ use door::Door;
 use link_watch::LinkWatch;
 use requests::{KeyframeRequests, RequestBook, ResponseFate};
 use responses::Responses;
+use served::ServedPoses;
 use sgm_model::scene_graph::{RobotId, Stamp};
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{
     unpack_covariance, KeyframeRefusalReason, KeyframeRequest, ObjectCloudRequest, WireDescriptor,
 };
 use sgm_model::wire::{Destination, Message as WireMessage, TeamKey};
+use std::sync::Arc;
 
 /// Where Comms delivers what arrives.
 #[derive(Clone)]
@@ -55,6 +61,8 @@ pub struct CommsLinks {
     pub alignments: Recipient<NeighbourAlignments>,
     pub serve: Recipient<Serve>,
     pub link: Recipient<LinkChanged>,
+    /// A neighbour's new estimates of keyframes it served us.
+    pub keyframe_poses: Recipient<NeighbourKeyframePoses>,
 }
 
 pub struct Comms {
@@ -74,6 +82,9 @@ pub struct Comms {
     journal: Option<std::sync::Arc<dyn ReplayJournal>>,
     requests: RequestBook,
     responses: Responses,
+    served: ServedPoses,
+    /// The map as last shared: its keyframe poses are what served keyframes are told.
+    map: Option<Arc<crate::map_view::MapView>>,
 }
 
 impl Comms {
@@ -105,6 +116,8 @@ impl Comms {
             journal: None,
             requests: RequestBook::new(),
             responses: Responses::default(),
+            served: ServedPoses::default(),
+            map: None,
         }
     }
 
@@ -115,6 +128,7 @@ impl Comms {
             replay: self.door.replay().clone(),
             keyframes_held: self.requests.iter().map(|(r, q)| (*r, q.held().clone())).collect(),
             keyframes_sent: self.responses.sent().clone(),
+            keyframes_told: self.served.told().clone(),
             status: self.status.clone(),
         }
     }
@@ -129,6 +143,7 @@ impl Comms {
             self.requests.insert(robot, KeyframeRequests::with_held(held));
         }
         self.responses = Responses::with_sent(state.keyframes_sent);
+        self.served = ServedPoses::with_told(state.keyframes_told);
         self.status = CommsStatus { links_down: Vec::new(), ..state.status };
         self
     }
@@ -247,7 +262,25 @@ impl Comms {
             if twice {
                 self.status.keyframes_sent_twice += 1;
             }
+            if let WireMessage::KeyframeResponse(r) = &out.message {
+                if let Some(pose) = r.world_from_body.to_pose() {
+                    self.served.served(out.to, r.keyframe, pose);
+                }
+            }
             self.send(Destination::Robot(out.to), out.message);
+        }
+    }
+
+    /// Served keyframes our solves moved, told to the neighbours holding them.
+    fn send_pose_updates(&mut self, now: Stamp) {
+        let Some(map) = self.map.clone() else { return };
+        let (watch, timeout) = (&self.watch, self.config.link_timeout_s);
+        let heard = |r| !watch.is_down(r) && watch.last_heard(r).is_some_and(|t| now - t < timeout);
+        let due = self.served.due(now, &map, &self.config.pose_updates, self.config.limits.max_ids, heard);
+        for (robot, messages) in due {
+            for message in messages {
+                self.send(Destination::Robot(robot), WireMessage::KeyframePoses(message));
+            }
         }
     }
 
@@ -289,6 +322,14 @@ impl Comms {
                 self.status.rejected.malformed += (total - alignments.len()) as u64;
                 if !alignments.is_empty() {
                     links.alignments.do_send(NeighbourAlignments { robot: from, alignments });
+                }
+            }
+            WireMessage::KeyframePoses(m) => {
+                let total = m.poses.len();
+                let poses: Vec<_> = m.poses.iter().filter_map(|p| Some((p.keyframe, p.to_pose()?))).collect();
+                self.status.rejected.malformed += (total - poses.len()) as u64;
+                if !poses.is_empty() {
+                    links.keyframe_poses.do_send(NeighbourKeyframePoses { robot: from, poses });
                 }
             }
             WireMessage::ObjectCloudRequest(r) => {
@@ -378,6 +419,7 @@ impl Handler<MapChanged> for Comms {
     type Result = ();
     fn handle(&mut self, msg: MapChanged, ctx: &mut Context<Self>) {
         contained(ctx, "comms", || {
+            self.map = Some(msg.0.clone());
             self.objects.objects(msg.0, self.config.significant_move_m);
             self.try_broadcast(self.clock.now());
         });
@@ -454,6 +496,7 @@ impl Handler<Tick> for Comms {
             self.broadcast_descriptors(msg.now);
             self.flush_requests(msg.now);
             self.send_responses();
+            self.send_pose_updates(msg.now);
         });
     }
 }

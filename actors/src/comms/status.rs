@@ -53,7 +53,7 @@ pub struct GetCommsStatus;
 /// What of Comms a snapshot keeps: the numbering that must never repeat, the replay windows
 /// per sender and incarnation (a message recorded before a crash is still refused after it),
 /// which keyframes each
-/// neighbour already gave us or was given, and the accounts.
+/// neighbour already gave us or was given (and at which pose), and the accounts.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CommsState {
     pub sequence: u64,
@@ -61,5 +61,7 @@ pub struct CommsState {
     pub replay: ReplayGuard,
     pub keyframes_held: BTreeMap<RobotId, BTreeSet<KeyframeId>>,
     pub keyframes_sent: BTreeMap<RobotId, BTreeSet<KeyframeId>>,
+    /// The pose each neighbour was last told of each keyframe we served (`super::served`).
+    pub keyframes_told: super::served::Told,
     pub status: CommsStatus,
 }

@@ -59,6 +59,34 @@ pub struct CommsConfig {
     pub cloud_resolution_m: f64,
     pub retry: RetryConfig,
     pub limits: WireLimits,
+    /// `[comms.pose_updates]`: keyframes we served, told again when our solves move them.
+    pub pose_updates: PoseUpdatesConfig,
+}
+
+/// `[comms.pose_updates]`: a neighbour holding keyframes we served ties them to its anchor of
+/// our map by our estimate of them when they left. When our later solves move one of them (a
+/// loop closure, an alignment) by more than `move_m` or `turn_deg` from what the neighbour was
+/// last told, the neighbour is told the new pose (`KeyframePoses`, 27 bytes a keyframe), at
+/// most once per `interval_s` per neighbour, and only to a neighbour heard within
+/// `link_timeout_s`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PoseUpdatesConfig {
+    /// Default true.
+    pub enabled: bool,
+    /// Shortest interval between two updates to one neighbour, s. Default 10.
+    pub interval_s: f64,
+    /// A served keyframe that moved farther than this from what the neighbour was told is told
+    /// again, m. Default 0.05.
+    pub move_m: f64,
+    /// Or that turned by more than this, degrees. Default 0.1.
+    pub turn_deg: f64,
+}
+
+impl Default for PoseUpdatesConfig {
+    fn default() -> Self {
+        Self { enabled: true, interval_s: 10.0, move_m: 0.05, turn_deg: 0.1 }
+    }
 }
 
 /// The key every build knows: fine in simulation, never in the field.
@@ -144,6 +172,7 @@ impl Default for CommsConfig {
             cloud_resolution_m: 0.01,
             retry: RetryConfig::default(),
             limits: WireLimits::default(),
+            pose_updates: PoseUpdatesConfig::default(),
         }
     }
 }
@@ -193,6 +222,10 @@ impl CommsConfig {
             c.limits.max_envelope_bytes,
             "≥ 1024",
         )?;
+        let u = &c.pose_updates;
+        check(positive(u.interval_s), "comms.pose_updates.interval_s", u.interval_s, "> 0")?;
+        check(positive(u.move_m), "comms.pose_updates.move_m", u.move_m, "> 0")?;
+        check(positive(u.turn_deg), "comms.pose_updates.turn_deg", u.turn_deg, "> 0")?;
         Ok(())
     }
 

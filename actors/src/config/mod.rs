@@ -11,7 +11,9 @@ mod odometry;
 mod optimiser;
 mod perception;
 
-pub use comms::{CommsConfig, PublicTeamKey, Secret, DEFAULT_TEAM_SALT, DEVELOPMENT_TEAM_KEY, PUBLIC_TEAM_KEYS};
+pub use comms::{
+    CommsConfig, PoseUpdatesConfig, PublicTeamKey, Secret, DEFAULT_TEAM_SALT, DEVELOPMENT_TEAM_KEY, PUBLIC_TEAM_KEYS,
+};
 pub use error::ConfigError;
 pub use matcher::{Association, MatcherSection};
 pub use odometry::{OdometrySection, OdometrySource};

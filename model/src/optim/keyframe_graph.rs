@@ -53,6 +53,8 @@ pub struct KeyframeGraphState {
     /// Each neighbour's anchor variable (its local_from_remote).
     pub anchors: Vec<(RobotId, usize)>,
     pub realigned: Vec<(RobotId, u32)>,
+    /// Per neighbour, neighbour keyframe priors moved by its pose updates.
+    pub refreshed: Vec<(RobotId, u64)>,
 }
 
 /// What a solve gives: every local keyframe's pose, the newest ones' marginal covariances, and
@@ -90,6 +92,8 @@ pub struct InterRobotCounts {
     pub inconsistent: usize,
     /// Times the consistent set's transform was far from the anchor's and the anchor moved.
     pub realigned: u32,
+    /// Its keyframes' priors moved by its pose updates (`KeyframePoses`), in all.
+    pub refreshed: u64,
 }
 
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -107,6 +111,8 @@ pub struct KeyframeGraph {
     inconsistent: BTreeMap<RobotId, Vec<usize>>,
     /// Per neighbour, how often PCM moved the anchor.
     realigned: BTreeMap<RobotId, u32>,
+    /// Per neighbour, priors moved by [`KeyframeGraph::refresh_neighbour`].
+    refreshed: BTreeMap<RobotId, u64>,
 }
 
 /// Standard deviations of the anchor's weak prior (rotation rad, translation m).
@@ -139,6 +145,7 @@ impl KeyframeGraph {
             rejected: self.rejected.clone(),
             anchors: self.anchors.iter().map(|(r, i)| (*r, *i)).collect(),
             realigned: self.realigned.iter().map(|(r, n)| (*r, *n)).collect(),
+            refreshed: self.refreshed.iter().map(|(r, n)| (*r, *n)).collect(),
         }
     }
 
@@ -162,6 +169,7 @@ impl KeyframeGraph {
             anchors: state.anchors.into_iter().collect(),
             inconsistent: BTreeMap::new(),
             realigned: state.realigned.into_iter().collect(),
+            refreshed: state.refreshed.into_iter().collect(),
         })
     }
 
@@ -279,14 +287,8 @@ impl KeyframeGraph {
         covariance: &Matrix6<f64>,
     ) {
         let Some(tie) = Prior::from_covariance(variable, *pose_in_remote, covariance) else { return };
-        let held = self
-            .graph
-            .betweens
-            .iter_mut()
-            .zip(&self.candidates)
-            .find(|(b, candidate)| !**candidate && b.from == anchor && b.to == variable);
-        match held {
-            Some((b, _)) => {
+        match self.tie_mut(anchor, variable) {
+            Some(b) => {
                 if tie.sqrt_information.determinant().abs() >= b.sqrt_information.determinant().abs() {
                     b.measured = *pose_in_remote;
                     b.sqrt_information = tie.sqrt_information;
@@ -295,6 +297,37 @@ impl KeyframeGraph {
             // Held without a tie (its first covariance was not positive definite).
             None => self.push_tie(anchor, &tie),
         }
+    }
+
+    /// The tie of neighbour keyframe `variable` to `anchor`, if it has one.
+    fn tie_mut(&mut self, anchor: usize, variable: usize) -> Option<&mut Between<Pose3, 6>> {
+        self.graph
+            .betweens
+            .iter_mut()
+            .zip(&self.candidates)
+            .find(|(b, candidate)| !**candidate && b.from == anchor && b.to == variable)
+            .map(|(b, _)| b)
+    }
+
+    /// `robot`'s later estimates (in its world) of keyframes it served us, moved by its own
+    /// solves since it sent them: the tie of each keyframe held takes the new mean T_r(j), and
+    /// keeps its covariance (a pose update carries none; the neighbour's marginal of a keyframe
+    /// mostly shrinks, so the held one errs on the cautious side). Keyframes not held are
+    /// ignored. Returns how many ties moved.
+    pub fn refresh_neighbour(&mut self, robot: RobotId, poses: &[(KeyframeId, Pose3)]) -> usize {
+        let Some(&anchor) = self.anchors.get(&robot) else { return 0 };
+        let mut moved = 0;
+        for (keyframe, pose_in_remote) in poses {
+            let Some(&variable) = self.index.get(&KeyframeRef::Remote { robot, keyframe: *keyframe }) else { continue };
+            if let Some(tie) = self.tie_mut(anchor, variable) {
+                tie.measured = *pose_in_remote;
+                moved += 1;
+            }
+        }
+        if moved > 0 {
+            *self.refreshed.entry(robot).or_default() += moved as u64;
+        }
+        moved
     }
 
     /// Ties a neighbour keyframe to its robot's anchor: the neighbour's estimate of it, with its
@@ -418,7 +451,8 @@ impl KeyframeGraph {
             .collect();
         let robot_of_anchor: BTreeMap<usize, RobotId> = self.anchors.iter().map(|(r, i)| (*i, *r)).collect();
         let mut inter_robot: BTreeMap<RobotId, InterRobotCounts> = BTreeMap::new();
-        let fresh = |robot: RobotId| InterRobotCounts { robot, factors: 0, inconsistent: 0, realigned: 0 };
+        let fresh =
+            |robot: RobotId| InterRobotCounts { robot, factors: 0, inconsistent: 0, realigned: 0, refreshed: 0 };
         for (k, b) in self.graph.betweens.iter().enumerate() {
             let (Some(KeyframeRef::Local(_)), Some(KeyframeRef::Remote { robot, .. })) =
                 (keyframe_of.get(&b.from), keyframe_of.get(&b.to))
@@ -434,6 +468,9 @@ impl KeyframeGraph {
         }
         for (robot, n) in &self.realigned {
             inter_robot.entry(*robot).or_insert_with(|| fresh(*robot)).realigned = *n;
+        }
+        for (robot, n) in &self.refreshed {
+            inter_robot.entry(*robot).or_insert_with(|| fresh(*robot)).refreshed = *n;
         }
         KeyframeGraphStatus {
             inter_robot: inter_robot.into_values().collect(),
@@ -573,6 +610,53 @@ mod tests {
     }
 
     #[test]
+    fn a_stale_neighbour_prior_refreshed_gives_the_graph_built_with_the_fresh_one() {
+        // The neighbour sent keyframes 102 and 106 at poses its own solves later moved: 102 by
+        // 0.3 m and 1° of yaw. The stale prior pulls the anchor off the truth; the refreshed
+        // graph solves to the truth, as a graph given the fresh poses from the start does.
+        let true_local_from_remote = pose_from_yaw_translation(0.5, Vector3::new(40.0, -5.0, 0.3));
+        let measured = pose_from_yaw_translation(0.2, Vector3::new(0.0, 3.0, 0.0));
+        let cov = Matrix6::identity() * 0.01;
+        let build = |stale: bool| {
+            let (mut graph, truth) = straight_chain(10);
+            let fresh = |k: usize| true_local_from_remote.inverse() * truth[k] * measured;
+            let sent = |k: usize| match (stale, k) {
+                (true, 2) => fresh(k) * pose_from_yaw_translation(1f64.to_radians(), Vector3::new(0.3, 0.0, 0.0)),
+                _ => fresh(k),
+            };
+            let keyframes: Vec<_> = [2usize, 6].iter().map(|&k| (KeyframeId(100 + k as u32), sent(k), cov)).collect();
+            let factors: Vec<_> = [2usize, 6]
+                .iter()
+                .map(|&k| (KeyframeId(k as u32), KeyframeId(100 + k as u32), measured, information()))
+                .collect();
+            graph.add_neighbour(RobotId(3), &true_local_from_remote, &keyframes, &factors);
+            (graph, fresh(2))
+        };
+        let anchor_error = |graph: &mut KeyframeGraph| {
+            let solved = graph.solve(false, 0).expect("solves");
+            crate::geometry::pose_error(&solved.anchors[0].1, &true_local_from_remote)
+        };
+        let (mut fresh_graph, _) = build(false);
+        let (mut graph, fresh_102) = build(true);
+        let stale = anchor_error(&mut graph);
+        assert!(stale.translation_m > 0.05 && stale.max_axis_rotation_deg() > 0.2, "{stale:?}");
+        // Unknown neighbours and keyframes change nothing; the held one moves.
+        assert_eq!(graph.refresh_neighbour(RobotId(9), &[(KeyframeId(102), fresh_102)]), 0);
+        let poses = [(KeyframeId(102), fresh_102), (KeyframeId(555), Pose3::identity())];
+        assert_eq!(graph.refresh_neighbour(RobotId(3), &poses), 1);
+        let refreshed = anchor_error(&mut graph);
+        assert!(refreshed.translation_m < 1e-6 && refreshed.max_axis_rotation_deg() < 1e-6, "{refreshed:?}");
+        let (a, b) = (graph.solve(false, 3).expect("solves"), fresh_graph.solve(false, 3).expect("solves"));
+        for ((ka, pa), (kb, pb)) in a.poses.iter().zip(&b.poses) {
+            assert_eq!(ka, kb);
+            assert!((pa.to_homogeneous() - pb.to_homogeneous()).abs().max() < 1e-9);
+        }
+        assert_eq!(graph.status().inter_robot[0].refreshed, 1);
+        let thawed = KeyframeGraph::thaw(graph.freeze()).expect("consistent");
+        assert_eq!(thawed.status().inter_robot[0].refreshed, 1);
+    }
+
+    #[test]
     fn a_wrong_first_alignment_is_outvoted_by_later_consistent_closures() {
         let (mut graph, truth) = straight_chain(12);
         let true_local_from_remote = pose_from_yaw_translation(0.3, Vector3::new(20.0, 4.0, 0.0));
@@ -603,7 +687,7 @@ mod tests {
         let status = graph.status();
         assert_eq!(
             status.inter_robot,
-            vec![InterRobotCounts { robot: RobotId(2), factors: 8, inconsistent: 3, realigned: 1 }]
+            vec![InterRobotCounts { robot: RobotId(2), factors: 8, inconsistent: 3, realigned: 1, refreshed: 0 }]
         );
         assert_eq!(status.rejected_inter_robot.len(), 3);
         // The local chain kept its odometry: the lie bent nothing.
@@ -687,7 +771,7 @@ mod tests {
         let status = graph.status();
         assert_eq!(
             status.inter_robot,
-            vec![InterRobotCounts { robot: RobotId(2), factors: 2, inconsistent: 0, realigned: 0 }]
+            vec![InterRobotCounts { robot: RobotId(2), factors: 2, inconsistent: 0, realigned: 0, refreshed: 0 }]
         );
     }
 }

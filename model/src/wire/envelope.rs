@@ -61,7 +61,8 @@ pub struct WireLimits {
     pub max_envelope_bytes: usize,
     /// Most objects in one ObjectData or ObjectCloudResponse. Default 4096.
     pub max_objects: usize,
-    /// Most ids in one request or refusal. Default 256.
+    /// Most ids in one request or refusal, and most entries of one `KeyframeDescriptors`,
+    /// `Alignments` or `KeyframePoses`. Default 256.
     pub max_ids: usize,
     /// Most points in one decoded cloud. Default 500 000.
     pub max_cloud_points: usize,
@@ -138,6 +139,7 @@ fn check_limits(message: &Message, limits: &WireLimits) -> Result<(), WireError>
         Message::KeyframeResponse(_) => ("responses", 1, 1),
         Message::KeyframeDescriptors(m) => ("descriptors", m.descriptors.len(), limits.max_ids),
         Message::Alignments(m) => ("alignments", m.alignments.len(), limits.max_ids),
+        Message::KeyframePoses(m) => ("keyframe poses", m.poses.len(), limits.max_ids),
     };
     if count > max {
         return Err(WireError::Limit { kind, what, count, max });

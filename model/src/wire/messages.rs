@@ -8,6 +8,7 @@
 //! | `KeyframeRefusal` | a request the sender cannot serve now | the keyframe ids and why |
 //! | `KeyframeDescriptors` | new keyframes, with `matcher.association = "scan_context"` only | Scan Context descriptors and poses (the evaluation's Swarm-SC baseline) |
 //! | `Alignments` | an alignment made or moved, rate-limited | the sender's transform to each neighbour it is aligned with (hints, checked by the receiver) |
+//! | `KeyframePoses` | keyframes served earlier moved in the sender's solves, rate-limited | their new poses (the receiver's priors take them) |
 //!
 //! Centroids travel as integers in units of `resolution_mm` (zigzag varints under postcard: two
 //! bytes per axis within ±163 m at 2 cm), sizes as bytes in 5 cm steps: an object costs 9–13
@@ -30,10 +31,11 @@ pub enum MessageKind {
     KeyframeRefusal,
     KeyframeDescriptors,
     Alignments,
+    KeyframePoses,
 }
 
 impl MessageKind {
-    pub const ALL: [MessageKind; 8] = [
+    pub const ALL: [MessageKind; 9] = [
         MessageKind::ObjectData,
         MessageKind::ObjectCloudRequest,
         MessageKind::ObjectCloudResponse,
@@ -42,6 +44,7 @@ impl MessageKind {
         MessageKind::KeyframeRefusal,
         MessageKind::KeyframeDescriptors,
         MessageKind::Alignments,
+        MessageKind::KeyframePoses,
     ];
 
     pub fn name(self) -> &'static str {
@@ -54,6 +57,7 @@ impl MessageKind {
             MessageKind::KeyframeRefusal => "KeyframeRefusal",
             MessageKind::KeyframeDescriptors => "KeyframeDescriptors",
             MessageKind::Alignments => "Alignments",
+            MessageKind::KeyframePoses => "KeyframePoses",
         }
     }
 }
@@ -69,6 +73,7 @@ pub enum Message {
     KeyframeRefusal(KeyframeRefusal),
     KeyframeDescriptors(KeyframeDescriptors),
     Alignments(Alignments),
+    KeyframePoses(KeyframePoses),
 }
 
 impl Message {
@@ -82,6 +87,7 @@ impl Message {
             Message::KeyframeRefusal(_) => MessageKind::KeyframeRefusal,
             Message::KeyframeDescriptors(_) => MessageKind::KeyframeDescriptors,
             Message::Alignments(_) => MessageKind::Alignments,
+            Message::KeyframePoses(_) => MessageKind::KeyframePoses,
         }
     }
 }
@@ -261,6 +267,51 @@ pub struct WireAlignment {
     pub sender_from_robot: WirePose,
 }
 
+/// The sender's current estimates of keyframes it served to the receiver earlier, which its own
+/// solves have since moved (`actors::comms::served`). The receiver's pose graph ties each
+/// neighbour keyframe to the neighbour's anchor by the neighbour's estimate of it: a stale one
+/// would pull the anchor by the neighbour's later corrections. The receiver replaces the mean
+/// of the prior of each keyframe it holds and ignores the others.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct KeyframePoses {
+    pub poses: Vec<WireKeyframePose>,
+}
+
+/// A keyframe's pose in the sender's world, in single precision: translation (m) and rotation
+/// vector (rad, the logarithm of the rotation). 24 bytes and the id's varint: below 0.1 mm and
+/// 0.1 µrad within 1 km of the origin.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireKeyframePose {
+    pub keyframe: KeyframeId,
+    pub translation: [f32; 3],
+    pub rotation: [f32; 3],
+}
+
+impl WireKeyframePose {
+    pub fn new(keyframe: KeyframeId, world_from_body: &Pose3) -> Self {
+        let t = world_from_body.translation.vector;
+        let r = world_from_body.rotation.scaled_axis();
+        Self {
+            keyframe,
+            translation: [t.x as f32, t.y as f32, t.z as f32],
+            rotation: [r.x as f32, r.y as f32, r.z as f32],
+        }
+    }
+
+    /// `None` unless every component is finite.
+    pub fn to_pose(&self) -> Option<Pose3> {
+        if !self.translation.iter().chain(&self.rotation).all(|v| v.is_finite()) {
+            return None;
+        }
+        let [tx, ty, tz] = self.translation.map(f64::from);
+        let [rx, ry, rz] = self.rotation.map(f64::from);
+        Some(Pose3::from_parts(
+            Translation3::new(tx, ty, tz),
+            UnitQuaternion::from_scaled_axis(Vector3::new(rx, ry, rz)),
+        ))
+    }
+}
+
 /// A pose as translation and unit quaternion (x, y, z, w).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WirePose {
@@ -374,5 +425,24 @@ mod tests {
         let packed = pack_covariance(&cov);
         assert_eq!(pack_covariance(&expand_covariance(&packed)), packed);
         assert_eq!(expand_covariance(&packed).transpose(), expand_covariance(&packed));
+    }
+
+    #[test]
+    fn keyframe_poses_round_trip_in_single_precision() {
+        for (roll, pitch, yaw) in [(0.0, 0.0, 0.0), (0.1, -0.2, 2.5), (0.0, 0.0, std::f64::consts::PI - 1e-9)] {
+            let pose = pose_from_rpy_translation(roll, pitch, yaw, Vector3::new(812.3, -640.25, 31.7));
+            let wire = WireKeyframePose::new(KeyframeId(7), &pose);
+            let back = wire.to_pose().unwrap();
+            let dt = (pose.translation.vector - back.translation.vector).norm();
+            let dr = (pose.rotation.inverse() * back.rotation).angle();
+            assert!(dt < 1e-4 && dr < 1e-6, "{dt} m, {dr} rad");
+        }
+        let bad = WireKeyframePose { keyframe: KeyframeId(1), translation: [f32::NAN, 0.0, 0.0], rotation: [0.0; 3] };
+        assert_eq!(bad.to_pose(), None);
+        let bytes = postcard::to_allocvec(&KeyframePoses {
+            poses: vec![WireKeyframePose::new(KeyframeId(300), &Pose3::identity())],
+        })
+        .unwrap();
+        assert_eq!(bytes.len(), 1 + 2 + 24, "count, id varint, six f32");
     }
 }

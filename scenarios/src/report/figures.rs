@@ -78,6 +78,9 @@ pub struct AlignmentReport {
     pub inconsistent_factors: usize,
     /// Times the consistent set's transform moved the alignment.
     pub realigned: u32,
+    /// Priors of the remote's keyframes moved by its pose updates (`KeyframePoses`,
+    /// `[comms.pose_updates]`), in all.
+    pub priors_refreshed: u64,
     /// The robots whose alignments, relayed around a cycle, put the remote elsewhere (the
     /// local robot's status, `matcher.relay.contradiction_m`): one alignment of the cycle is
     /// wrong.
@@ -378,6 +381,7 @@ pub fn compute(record: &RunRecord) -> Report {
                 inter_robot_factors: held.map_or(0, |h| h.factors),
                 inconsistent_factors: held.map_or(0, |h| h.inconsistent),
                 realigned: held.map_or(0, |h| h.realigned),
+                priors_refreshed: held.map_or(0, |h| h.refreshed),
                 contradicted_by: n
                     .contradicted_by
                     .iter()

@@ -1,0 +1,161 @@
+//! Keyframes we served, told again when our solves move them (`[comms.pose_updates]`), as plain
+//! state.
+//!
+//! A neighbour holding one of our keyframes ties it to its anchor of our map by the pose we sent
+//! with it (`model::optim::keyframe_graph`: e_j = Log(T_r(j)⁻¹ · A_r⁻¹ · X_j)). Our later solves
+//! (a loop closure, an alignment) move the keyframe in our world; the neighbour's T_r(j) stays
+//! where it was, and its inter-robot factors on the keyframe then pull its anchor by our
+//! correction. So we remember, per neighbour, the pose each keyframe was last told at, and when
+//! our map's estimate has moved farther than `move_m` or turned more than `turn_deg` from it,
+//! the keyframe's new pose goes out in a `KeyframePoses` message — at most once per
+//! `interval_s` per neighbour, only to a neighbour heard within `link_timeout_s` (and not
+//! down), in envelopes of at most
+//! `limits.max_ids` poses. A keyframe whose scan our map evicted is no longer in the map view:
+//! it is not told again. An update lost on the radio is made good only when the keyframe next
+//! moves beyond the thresholds from the pose it carried.
+
+use crate::config::PoseUpdatesConfig;
+use crate::map_view::MapView;
+use sgm_model::geometry::Pose3;
+use sgm_model::scene_graph::{KeyframeId, RobotId, Stamp};
+use sgm_model::wire::messages::{KeyframePoses, WireKeyframePose};
+use std::collections::BTreeMap;
+
+/// Per neighbour, each keyframe we served and the pose it was last told.
+pub type Told = BTreeMap<RobotId, BTreeMap<KeyframeId, Pose3>>;
+
+#[derive(Clone, Debug, Default)]
+pub struct ServedPoses {
+    told: Told,
+    /// When each neighbour was last sent an update.
+    last: BTreeMap<RobotId, Stamp>,
+}
+
+impl ServedPoses {
+    /// Restored from a snapshot: what each neighbour was told.
+    pub fn with_told(told: Told) -> Self {
+        Self { told, last: BTreeMap::new() }
+    }
+
+    pub fn told(&self) -> &Told {
+        &self.told
+    }
+
+    /// A keyframe response left for `to` with `world_from_body`.
+    pub fn served(&mut self, to: RobotId, keyframe: KeyframeId, world_from_body: Pose3) {
+        self.told.entry(to).or_default().insert(keyframe, world_from_body);
+    }
+
+    /// The updates due at `now` against `view` (our map's latest estimates), per neighbour
+    /// whose interval has passed and that is heard (`up`), each split into messages of at
+    /// most `max_per_message` poses. What goes out counts as told.
+    pub fn due(
+        &mut self,
+        now: Stamp,
+        view: &MapView,
+        config: &PoseUpdatesConfig,
+        max_per_message: usize,
+        up: impl Fn(RobotId) -> bool,
+    ) -> Vec<(RobotId, Vec<KeyframePoses>)> {
+        if !config.enabled {
+            return Vec::new();
+        }
+        let turn_rad = config.turn_deg.to_radians();
+        let mut out = Vec::new();
+        for (&robot, told) in &mut self.told {
+            let waited = self.last.get(&robot).is_none_or(|&t| now - t >= config.interval_s);
+            if !waited || !up(robot) {
+                continue;
+            }
+            let mut moved = Vec::new();
+            for (&id, pose) in told.iter_mut() {
+                let Some(kf) = view.keyframes.get(&id) else { continue };
+                let now_pose = kf.world_from_body;
+                let shift = (now_pose.translation.vector - pose.translation.vector).norm();
+                let turn = (pose.rotation.inverse() * now_pose.rotation).angle();
+                if shift > config.move_m || turn > turn_rad {
+                    *pose = now_pose;
+                    moved.push(WireKeyframePose::new(id, &now_pose));
+                }
+            }
+            if moved.is_empty() {
+                continue;
+            }
+            self.last.insert(robot, now);
+            let messages = moved.chunks(max_per_message.max(1)).map(|c| KeyframePoses { poses: c.to_vec() }).collect();
+            out.push((robot, messages));
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::map_view::ViewKeyframe;
+    use nalgebra::Vector3;
+    use sgm_model::geometry::pose_from_rpy_translation;
+    use sgm_model::scene_graph::SemanticScan;
+    use std::sync::Arc;
+
+    fn view(poses: &[(u32, Pose3)]) -> MapView {
+        let scan = Arc::new(SemanticScan::default());
+        let keyframes = poses
+            .iter()
+            .map(|(id, p)| (KeyframeId(*id), ViewKeyframe { world_from_body: *p, scan: scan.clone() }))
+            .collect();
+        MapView { keyframes, ..MapView::default() }
+    }
+
+    fn at(x: f64, yaw_deg: f64) -> Pose3 {
+        pose_from_rpy_translation(0.0, 0.0, yaw_deg.to_radians(), Vector3::new(x, 0.0, 0.0))
+    }
+
+    fn told(out: &[(RobotId, Vec<KeyframePoses>)]) -> Vec<(u16, Vec<u32>)> {
+        out.iter().map(|(r, m)| (r.0, m.iter().flat_map(|m| m.poses.iter().map(|p| p.keyframe.0)).collect())).collect()
+    }
+
+    #[test]
+    fn keyframes_that_moved_beyond_a_threshold_are_told_again_at_most_once_per_interval() {
+        let config = PoseUpdatesConfig::default();
+        let mut s = ServedPoses::default();
+        s.served(RobotId(2), KeyframeId(1), at(0.0, 0.0));
+        s.served(RobotId(2), KeyframeId(2), at(5.0, 0.0));
+        s.served(RobotId(3), KeyframeId(1), at(0.0, 0.0));
+        // Within both thresholds: nothing.
+        let small = view(&[(1, at(0.04, 0.09)), (2, at(5.0, 0.0))]);
+        assert!(s.due(0.0, &small, &config, 256, |_| true).is_empty());
+        // Keyframe 1 moved 6 cm: both neighbours that hold it are told, keyframe 2 is not.
+        let moved = view(&[(1, at(0.06, 0.0)), (2, at(5.0, 0.0))]);
+        let out = s.due(1.0, &moved, &config, 256, |_| true);
+        assert_eq!(told(&out), [(2, vec![1]), (3, vec![1])]);
+        let pose = out[0].1[0].poses[0].to_pose().unwrap();
+        assert!((pose.translation.x - 0.06).abs() < 1e-6);
+        // Keyframe 2 turns 0.2°: not before the interval has passed, then told.
+        let turned = view(&[(1, at(0.06, 0.0)), (2, at(5.0, 0.2))]);
+        assert!(s.due(5.0, &turned, &config, 256, |_| true).is_empty());
+        assert_eq!(told(&s.due(11.0, &turned, &config, 256, |_| true)), [(2, vec![2])]);
+        // What was told is the reference now: no repeat.
+        assert!(s.due(30.0, &turned, &config, 256, |_| true).is_empty());
+    }
+
+    #[test]
+    fn a_neighbour_whose_link_is_down_waits_and_messages_hold_at_most_the_limit() {
+        let config = PoseUpdatesConfig::default();
+        let mut s = ServedPoses::default();
+        for id in 0..5 {
+            s.served(RobotId(2), KeyframeId(id), at(f64::from(id), 0.0));
+        }
+        let moved = view(&(0..5).map(|id| (id, at(f64::from(id) + 1.0, 0.0))).collect::<Vec<_>>());
+        assert!(s.due(0.0, &moved, &config, 2, |_| false).is_empty(), "link down");
+        let out = s.due(1.0, &moved, &config, 2, |_| true);
+        assert_eq!(out[0].1.iter().map(|m| m.poses.len()).collect::<Vec<_>>(), [2, 2, 1]);
+        // An evicted keyframe (absent from the view) is not told; disabled tells nothing.
+        let mut s = ServedPoses::default();
+        s.served(RobotId(2), KeyframeId(9), at(0.0, 0.0));
+        assert!(s.due(0.0, &moved, &config, 2, |_| true).is_empty());
+        s.served(RobotId(2), KeyframeId(1), at(0.0, 0.0));
+        let off = PoseUpdatesConfig { enabled: false, ..config };
+        assert!(s.due(0.0, &moved, &off, 2, |_| true).is_empty());
+    }
+}
