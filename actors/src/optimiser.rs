@@ -6,7 +6,8 @@
 //! Tracker, which applies them to the map (the Matcher sees them in the next map snapshot), and
 //! each neighbour's transform as the graph now estimates it (its anchor) to the Matcher. A
 //! neighbour's later estimates of keyframes it served us (`KeyframePoses`, through Comms) move
-//! the means of their priors, and the graph is solved again.
+//! the means of their priors (or wait for keyframes not yet in the graph), and the graph is
+//! solved again at the next tick.
 //!
 //! A wrong loop closure or inter-robot factor (a false match that passed every check) would
 //! bend the whole trajectory toward it. With `reject_outliers`, each solve is GNC-TLS over those
@@ -38,6 +39,8 @@ pub struct Optimiser {
     config: OptimiserConfig,
     links: Option<OptimiserLinks>,
     graph: KeyframeGraph,
+    /// Neighbour keyframe priors moved since the last solve (solved at the next tick).
+    refreshed_since_solve: bool,
 }
 
 /// What of the Optimiser a snapshot keeps: the whole pose graph and its outlier decisions.
@@ -53,7 +56,7 @@ pub struct GetOptimiserStatus;
 
 impl Optimiser {
     pub fn new(robot: RobotId, config: OptimiserConfig) -> Self {
-        Self { robot, config, links: None, graph: KeyframeGraph::default() }
+        Self { robot, config, links: None, graph: KeyframeGraph::default(), refreshed_since_solve: false }
     }
 
     pub fn freeze(&self) -> OptimiserState {
@@ -74,6 +77,7 @@ impl Optimiser {
 
     /// Solves, then publishes the poses and the newest keyframes' marginal covariances.
     fn solve_and_publish(&mut self) {
+        self.refreshed_since_solve = false;
         let solved = match self.graph.solve(self.config.reject_outliers, MARGINALS) {
             Ok(solved) => solved,
             Err(e) => {
@@ -129,9 +133,23 @@ impl Handler<NeighbourKeyframePoses> for Optimiser {
     type Result = ();
     fn handle(&mut self, msg: NeighbourKeyframePoses, ctx: &mut Context<Self>) {
         contained(ctx, "optimiser", || {
-            let moved = self.graph.refresh_neighbour(msg.robot, &msg.poses);
-            tracing::debug!(robot = %self.robot, neighbour = %msg.robot, told = msg.poses.len(), moved, "neighbour keyframe poses");
-            if moved > 0 {
+            let r = self.graph.refresh_neighbour(msg.robot, &msg.poses);
+            tracing::debug!(robot = %self.robot, neighbour = %msg.robot, moved = r.moved, deferred = r.deferred, "neighbour keyframe poses");
+            if r.dropped > 0 {
+                tracing::warn!(robot = %self.robot, neighbour = %msg.robot, dropped = r.dropped,
+                    "pose updates of keyframes we do not hold dropped: too many waiting for their keyframes");
+            }
+            // Solved at the next tick: updates split over several envelopes make one solve.
+            self.refreshed_since_solve |= r.moved > 0;
+        });
+    }
+}
+
+impl Handler<Tick> for Optimiser {
+    type Result = ();
+    fn handle(&mut self, _: Tick, ctx: &mut Context<Self>) {
+        contained(ctx, "optimiser", || {
+            if self.refreshed_since_solve {
                 self.solve_and_publish();
             }
         });

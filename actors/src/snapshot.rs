@@ -217,9 +217,14 @@ mod tests {
                 rejected: Vec::new(),
                 anchors: Vec::new(),
                 realigned: Vec::new(),
-                refreshed: Vec::new(),
+                refreshed: vec![(RobotId(2), 3)],
+                deferred: vec![(RobotId(2), KeyframeId(7), Pose3::translation(1.0, 2.0, 3.0))],
             },
-            comms: CommsState { sequence: 99, ..CommsState::default() },
+            comms: CommsState {
+                sequence: 99,
+                keyframes_told: [(RobotId(2), [(KeyframeId(4), Pose3::translation(4.0, 0.0, 0.0))].into())].into(),
+                ..CommsState::default()
+            },
         }
     }
 

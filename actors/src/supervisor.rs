@@ -287,6 +287,7 @@ impl Handler<Tick> for RobotSupervisor {
         self.clock.advance_to(tick.now);
         self.matcher.do_send(tick);
         self.comms.do_send(tick);
+        self.optimiser.do_send(tick);
     }
 }
 

@@ -446,6 +446,7 @@ async fn served_keyframes_that_a_solve_moves_are_told_to_the_neighbour_holding_t
         radio.deliver_due(f64::from(k) * 0.1);
         settle().await;
     }
+    let heard_after = heard.clone();
     let heard = std::mem::take(&mut *heard.lock().unwrap());
     assert_eq!(heard.poses.len(), 1, "one update, once");
     assert_eq!(heard.poses[0].robot, SERVER);
@@ -458,6 +459,21 @@ async fn served_keyframes_that_a_solve_moves_are_told_to_the_neighbour_holding_t
     }
     let status = server.send(GetCommsStatus).await.unwrap();
     assert_eq!(status.sent.get(sgm_model::wire::MessageKind::KeyframePoses).count, 1);
+    // A pose that is not finite is dropped and counted; the rest of its message is delivered.
+    use sgm_model::wire::messages::{KeyframePoses, WireKeyframePose};
+    let bad = WireKeyframePose { keyframe: KeyframeId(0), translation: [f32::NAN, 0.0, 0.0], rotation: [0.0; 3] };
+    let good = WireKeyframePose::new(KeyframeId(3), &moved(1));
+    let message = WireMessage::KeyframePoses(KeyframePoses { poses: vec![bad, good] });
+    server.do_send(Outgoing { to: REQUESTER, message });
+    step(4.0);
+    settle().await;
+    radio.deliver_due(4.0);
+    settle().await;
+    let requester = requester.send(GetCommsStatus).await.unwrap();
+    assert_eq!(requester.rejected.malformed, 1);
+    let poses = std::mem::take(&mut heard_after.lock().unwrap().poses);
+    assert_eq!(poses.len(), 1);
+    assert_eq!(poses[0].poses.iter().map(|(k, _)| k.0).collect::<Vec<_>>(), [3]);
 }
 
 /// A map snapshot holding only `objects`, as the Tracker shares it.

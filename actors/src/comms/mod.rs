@@ -294,6 +294,9 @@ impl Comms {
             }
         }
         let from = admitted.from;
+        if admitted.sender_restarted {
+            self.served.retell(from);
+        }
         self.status.received.record(admitted.message.kind(), bytes.len());
         self.heard(from, self.clock.now());
         let Some(links) = self.links.clone() else { return };

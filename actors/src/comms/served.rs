@@ -11,7 +11,9 @@
 //! `interval_s` per neighbour, only to a neighbour heard within `link_timeout_s` (and not
 //! down), in envelopes of at most
 //! `limits.max_ids` poses. A keyframe whose scan our map evicted is no longer in the map view:
-//! it is not told again. An update lost on the radio is made good only when the keyframe next
+//! it is forgotten, and never told again (so what is remembered is bounded by the map's cloud
+//! budget per neighbour). A neighbour that restarted (a new incarnation) is told every served
+//! keyframe at its next update. An update lost on the radio is made good only when the keyframe next
 //! moves beyond the thresholds from the pose it carried.
 
 use crate::config::PoseUpdatesConfig;
@@ -19,7 +21,7 @@ use crate::map_view::MapView;
 use sgm_model::geometry::Pose3;
 use sgm_model::scene_graph::{KeyframeId, RobotId, Stamp};
 use sgm_model::wire::messages::{KeyframePoses, WireKeyframePose};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 /// Per neighbour, each keyframe we served and the pose it was last told.
 pub type Told = BTreeMap<RobotId, BTreeMap<KeyframeId, Pose3>>;
@@ -29,21 +31,34 @@ pub struct ServedPoses {
     told: Told,
     /// When each neighbour was last sent an update.
     last: BTreeMap<RobotId, Stamp>,
+    /// Neighbours to be told every served keyframe's pose at their next update, whatever it
+    /// was told before (restarted: they may hold older priors than we told them).
+    retell: BTreeSet<RobotId>,
 }
 
 impl ServedPoses {
     /// Restored from a snapshot: what each neighbour was told.
     pub fn with_told(told: Told) -> Self {
-        Self { told, last: BTreeMap::new() }
+        Self { told, ..Self::default() }
     }
 
     pub fn told(&self) -> &Told {
         &self.told
     }
 
-    /// A keyframe response left for `to` with `world_from_body`.
+    /// A keyframe response left for `to` with `world_from_body`. A keyframe served before keeps
+    /// what it was told (the neighbour may keep its earlier prior, see
+    /// `KeyframeGraph::add_neighbour`): the next update tells any difference.
     pub fn served(&mut self, to: RobotId, keyframe: KeyframeId, world_from_body: Pose3) {
-        self.told.entry(to).or_default().insert(keyframe, world_from_body);
+        self.told.entry(to).or_default().entry(keyframe).or_insert(world_from_body);
+    }
+
+    /// `robot` restarted (a new incarnation): from a snapshot older than what we told it, maybe.
+    /// Its next update tells every served keyframe still in our map.
+    pub fn retell(&mut self, robot: RobotId) {
+        if self.told.contains_key(&robot) {
+            self.retell.insert(robot);
+        }
     }
 
     /// The updates due at `now` against `view` (our map's latest estimates), per neighbour
@@ -67,13 +82,16 @@ impl ServedPoses {
             if !waited || !up(robot) {
                 continue;
             }
+            // A keyframe whose scan the map evicted never comes back to the view: forgotten.
+            told.retain(|id, _| view.keyframes.contains_key(id));
+            let all = self.retell.remove(&robot);
             let mut moved = Vec::new();
             for (&id, pose) in told.iter_mut() {
                 let Some(kf) = view.keyframes.get(&id) else { continue };
                 let now_pose = kf.world_from_body;
                 let shift = (now_pose.translation.vector - pose.translation.vector).norm();
                 let turn = (pose.rotation.inverse() * now_pose.rotation).angle();
-                if shift > config.move_m || turn > turn_rad {
+                if all || shift > config.move_m || turn > turn_rad {
                     *pose = now_pose;
                     moved.push(WireKeyframePose::new(id, &now_pose));
                 }
@@ -137,6 +155,48 @@ mod tests {
         assert_eq!(told(&s.due(11.0, &turned, &config, 256, |_| true)), [(2, vec![2])]);
         // What was told is the reference now: no repeat.
         assert!(s.due(30.0, &turned, &config, 256, |_| true).is_empty());
+    }
+
+    #[test]
+    fn each_neighbour_has_its_own_interval_and_a_threshold_is_exceeded_not_met() {
+        let config = PoseUpdatesConfig::default();
+        let mut s = ServedPoses::default();
+        s.served(RobotId(2), KeyframeId(1), at(0.0, 0.0));
+        let first = view(&[(1, at(0.1, 0.0))]);
+        assert_eq!(told(&s.due(0.0, &first, &config, 256, |_| true)), [(2, vec![1])]);
+        // Robot 3 is served keyframe 1 later, at its old pose: told at once, robot 2's interval
+        // notwithstanding; robot 2 waits.
+        s.served(RobotId(3), KeyframeId(1), at(0.0, 0.0));
+        let second = view(&[(1, at(0.2, 0.0))]);
+        assert_eq!(told(&s.due(1.0, &second, &config, 256, |_| true)), [(3, vec![1])]);
+        assert_eq!(told(&s.due(10.0, &second, &config, 256, |_| true)), [(2, vec![1])]);
+        // Exactly at the thresholds is not beyond them.
+        let mut s = ServedPoses::default();
+        s.served(RobotId(2), KeyframeId(1), at(0.0, 0.0));
+        s.served(RobotId(2), KeyframeId(2), at(10.0, 0.0));
+        let edge = view(&[(1, at(0.05, 0.0)), (2, at(10.0, 0.1))]);
+        assert!(s.due(0.0, &edge, &config, 256, |_| true).is_empty());
+    }
+
+    #[test]
+    fn evicted_keyframes_are_forgotten_a_resent_one_keeps_what_was_told_and_a_restart_hears_all() {
+        let config = PoseUpdatesConfig::default();
+        let mut s = ServedPoses::default();
+        s.served(RobotId(2), KeyframeId(1), at(0.0, 0.0));
+        s.served(RobotId(2), KeyframeId(2), at(5.0, 0.0));
+        // Keyframe 2's scan was evicted: it leaves the view and what was told of it is dropped.
+        assert!(s.due(0.0, &view(&[(1, at(0.0, 0.0))]), &config, 256, |_| true).is_empty());
+        assert_eq!(s.told()[&RobotId(2)].keys().copied().collect::<Vec<_>>(), [KeyframeId(1)]);
+        // Served again at a new pose: the neighbour may keep its earlier prior, so the update
+        // compares with what it was told first.
+        s.served(RobotId(2), KeyframeId(1), at(1.0, 0.0));
+        let moved = view(&[(1, at(1.0, 0.0))]);
+        assert_eq!(told(&s.due(10.0, &moved, &config, 256, |_| true)), [(2, vec![1])]);
+        // Restarted: told again though nothing moved; a neighbour never served is not.
+        s.retell(RobotId(2));
+        s.retell(RobotId(5));
+        assert_eq!(told(&s.due(20.0, &moved, &config, 256, |_| true)), [(2, vec![1])]);
+        assert!(s.due(30.0, &moved, &config, 256, |_| true).is_empty());
     }
 
     #[test]

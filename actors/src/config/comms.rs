@@ -66,7 +66,7 @@ pub struct CommsConfig {
 /// `[comms.pose_updates]`: a neighbour holding keyframes we served ties them to its anchor of
 /// our map by our estimate of them when they left. When our later solves move one of them (a
 /// loop closure, an alignment) by more than `move_m` or `turn_deg` from what the neighbour was
-/// last told, the neighbour is told the new pose (`KeyframePoses`, 27 bytes a keyframe), at
+/// last told, the neighbour is told the new pose (`KeyframePoses`, 25–29 bytes a keyframe), at
 /// most once per `interval_s` per neighbour, and only to a neighbour heard within
 /// `link_timeout_s`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

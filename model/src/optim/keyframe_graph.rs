@@ -55,6 +55,8 @@ pub struct KeyframeGraphState {
     pub realigned: Vec<(RobotId, u32)>,
     /// Per neighbour, neighbour keyframe priors moved by its pose updates.
     pub refreshed: Vec<(RobotId, u64)>,
+    /// Pose updates of keyframes not yet in the graph: (neighbour, keyframe, pose).
+    pub deferred: Vec<(RobotId, KeyframeId, Pose3)>,
 }
 
 /// What a solve gives: every local keyframe's pose, the newest ones' marginal covariances, and
@@ -113,6 +115,27 @@ pub struct KeyframeGraph {
     realigned: BTreeMap<RobotId, u32>,
     /// Per neighbour, priors moved by [`KeyframeGraph::refresh_neighbour`].
     refreshed: BTreeMap<RobotId, u64>,
+    /// Per neighbour, the latest pose update of each keyframe not yet in the graph (at most
+    /// [`MAX_DEFERRED_POSES`]): the keyframe takes it when it arrives.
+    deferred: BTreeMap<RobotId, BTreeMap<KeyframeId, Pose3>>,
+}
+
+/// Pose updates held per neighbour for keyframes not yet in the graph, at most. A keyframe
+/// enters the graph when the Matcher's round that asked for it ends (seconds after it was
+/// served), and an update may come in between; a round asks for a few keyframes
+/// (`matcher.max_keyframes_per_alignment`, `closures.max_keyframes_per_round`), so this bound is
+/// never reached by an honest neighbour. Beyond it updates of unknown keyframes are dropped.
+pub const MAX_DEFERRED_POSES: usize = 1024;
+
+/// What [`KeyframeGraph::refresh_neighbour`] did with a neighbour's pose updates.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Refreshed {
+    /// Ties of keyframes in the graph that took the new pose.
+    pub moved: usize,
+    /// Keyframes not yet in the graph, held for when they arrive.
+    pub deferred: usize,
+    /// Keyframes not yet in the graph beyond [`MAX_DEFERRED_POSES`]: dropped.
+    pub dropped: usize,
 }
 
 /// Standard deviations of the anchor's weak prior (rotation rad, translation m).
@@ -146,6 +169,11 @@ impl KeyframeGraph {
             anchors: self.anchors.iter().map(|(r, i)| (*r, *i)).collect(),
             realigned: self.realigned.iter().map(|(r, n)| (*r, *n)).collect(),
             refreshed: self.refreshed.iter().map(|(r, n)| (*r, *n)).collect(),
+            deferred: self
+                .deferred
+                .iter()
+                .flat_map(|(r, poses)| poses.iter().map(move |(k, p)| (*r, *k, *p)))
+                .collect(),
         }
     }
 
@@ -170,6 +198,10 @@ impl KeyframeGraph {
             inconsistent: BTreeMap::new(),
             realigned: state.realigned.into_iter().collect(),
             refreshed: state.refreshed.into_iter().collect(),
+            deferred: state.deferred.into_iter().fold(BTreeMap::new(), |mut m, (r, k, p)| {
+                m.entry(r).or_insert_with(BTreeMap::new).insert(k, p);
+                m
+            }),
         })
     }
 
@@ -253,8 +285,14 @@ impl KeyframeGraph {
                 self.keep_more_informative(anchor, i, pose_in_remote, covariance);
                 continue;
             }
+            // A pose update that came before the keyframe is newer than the pose it was served with.
+            let deferred = self.deferred.get_mut(&robot).and_then(|d| d.remove(keyframe));
+            if deferred.is_some() {
+                *self.refreshed.entry(robot).or_default() += 1;
+            }
+            let pose_in_remote = deferred.unwrap_or(*pose_in_remote);
             let i = self.variable(r, anchor_value * pose_in_remote);
-            if let Some(tie) = Prior::from_covariance(i, *pose_in_remote, covariance) {
+            if let Some(tie) = Prior::from_covariance(i, pose_in_remote, covariance) {
                 self.push_tie(anchor, &tie);
             }
         }
@@ -312,22 +350,37 @@ impl KeyframeGraph {
     /// `robot`'s later estimates (in its world) of keyframes it served us, moved by its own
     /// solves since it sent them: the tie of each keyframe held takes the new mean T_r(j), and
     /// keeps its covariance (a pose update carries none; the neighbour's marginal of a keyframe
-    /// mostly shrinks, so the held one errs on the cautious side). Keyframes not held are
-    /// ignored. Returns how many ties moved.
-    pub fn refresh_neighbour(&mut self, robot: RobotId, poses: &[(KeyframeId, Pose3)]) -> usize {
-        let Some(&anchor) = self.anchors.get(&robot) else { return 0 };
-        let mut moved = 0;
+    /// mostly shrinks, so the held one errs on the cautious side). A keyframe not yet in the
+    /// graph (its round has not ended) keeps the latest update for when it arrives
+    /// ([`KeyframeGraph::add_neighbour`] takes it instead of the pose it was served with, also
+    /// before the first alignment), up to [`MAX_DEFERRED_POSES`] per neighbour.
+    pub fn refresh_neighbour(&mut self, robot: RobotId, poses: &[(KeyframeId, Pose3)]) -> Refreshed {
+        let mut out = Refreshed::default();
+        let anchor = self.anchors.get(&robot).copied();
         for (keyframe, pose_in_remote) in poses {
-            let Some(&variable) = self.index.get(&KeyframeRef::Remote { robot, keyframe: *keyframe }) else { continue };
-            if let Some(tie) = self.tie_mut(anchor, variable) {
-                tie.measured = *pose_in_remote;
-                moved += 1;
+            let held = self.index.get(&KeyframeRef::Remote { robot, keyframe: *keyframe }).copied();
+            match anchor.zip(held) {
+                Some((anchor, variable)) => {
+                    if let Some(tie) = self.tie_mut(anchor, variable) {
+                        tie.measured = *pose_in_remote;
+                        out.moved += 1;
+                    }
+                }
+                None => {
+                    let held = self.deferred.entry(robot).or_default();
+                    if held.len() < MAX_DEFERRED_POSES || held.contains_key(keyframe) {
+                        held.insert(*keyframe, *pose_in_remote);
+                        out.deferred += 1;
+                    } else {
+                        out.dropped += 1;
+                    }
+                }
             }
         }
-        if moved > 0 {
-            *self.refreshed.entry(robot).or_default() += moved as u64;
+        if out.moved > 0 {
+            *self.refreshed.entry(robot).or_default() += out.moved as u64;
         }
-        moved
+        out
     }
 
     /// Ties a neighbour keyframe to its robot's anchor: the neighbour's estimate of it, with its
@@ -613,47 +666,71 @@ mod tests {
     fn a_stale_neighbour_prior_refreshed_gives_the_graph_built_with_the_fresh_one() {
         // The neighbour sent keyframes 102 and 106 at poses its own solves later moved: 102 by
         // 0.3 m and 1° of yaw. The stale prior pulls the anchor off the truth; the refreshed
-        // graph solves to the truth, as a graph given the fresh poses from the start does.
+        // graph solves to the truth, as a graph given the fresh poses from the start does. A
+        // second neighbour holds a keyframe of the same id, whose tie must not move.
         let true_local_from_remote = pose_from_yaw_translation(0.5, Vector3::new(40.0, -5.0, 0.3));
+        let other_from_remote = pose_from_yaw_translation(-0.3, Vector3::new(-20.0, 8.0, 0.0));
         let measured = pose_from_yaw_translation(0.2, Vector3::new(0.0, 3.0, 0.0));
         let cov = Matrix6::identity() * 0.01;
-        let build = |stale: bool| {
-            let (mut graph, truth) = straight_chain(10);
-            let fresh = |k: usize| true_local_from_remote.inverse() * truth[k] * measured;
-            let sent = |k: usize| match (stale, k) {
-                (true, 2) => fresh(k) * pose_from_yaw_translation(1f64.to_radians(), Vector3::new(0.3, 0.0, 0.0)),
-                _ => fresh(k),
-            };
-            let keyframes: Vec<_> = [2usize, 6].iter().map(|&k| (KeyframeId(100 + k as u32), sent(k), cov)).collect();
+        let (_, truth) = straight_chain(10);
+        let fresh = |k: usize| true_local_from_remote.inverse() * truth[k] * measured;
+        let stale_102 = fresh(2) * pose_from_yaw_translation(1f64.to_radians(), Vector3::new(0.3, 0.0, 0.0));
+        // `updates` reach the graph before the neighbour's keyframes do (deferred), if any.
+        let build = |sent_102: Pose3, updates: &[(KeyframeId, Pose3)]| {
+            let (mut graph, _) = straight_chain(10);
+            let early = graph.refresh_neighbour(RobotId(3), updates);
+            assert_eq!(early, Refreshed { moved: 0, deferred: updates.len(), dropped: 0 });
+            let keyframes = [(KeyframeId(102), sent_102, cov), (KeyframeId(106), fresh(6), cov)];
             let factors: Vec<_> = [2usize, 6]
                 .iter()
                 .map(|&k| (KeyframeId(k as u32), KeyframeId(100 + k as u32), measured, information()))
                 .collect();
             graph.add_neighbour(RobotId(3), &true_local_from_remote, &keyframes, &factors);
-            (graph, fresh(2))
+            let other = [(KeyframeId(102), other_from_remote.inverse() * truth[4] * measured, cov)];
+            let other_factor = [(KeyframeId(4), KeyframeId(102), measured, information())];
+            graph.add_neighbour(RobotId(4), &other_from_remote, &other, &other_factor);
+            graph
         };
-        let anchor_error = |graph: &mut KeyframeGraph| {
-            let solved = graph.solve(false, 0).expect("solves");
-            crate::geometry::pose_error(&solved.anchors[0].1, &true_local_from_remote)
+        let solve = |graph: &mut KeyframeGraph| graph.solve(false, 3).expect("solves");
+        let anchor_error = |solved: &Solved, robot: RobotId, truth: &Pose3| {
+            let anchor = solved.anchors.iter().find(|(r, _)| *r == robot).expect("anchored").1;
+            crate::geometry::pose_error(&anchor, truth)
         };
-        let (mut fresh_graph, _) = build(false);
-        let (mut graph, fresh_102) = build(true);
-        let stale = anchor_error(&mut graph);
+        let same = |a: &Solved, b: &Solved| {
+            a.poses
+                .iter()
+                .zip(&b.poses)
+                .all(|((ka, pa), (kb, pb))| ka == kb && (pa.to_homogeneous() - pb.to_homogeneous()).abs().max() < 1e-9)
+        };
+        let fresh_solved = solve(&mut build(fresh(2), &[]));
+        let mut graph = build(stale_102, &[]);
+        let stale = anchor_error(&solve(&mut graph), RobotId(3), &true_local_from_remote);
         assert!(stale.translation_m > 0.05 && stale.max_axis_rotation_deg() > 0.2, "{stale:?}");
-        // Unknown neighbours and keyframes change nothing; the held one moves.
-        assert_eq!(graph.refresh_neighbour(RobotId(9), &[(KeyframeId(102), fresh_102)]), 0);
-        let poses = [(KeyframeId(102), fresh_102), (KeyframeId(555), Pose3::identity())];
-        assert_eq!(graph.refresh_neighbour(RobotId(3), &poses), 1);
-        let refreshed = anchor_error(&mut graph);
+        // The held keyframe of robot 3 moves; robot 4's keyframe 102 does not; an unknown one
+        // is deferred.
+        let poses = [(KeyframeId(102), fresh(2)), (KeyframeId(555), Pose3::identity())];
+        assert_eq!(graph.refresh_neighbour(RobotId(3), &poses), Refreshed { moved: 1, deferred: 1, dropped: 0 });
+        let solved = solve(&mut graph);
+        let refreshed = anchor_error(&solved, RobotId(3), &true_local_from_remote);
         assert!(refreshed.translation_m < 1e-6 && refreshed.max_axis_rotation_deg() < 1e-6, "{refreshed:?}");
-        let (a, b) = (graph.solve(false, 3).expect("solves"), fresh_graph.solve(false, 3).expect("solves"));
-        for ((ka, pa), (kb, pb)) in a.poses.iter().zip(&b.poses) {
-            assert_eq!(ka, kb);
-            assert!((pa.to_homogeneous() - pb.to_homogeneous()).abs().max() < 1e-9);
-        }
-        assert_eq!(graph.status().inter_robot[0].refreshed, 1);
+        let other = anchor_error(&solved, RobotId(4), &other_from_remote);
+        assert!(other.translation_m < 1e-6 && other.max_axis_rotation_deg() < 1e-6, "{other:?}");
+        assert!(same(&solved, &fresh_solved));
+        let counts = graph.status().inter_robot;
+        assert_eq!((counts[0].robot, counts[0].refreshed, counts[1].refreshed), (RobotId(3), 1, 0));
         let thawed = KeyframeGraph::thaw(graph.freeze()).expect("consistent");
-        assert_eq!(thawed.status().inter_robot[0].refreshed, 1);
+        assert_eq!(thawed, graph);
+        // An update that came before its keyframe is taken when the keyframe arrives.
+        let mut early = build(stale_102, &[(KeyframeId(102), fresh(2))]);
+        assert!(same(&solve(&mut early), &fresh_solved));
+        assert_eq!(early.status().inter_robot[0].refreshed, 1);
+        // Deferred updates are bounded per neighbour; a later update of one held is kept.
+        let mut graph = KeyframeGraph::default();
+        let many: Vec<_> = (0..MAX_DEFERRED_POSES as u32 + 5).map(|k| (KeyframeId(k), Pose3::identity())).collect();
+        let r = graph.refresh_neighbour(RobotId(7), &many);
+        assert_eq!((r.deferred, r.dropped), (MAX_DEFERRED_POSES, 5));
+        assert_eq!(graph.refresh_neighbour(RobotId(7), &many[..1]).deferred, 1);
+        assert_eq!(graph.refresh_neighbour(RobotId(8), &many[..1]).deferred, 1, "per neighbour");
     }
 
     #[test]

@@ -278,8 +278,8 @@ pub struct KeyframePoses {
 }
 
 /// A keyframe's pose in the sender's world, in single precision: translation (m) and rotation
-/// vector (rad, the logarithm of the rotation). 24 bytes and the id's varint: below 0.1 mm and
-/// 0.1 µrad within 1 km of the origin.
+/// vector (rad, the logarithm of the rotation). 24 bytes and the id's varint: within 0.1 mm and
+/// about 0.1 µrad per axis within 1 km of the origin.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WireKeyframePose {
     pub keyframe: KeyframeId,
