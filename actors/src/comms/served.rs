@@ -129,6 +129,11 @@ mod tests {
         pose_from_rpy_translation(0.0, 0.0, yaw_deg.to_radians(), Vector3::new(x, 0.0, 0.0))
     }
 
+    /// The updates due at `now` with the default configuration, every neighbour heard.
+    fn tell(s: &mut ServedPoses, now: f64, view: &MapView) -> Vec<(u16, Vec<u32>)> {
+        told(&s.due(now, view, &PoseUpdatesConfig::default(), 256, |_| true))
+    }
+
     fn told(out: &[(RobotId, Vec<KeyframePoses>)]) -> Vec<(u16, Vec<u32>)> {
         out.iter().map(|(r, m)| (r.0, m.iter().flat_map(|m| m.poses.iter().map(|p| p.keyframe.0)).collect())).collect()
     }
@@ -142,7 +147,7 @@ mod tests {
         s.served(RobotId(3), KeyframeId(1), at(0.0, 0.0));
         // Within both thresholds: nothing.
         let small = view(&[(1, at(0.04, 0.09)), (2, at(5.0, 0.0))]);
-        assert!(s.due(0.0, &small, &config, 256, |_| true).is_empty());
+        assert!(tell(&mut s, 0.0, &small).is_empty());
         // Keyframe 1 moved 6 cm: both neighbours that hold it are told, keyframe 2 is not.
         let moved = view(&[(1, at(0.06, 0.0)), (2, at(5.0, 0.0))]);
         let out = s.due(1.0, &moved, &config, 256, |_| true);
@@ -151,52 +156,50 @@ mod tests {
         assert!((pose.translation.x - 0.06).abs() < 1e-6);
         // Keyframe 2 turns 0.2°: not before the interval has passed, then told.
         let turned = view(&[(1, at(0.06, 0.0)), (2, at(5.0, 0.2))]);
-        assert!(s.due(5.0, &turned, &config, 256, |_| true).is_empty());
-        assert_eq!(told(&s.due(11.0, &turned, &config, 256, |_| true)), [(2, vec![2])]);
+        assert!(tell(&mut s, 5.0, &turned).is_empty());
+        assert_eq!(tell(&mut s, 11.0, &turned), [(2, vec![2])]);
         // What was told is the reference now: no repeat.
-        assert!(s.due(30.0, &turned, &config, 256, |_| true).is_empty());
+        assert!(tell(&mut s, 30.0, &turned).is_empty());
     }
 
     #[test]
     fn each_neighbour_has_its_own_interval_and_a_threshold_is_exceeded_not_met() {
-        let config = PoseUpdatesConfig::default();
         let mut s = ServedPoses::default();
         s.served(RobotId(2), KeyframeId(1), at(0.0, 0.0));
         let first = view(&[(1, at(0.1, 0.0))]);
-        assert_eq!(told(&s.due(0.0, &first, &config, 256, |_| true)), [(2, vec![1])]);
+        assert_eq!(tell(&mut s, 0.0, &first), [(2, vec![1])]);
         // Robot 3 is served keyframe 1 later, at its old pose: told at once, robot 2's interval
         // notwithstanding; robot 2 waits.
         s.served(RobotId(3), KeyframeId(1), at(0.0, 0.0));
         let second = view(&[(1, at(0.2, 0.0))]);
-        assert_eq!(told(&s.due(1.0, &second, &config, 256, |_| true)), [(3, vec![1])]);
-        assert_eq!(told(&s.due(10.0, &second, &config, 256, |_| true)), [(2, vec![1])]);
+        assert_eq!(tell(&mut s, 1.0, &second), [(3, vec![1])]);
+        assert_eq!(tell(&mut s, 10.0, &second), [(2, vec![1])]);
         // Exactly at the thresholds is not beyond them.
         let mut s = ServedPoses::default();
         s.served(RobotId(2), KeyframeId(1), at(0.0, 0.0));
         s.served(RobotId(2), KeyframeId(2), at(10.0, 0.0));
         let edge = view(&[(1, at(0.05, 0.0)), (2, at(10.0, 0.1))]);
-        assert!(s.due(0.0, &edge, &config, 256, |_| true).is_empty());
+        assert!(tell(&mut s, 0.0, &edge).is_empty());
     }
 
     #[test]
     fn evicted_keyframes_are_forgotten_a_resent_one_keeps_what_was_told_and_a_restart_hears_all() {
-        let config = PoseUpdatesConfig::default();
         let mut s = ServedPoses::default();
         s.served(RobotId(2), KeyframeId(1), at(0.0, 0.0));
         s.served(RobotId(2), KeyframeId(2), at(5.0, 0.0));
         // Keyframe 2's scan was evicted: it leaves the view and what was told of it is dropped.
-        assert!(s.due(0.0, &view(&[(1, at(0.0, 0.0))]), &config, 256, |_| true).is_empty());
+        assert!(tell(&mut s, 0.0, &view(&[(1, at(0.0, 0.0))])).is_empty());
         assert_eq!(s.told()[&RobotId(2)].keys().copied().collect::<Vec<_>>(), [KeyframeId(1)]);
         // Served again at a new pose: the neighbour may keep its earlier prior, so the update
         // compares with what it was told first.
         s.served(RobotId(2), KeyframeId(1), at(1.0, 0.0));
         let moved = view(&[(1, at(1.0, 0.0))]);
-        assert_eq!(told(&s.due(10.0, &moved, &config, 256, |_| true)), [(2, vec![1])]);
+        assert_eq!(tell(&mut s, 10.0, &moved), [(2, vec![1])]);
         // Restarted: told again though nothing moved; a neighbour never served is not.
         s.retell(RobotId(2));
         s.retell(RobotId(5));
-        assert_eq!(told(&s.due(20.0, &moved, &config, 256, |_| true)), [(2, vec![1])]);
-        assert!(s.due(30.0, &moved, &config, 256, |_| true).is_empty());
+        assert_eq!(tell(&mut s, 20.0, &moved), [(2, vec![1])]);
+        assert!(tell(&mut s, 30.0, &moved).is_empty());
     }
 
     #[test]
