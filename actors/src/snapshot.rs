@@ -219,6 +219,7 @@ mod tests {
                 realigned: Vec::new(),
                 refreshed: vec![(RobotId(2), 3)],
                 deferred: vec![(RobotId(2), KeyframeId(7), Pose3::translation(1.0, 2.0, 3.0))],
+                updated: Vec::new(),
             },
             comms: CommsState {
                 sequence: 99,

@@ -39,7 +39,7 @@ use super::solver::{least_squares, optimize_with, LmParams, SolveError, Structur
 use crate::geometry::{medoid, pose_error, Pose3};
 use crate::scene_graph::{Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, RobotId};
 use nalgebra::Matrix6;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 /// The graph and its outlier decisions, as a snapshot keeps them.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -57,6 +57,8 @@ pub struct KeyframeGraphState {
     pub refreshed: Vec<(RobotId, u64)>,
     /// Pose updates of keyframes not yet in the graph: (neighbour, keyframe, pose).
     pub deferred: Vec<(RobotId, KeyframeId, Pose3)>,
+    /// Neighbour keyframe variables whose tie holds a pose update's mean.
+    pub updated: Vec<usize>,
 }
 
 /// What a solve gives: every local keyframe's pose, the newest ones' marginal covariances, and
@@ -118,6 +120,9 @@ pub struct KeyframeGraph {
     /// Per neighbour, the latest pose update of each keyframe not yet in the graph (at most
     /// [`MAX_DEFERRED_POSES`]): the keyframe takes it when it arrives.
     deferred: BTreeMap<RobotId, BTreeMap<KeyframeId, Pose3>>,
+    /// Neighbour keyframe variables whose tie holds a pose update's mean: newer than the pose
+    /// the keyframe is served with, which a keyframe received again does not take back.
+    updated: BTreeSet<usize>,
 }
 
 /// Pose updates held per neighbour for keyframes not yet in the graph, at most. A keyframe
@@ -174,6 +179,7 @@ impl KeyframeGraph {
                 .iter()
                 .flat_map(|(r, poses)| poses.iter().map(move |(k, p)| (*r, *k, *p)))
                 .collect(),
+            updated: self.updated.iter().copied().collect(),
         }
     }
 
@@ -187,7 +193,8 @@ impl KeyframeGraph {
             && state.graph.priors.iter().all(|p| p.variable < n)
             && state.candidates.len() == state.graph.betweens.len()
             && state.rejected.iter().all(|k| *k < state.candidates.len())
-            && state.anchors.iter().all(|(_, i)| *i < n);
+            && state.anchors.iter().all(|(_, i)| *i < n)
+            && state.updated.iter().all(|i| *i < n);
         consistent.then(|| Self {
             graph: state.graph,
             index: state.index.into_iter().collect(),
@@ -202,6 +209,7 @@ impl KeyframeGraph {
                 m.entry(r).or_insert_with(BTreeMap::new).insert(k, p);
                 m
             }),
+            updated: state.updated.into_iter().collect(),
         })
     }
 
@@ -290,8 +298,11 @@ impl KeyframeGraph {
             if deferred.is_some() {
                 *self.refreshed.entry(robot).or_default() += 1;
             }
+            let i = self.variable(r, anchor_value * deferred.unwrap_or(*pose_in_remote));
+            if deferred.is_some() {
+                self.updated.insert(i);
+            }
             let pose_in_remote = deferred.unwrap_or(*pose_in_remote);
-            let i = self.variable(r, anchor_value * pose_in_remote);
             if let Some(tie) = Prior::from_covariance(i, pose_in_remote, covariance) {
                 self.push_tie(anchor, &tie);
             }
@@ -314,8 +325,9 @@ impl KeyframeGraph {
     /// tie), else keeps what it has. A neighbour's marginals mostly shrink as its graph grows,
     /// and a keyframe first met through a claim that knew little of it (a false factor's, see
     /// `sim::false_factors`) takes the neighbour's own prior when that arrives, instead of
-    /// keeping the first for the rest of the mission. A covariance that is not positive
-    /// definite changes nothing. The protocol asks for a keyframe once, so an honest mission
+    /// keeping the first for the rest of the mission — its covariance, and its pose unless the
+    /// tie holds a pose update, which is newer than the pose a keyframe is served with. A
+    /// covariance that is not positive definite changes nothing. The protocol asks for a keyframe once, so an honest mission
     /// never comes here.
     fn keep_more_informative(
         &mut self,
@@ -325,10 +337,13 @@ impl KeyframeGraph {
         covariance: &Matrix6<f64>,
     ) {
         let Some(tie) = Prior::from_covariance(variable, *pose_in_remote, covariance) else { return };
+        let keep_mean = self.updated.contains(&variable);
         match self.tie_mut(anchor, variable) {
             Some(b) => {
                 if tie.sqrt_information.determinant().abs() >= b.sqrt_information.determinant().abs() {
-                    b.measured = *pose_in_remote;
+                    if !keep_mean {
+                        b.measured = *pose_in_remote;
+                    }
                     b.sqrt_information = tie.sqrt_information;
                 }
             }
@@ -363,6 +378,7 @@ impl KeyframeGraph {
                 Some((anchor, variable)) => {
                     if let Some(tie) = self.tie_mut(anchor, variable) {
                         tie.measured = *pose_in_remote;
+                        self.updated.insert(variable);
                         out.moved += 1;
                     }
                 }
@@ -675,11 +691,17 @@ mod tests {
         let (_, truth) = straight_chain(10);
         let fresh = |k: usize| true_local_from_remote.inverse() * truth[k] * measured;
         let stale_102 = fresh(2) * pose_from_yaw_translation(1f64.to_radians(), Vector3::new(0.3, 0.0, 0.0));
-        // `updates` reach the graph before the neighbour's keyframes do (deferred), if any.
-        let build = |sent_102: Pose3, updates: &[(KeyframeId, Pose3)]| {
+        // `updates` reach the graph before the neighbour's keyframes do (deferred), if any; with
+        // `claimed`, after a vague claim on keyframe 102 (a false factor's) brought it in early.
+        let build = |sent_102: Pose3, updates: &[(KeyframeId, Pose3)], claimed: bool| {
             let (mut graph, _) = straight_chain(10);
+            if claimed {
+                let vague = [(KeyframeId(102), Pose3::identity(), Matrix6::identity() * 1e4)];
+                graph.add_neighbour(RobotId(3), &true_local_from_remote, &vague, &[]);
+            }
             let early = graph.refresh_neighbour(RobotId(3), updates);
-            assert_eq!(early, Refreshed { moved: 0, deferred: updates.len(), dropped: 0 });
+            let (moved, deferred) = if claimed { (updates.len(), 0) } else { (0, updates.len()) };
+            assert_eq!(early, Refreshed { moved, deferred, dropped: 0 });
             let keyframes = [(KeyframeId(102), sent_102, cov), (KeyframeId(106), fresh(6), cov)];
             let factors: Vec<_> = [2usize, 6]
                 .iter()
@@ -702,8 +724,8 @@ mod tests {
                 .zip(&b.poses)
                 .all(|((ka, pa), (kb, pb))| ka == kb && (pa.to_homogeneous() - pb.to_homogeneous()).abs().max() < 1e-9)
         };
-        let fresh_solved = solve(&mut build(fresh(2), &[]));
-        let mut graph = build(stale_102, &[]);
+        let fresh_solved = solve(&mut build(fresh(2), &[], false));
+        let mut graph = build(stale_102, &[], false);
         let stale = anchor_error(&solve(&mut graph), RobotId(3), &true_local_from_remote);
         assert!(stale.translation_m > 0.05 && stale.max_axis_rotation_deg() > 0.2, "{stale:?}");
         // The held keyframe of robot 3 moves; robot 4's keyframe 102 does not; an unknown one
@@ -721,9 +743,14 @@ mod tests {
         let thawed = KeyframeGraph::thaw(graph.freeze()).expect("consistent");
         assert_eq!(thawed, graph);
         // An update that came before its keyframe is taken when the keyframe arrives.
-        let mut early = build(stale_102, &[(KeyframeId(102), fresh(2))]);
+        let mut early = build(stale_102, &[(KeyframeId(102), fresh(2))], false);
         assert!(same(&solve(&mut early), &fresh_solved));
         assert_eq!(early.status().inter_robot[0].refreshed, 1);
+        // Brought in early by a vague claim and updated there, the keyframe served later (its
+        // served pose older than the update) takes the served covariance and keeps the update.
+        let mut claimed = build(stale_102, &[(KeyframeId(102), fresh(2))], true);
+        assert!(same(&solve(&mut claimed), &fresh_solved));
+        assert_eq!(KeyframeGraph::thaw(claimed.freeze()).as_ref(), Some(&claimed));
         // Deferred updates are bounded per neighbour; a later update of one held is kept.
         let mut graph = KeyframeGraph::default();
         let many: Vec<_> = (0..MAX_DEFERRED_POSES as u32 + 5).map(|k| (KeyframeId(k), Pose3::identity())).collect();
