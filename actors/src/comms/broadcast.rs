@@ -68,6 +68,11 @@ impl ObjectBroadcast {
         self.revision
     }
 
+    /// The map as last shared (kept also while disabled).
+    pub fn latest(&self) -> Option<&Arc<MapView>> {
+        self.latest.as_ref()
+    }
+
     /// The object layer now; whether it changed significantly since the last broadcast.
     pub fn objects(&mut self, map: Arc<MapView>, significant_move_m: f64) {
         let objects = &map.objects;

@@ -48,7 +48,6 @@ use sgm_model::wire::messages::{
     unpack_covariance, KeyframeRefusalReason, KeyframeRequest, ObjectCloudRequest, WireDescriptor,
 };
 use sgm_model::wire::{Destination, Message as WireMessage, TeamKey};
-use std::sync::Arc;
 
 /// Where Comms delivers what arrives.
 #[derive(Clone)]
@@ -83,8 +82,6 @@ pub struct Comms {
     requests: RequestBook,
     responses: Responses,
     served: ServedPoses,
-    /// The map as last shared: its keyframe poses are what served keyframes are told.
-    map: Option<Arc<crate::map_view::MapView>>,
 }
 
 impl Comms {
@@ -117,7 +114,6 @@ impl Comms {
             requests: RequestBook::new(),
             responses: Responses::default(),
             served: ServedPoses::default(),
-            map: None,
         }
     }
 
@@ -273,7 +269,8 @@ impl Comms {
 
     /// Served keyframes our solves moved, told to the neighbours holding them.
     fn send_pose_updates(&mut self, now: Stamp) {
-        let Some(map) = self.map.clone() else { return };
+        // The map as last shared: its keyframe poses are what served keyframes are told.
+        let Some(map) = self.objects.latest().cloned() else { return };
         let (watch, timeout) = (&self.watch, self.config.link_timeout_s);
         let heard = |r| !watch.is_down(r) && watch.last_heard(r).is_some_and(|t| now - t < timeout);
         let due = self.served.due(now, &map, &self.config.pose_updates, self.config.limits.max_ids, heard);
@@ -422,7 +419,6 @@ impl Handler<MapChanged> for Comms {
     type Result = ();
     fn handle(&mut self, msg: MapChanged, ctx: &mut Context<Self>) {
         contained(ctx, "comms", || {
-            self.map = Some(msg.0.clone());
             self.objects.objects(msg.0, self.config.significant_move_m);
             self.try_broadcast(self.clock.now());
         });
