@@ -1,8 +1,9 @@
 //! Cycles of alignments flag a wrong one (`matcher.relay.contradiction_m`): in the indoor world
-//! whose room grid a half turn maps onto itself, seed 2 aligns alpha and bravo turned by 180°,
-//! and charlie's right alignments contradict that around the cycle; on seed 1, where every
-//! alignment is right, nothing is flagged. A cycle cannot say which of its alignments is wrong,
-//! so the right ones on a broken cycle are flagged too.
+//! of repeated rooms, seed 13 has charlie align alpha 19 m and 90° off at 29 s, and the other
+//! five alignments, right, contradict it around the cycle; on seed 1, where every alignment is
+//! right, nothing is flagged. A cycle cannot say which of its alignments is wrong, so right ones
+//! on a broken cycle are flagged too. (Seed 2, which aligned alpha and bravo turned by 180°, was
+//! this test's case until the matcher's crowd estimate refused that turn.)
 
 use sgm_scenarios::report::{compute, AlignmentReport, Report};
 use sgm_scenarios::runner::run;
@@ -62,18 +63,27 @@ fn all_aligned(report: &Report) {
 }
 
 #[test]
-fn a_wrong_alignment_among_symmetric_rooms_is_flagged_around_its_cycle() {
+fn a_wrong_alignment_among_repeated_rooms_is_flagged_around_its_cycle() {
     let logs = logs();
-    let report = indoor(2, 70.0);
+    let report = indoor(13, 70.0);
     all_aligned(&report);
     let wrong_ones: Vec<&AlignmentReport> = report.alignments.iter().filter(|a| wrong(a)).collect();
-    assert!(!wrong_ones.is_empty(), "seed 2 no longer aligns wrongly: choose another case for this test");
-    // Three robots make one cycle: a wrong alignment on it breaks it for every direction.
-    for a in &report.alignments {
-        assert!(!a.contradicted_by.is_empty(), "{} ← {} is not flagged", a.local, a.remote);
+    assert!(!wrong_ones.is_empty(), "seed 13 no longer aligns wrongly: choose another case for this test");
+    // The wrong alignment is flagged, and so are right ones that meet it around the cycle.
+    for a in &wrong_ones {
+        assert!(!a.contradicted_by.is_empty(), "{} ← {} is wrong and not flagged", a.local, a.remote);
     }
-    // And the log said so for every direction, at most once a minute each (70 s: twice at
-    // most; the other test of this file flags nothing, so every such line is this run's).
+    let flagged: std::collections::BTreeSet<(String, String)> = report
+        .alignments
+        .iter()
+        .filter(|a| !a.contradicted_by.is_empty())
+        .map(|a| (a.local.clone(), a.remote.clone()))
+        .collect();
+    assert!(flagged.len() > wrong_ones.len(), "only the wrong ones flagged: {flagged:?}");
+    // And the log said so for each of them, at most once a minute each (70 s: twice at most;
+    // the other test of this file flags nothing, so every such line is this run's). A direction
+    // may also have been flagged for a while and cleared (its cycle then went through the
+    // wrong alignment, before a right one came in).
     let text = String::from_utf8_lossy(&logs.lock().unwrap()).into_owned();
     let warned: Vec<&str> =
         text.lines().filter(|l| l.contains("our alignment of the neighbour is contradicted")).collect();
@@ -81,10 +91,16 @@ fn a_wrong_alignment_among_symmetric_rooms_is_flagged_around_its_cycle() {
     let field = |line: &str, key: &str| {
         line.split_whitespace().find_map(|w| w.strip_prefix(key)).map(str::to_owned).unwrap_or_default()
     };
+    let name = |robot: String| match robot.as_str() {
+        "robot1" => "alpha".to_owned(),
+        "robot2" => "bravo".to_owned(),
+        "robot3" => "charlie".to_owned(),
+        _ => robot,
+    };
     let directions: std::collections::BTreeSet<(String, String)> =
-        warned.iter().map(|l| (field(l, "robot="), field(l, "neighbour="))).collect();
-    assert_eq!(directions.len(), 6, "{warned:#?}");
-    assert!(warned.len() <= 12, "{} warnings: {warned:#?}", warned.len());
+        warned.iter().map(|l| (name(field(l, "robot=")), name(field(l, "neighbour=")))).collect();
+    assert!(directions.is_superset(&flagged), "flagged {flagged:?}, warned {warned:#?}");
+    assert!(warned.len() <= 2 * directions.len(), "{} warnings: {warned:#?}", warned.len());
 }
 
 #[test]

@@ -9,15 +9,15 @@
 //!    `verification`
 //!    A hypothesis whose vertical residuals show a significant tilt of the frames is refitted in
 //!    6-DoF: `tilt`
-//! 6. refusal: too few, collinear, not significant (NFA), ambiguous → `significance`
+//! 6. refusal: too few, collinear, not significant (NFA, `null_model`), ambiguous → `significance`
 //! 7. weighted least-squares transform (§IV-C) → `geometry::fit_rigid` (inside refinement)
 
 use super::affinity::{self, AffinityParams};
 use super::candidates::{candidates, Candidate};
 use super::labels::LabelSimilarity;
+use super::null_model::NullModel;
 use super::outcome::*;
 use super::overlap::Overlap;
-use super::significance::log10_nfa_adaptive;
 use super::spectral::principal_eigenvector;
 use super::symmetry::{self, PeriodSearch};
 use super::tilt::{self, TiltSearch};
@@ -124,7 +124,13 @@ pub fn match_graphs(
     // eigenvector ranks poorly): seed pairs sampled from the affinity rows — a candidate and one
     // of its consistent partners — with a fixed-seed generator.
     let scorer = Scorer::new(local, remote, &vertices, config.inlier_distance_m, config.inlier_height_m);
-    let null = NullModel::new(local, remote, &vertices, config.inlier_distance_m);
+    let null = NullModel::new(
+        local,
+        remote,
+        &vertices,
+        config.inlier_distance_m,
+        MIN_RADIUS_FRACTION * config.inlier_distance_m,
+    );
     let required = -config.max_false_alarms.log10();
     let mut search = Search::new(local.len());
     for (x, &a) in pool.iter().enumerate() {
@@ -134,7 +140,7 @@ pub fn match_graphs(
     }
     let settle = |e: &Evaluation| settle(&scorer, local, remote, e, config);
     let stage_one_significant =
-        search.best().map(|b| null.significance(&settle(b).0, search.tests, remote) >= required).unwrap_or(false);
+        search.best().map(|b| null.spread_significance(&settle(b).0, search.tests) >= required).unwrap_or(false);
     if !stage_one_significant && config.hypothesis_samples > 0 {
         let mut rng = ChaCha8Rng::seed_from_u64(SAMPLING_SEED);
         for _ in 0..config.hypothesis_samples {
@@ -158,9 +164,16 @@ pub fn match_graphs(
     let (best, model) = settle(&hypotheses[0]);
 
     // 6: refusals.
-    let significance = null.significance(&best, tests, remote);
+    // The search and the runner-up rules compare significances under the spread estimate; a
+    // claim must also pass under the crowd estimate (`null_model`), which is what is reported.
+    let significance = null.spread_significance(&best, tests);
+    let claimed = null.crowd_significance(&best, tests);
     let refuse = |reason| MatchReport {
-        outcome: MatchOutcome::Refused(Refusal { reason, best_guess: Some(best.local_from_remote), significance }),
+        outcome: MatchOutcome::Refused(Refusal {
+            reason,
+            best_guess: Some(best.local_from_remote),
+            significance: claimed,
+        }),
         spectral_matches: Vec::new(),
         stats: stats.clone(),
     };
@@ -175,8 +188,9 @@ pub fn match_graphs(
         let reason = RefusalReason::Collinear { spread_m, required_m: config.min_spread_m };
         return MatchReport { spectral_matches, ..refuse(reason) };
     }
-    if significance < required {
-        return MatchReport { spectral_matches, ..refuse(RefusalReason::NotSignificant { significance, required }) };
+    if claimed < required {
+        let reason = RefusalReason::NotSignificant { significance: claimed, required };
+        return MatchReport { spectral_matches, ..refuse(reason) };
     }
     let remote_points = || best.inliers.iter().map(|i| remote.objects()[i.remote as usize].centroid);
     // Refinement at most doubles a hypothesis' score in practice, so weaker ones cannot be
@@ -236,7 +250,7 @@ pub fn match_graphs(
             continue;
         }
         // A tie on score may straddle the threshold; consistency alone must be significant.
-        let runner_up_significance = null.significance(&runner_up, tests, remote);
+        let runner_up_significance = null.spread_significance(&runner_up, tests);
         if runner_up_significance < if as_good { runner_up_required } else { required } {
             continue;
         }
@@ -279,7 +293,7 @@ pub fn match_graphs(
     matches.sort_by_key(|m| (m.local, m.remote));
     let rmse_m = (matches.iter().map(|m| m.residual_m * m.residual_m).sum::<f64>() / matches.len() as f64).sqrt();
     MatchReport {
-        outcome: MatchOutcome::Aligned(Alignment { local_from_remote, matches, significance, rmse_m }),
+        outcome: MatchOutcome::Aligned(Alignment { local_from_remote, matches, significance: claimed, rmse_m }),
         spectral_matches,
         stats,
     }
@@ -412,70 +426,4 @@ fn seed_transform(
     }
     let pair = |p, q| Correspondence { in_local: p, in_remote: q, weight: 1.0 };
     fit_rigid(&[pair(pi, qm), pair(pj, qn)], RigidModel::Planar)
-}
-
-/// The chance model of `significance`: per remote object, how many local objects it may match.
-struct NullModel {
-    area_m2: f64,
-    /// Residuals below this count as this (centroids are never exact).
-    min_radius_m: f64,
-    min: Point3<f64>,
-    max: Point3<f64>,
-    same_label: Vec<f64>,
-    any_label: Vec<f64>,
-    soft: bool,
-}
-
-impl NullModel {
-    fn new(local: &ObjectGraph, remote: &ObjectGraph, vertices: &VertexCompare, radius: f64) -> Self {
-        let (mut min, mut max) = (Point3::new(f64::MAX, f64::MAX, 0.0), Point3::new(f64::MIN, f64::MIN, 0.0));
-        for o in local.objects() {
-            min.x = min.x.min(o.centroid.x - radius);
-            min.y = min.y.min(o.centroid.y - radius);
-            max.x = max.x.max(o.centroid.x + radius);
-            max.y = max.y.max(o.centroid.y + radius);
-        }
-        let count = |q: &super::GraphObject, same: bool| {
-            local.objects().iter().filter(|p| vertices.similarity(p, q) > 0.0 && (!same || p.label == q.label)).count()
-                as f64
-        };
-        Self {
-            area_m2: ((max.x - min.x) * (max.y - min.y)).max(1e-9),
-            min_radius_m: MIN_RADIUS_FRACTION * radius,
-            min,
-            max,
-            same_label: remote.objects().iter().map(|q| count(q, true)).collect(),
-            any_label: remote.objects().iter().map(|q| count(q, false)).collect(),
-            soft: vertices.labels.is_soft(),
-        }
-    }
-
-    /// −log10 NFA of an evaluation (with soft labels: the better of the same-label and any-label
-    /// tests, Bonferroni-corrected by 2).
-    fn significance(&self, e: &Evaluation, tests: usize, remote: &ObjectGraph) -> f64 {
-        let (mut trials, mut c_same, mut c_any) = (0usize, 0.0, 0.0);
-        for (m, q) in remote.objects().iter().enumerate() {
-            let p = e.local_from_remote * q.centroid;
-            if p.x >= self.min.x && p.x <= self.max.x && p.y >= self.min.y && p.y <= self.max.y {
-                trials += 1;
-                c_same += self.same_label[m];
-                c_any += self.any_label[m];
-            }
-        }
-        if trials == 0 {
-            return 0.0;
-        }
-        let floor = self.min_radius_m;
-        let chance = |count: f64| {
-            let per_object = count / trials as f64 / self.area_m2;
-            move |r: f64| (per_object * std::f64::consts::PI * r.max(floor).powi(2)).min(1.0)
-        };
-        let mut same: Vec<f64> = e.inliers.iter().filter(|i| i.same_label).map(|i| i.residual_xy_m).collect();
-        let mut nfa = log10_nfa_adaptive(tests, trials, &mut same, chance(c_same));
-        if self.soft {
-            let mut any: Vec<f64> = e.inliers.iter().map(|i| i.residual_xy_m).collect();
-            nfa = nfa.min(log10_nfa_adaptive(tests, trials, &mut any, chance(c_any))) + 2f64.log10();
-        }
-        (-nfa).clamp(-1e3, 1e3)
-    }
 }

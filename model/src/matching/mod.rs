@@ -13,6 +13,7 @@ mod config;
 mod graph;
 mod labels;
 mod matcher;
+mod null_model;
 mod object_grid;
 mod outcome;
 mod overlap;
