@@ -107,9 +107,10 @@ impl<'a> NullModel<'a> {
         let local = self.local.objects();
         let crowd_area = std::f64::consts::PI * self.crowd_radius_m.powi(2);
         let d2 = self.crowd_radius_m.powi(2);
-        // Sums over the trials of the density of eligible local objects per m², same label and
-        // any label.
-        let (mut trials, mut density) = (0usize, [0.0; 2]);
+        // Sums over the trials, same label and any label: the counts c (the spread estimate's
+        // density is c / A, summed in the order it always was, so its bits are the box model's)
+        // and the crowd estimate's density per m².
+        let (mut trials, mut counted, mut crowded) = (0usize, [0.0; 2], [0.0; 2]);
         for (m, q) in self.remote.objects().iter().enumerate() {
             let p = e.local_from_remote * q.centroid;
             if !(p.x >= self.min.x && p.x <= self.max.x && p.y >= self.min.y && p.y <= self.max.y) {
@@ -130,22 +131,28 @@ impl<'a> NullModel<'a> {
                 });
             }
             for (k, counts) in [&self.same_label, &self.any_label].into_iter().enumerate() {
-                density[k] += (counts[m] / self.area_m2).max(near[k] as f64 / crowd_area);
+                counted[k] += counts[m];
+                crowded[k] += (counts[m] / self.area_m2).max(near[k] as f64 / crowd_area);
             }
         }
         if trials == 0 {
             return 0.0;
         }
         let floor = self.min_radius_m;
-        let chance = |sum_per_m2: f64| {
-            let per_m2 = sum_per_m2 / trials as f64;
-            move |r: f64| (per_m2 * std::f64::consts::PI * r.max(floor).powi(2)).min(1.0)
+        // Mean density of the trials' eligible objects, per m².
+        let per_m2 = |k: usize| {
+            if crowd {
+                crowded[k] / trials as f64
+            } else {
+                counted[k] / trials as f64 / self.area_m2
+            }
         };
+        let chance = |per_m2: f64| move |r: f64| (per_m2 * std::f64::consts::PI * r.max(floor).powi(2)).min(1.0);
         let mut same: Vec<f64> = e.inliers.iter().filter(|i| i.same_label).map(|i| i.residual_xy_m).collect();
-        let mut nfa = log10_nfa_adaptive(tests, trials, &mut same, chance(density[0]));
+        let mut nfa = log10_nfa_adaptive(tests, trials, &mut same, chance(per_m2(0)));
         if self.soft {
             let mut all: Vec<f64> = e.inliers.iter().map(|i| i.residual_xy_m).collect();
-            nfa = nfa.min(log10_nfa_adaptive(tests, trials, &mut all, chance(density[1]))) + 2f64.log10();
+            nfa = nfa.min(log10_nfa_adaptive(tests, trials, &mut all, chance(per_m2(1)))) + 2f64.log10();
         }
         (-nfa).clamp(-1e3, 1e3)
     }
