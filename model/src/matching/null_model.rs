@@ -103,7 +103,14 @@ impl<'a> NullModel<'a> {
     }
 
     fn significance(&self, e: &Evaluation, tests: usize, crowd: bool) -> f64 {
-        let partner: std::collections::HashMap<u32, u32> = e.inliers.iter().map(|i| (i.remote, i.local)).collect();
+        // The local object each remote one is paired with (only the crowd estimate needs it).
+        let mut partner: Vec<Option<u32>> = Vec::new();
+        if crowd {
+            partner.resize(self.remote.len(), None);
+            for i in &e.inliers {
+                partner[i.remote as usize] = Some(i.local);
+            }
+        }
         let local = self.local.objects();
         let crowd_area = std::f64::consts::PI * self.crowd_radius_m.powi(2);
         let d2 = self.crowd_radius_m.powi(2);
@@ -119,7 +126,7 @@ impl<'a> NullModel<'a> {
             trials += 1;
             let mut near = [0usize; 2];
             if crowd {
-                let own = partner.get(&(m as u32)).copied();
+                let own = partner[m];
                 self.crowd_grid.around(p.x, p.y, |i| {
                     let o = &local[i as usize];
                     let far = (o.centroid - p).xy().norm_squared() > d2;
