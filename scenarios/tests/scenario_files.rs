@@ -159,3 +159,21 @@ fn impossible_segmenter_errors_are_refused_with_their_key() {
     let none = parse(ONE_ROBOT).unwrap();
     assert!(none.fusion.classes.iter().all(|c| c.name != "person"), "no people, no class");
 }
+
+/// The book: "A file's table replaces the default one" — not merged with it, which gave the
+/// indoor scenarios a campus's trees, lamp posts and benches among their furniture.
+#[test]
+fn a_files_object_table_replaces_the_default_one() {
+    let objects = |text: &str| parse(&format!("{text}{ONE_ROBOT}")).unwrap().world.objects;
+    let given = objects("[world.objects]\nchair = 3\ntable = 2\n");
+    assert_eq!(given.into_iter().collect::<Vec<_>>(), vec![("chair".to_string(), 3), ("table".to_string(), 2)]);
+    assert_eq!(objects(""), sgm_scenarios::scenario::WorldSpec::default().objects);
+    assert!(objects("[world.objects]\n").is_empty(), "an empty table: a world without objects");
+    // The environment's keys go over the file's table (a prefix of its own: tests run in parallel).
+    std::env::set_var("SGM_OBJECTS_TABLE_TEST__WORLD__OBJECTS__TABLE", "5");
+    let both =
+        Scenario::from_toml(&format!("[world.objects]\nchair = 3\n{ONE_ROBOT}"), "test.toml", "SGM_OBJECTS_TABLE_TEST");
+    std::env::remove_var("SGM_OBJECTS_TABLE_TEST__WORLD__OBJECTS__TABLE");
+    let both = both.unwrap().world.objects.into_iter().collect::<Vec<_>>();
+    assert_eq!(both, vec![("chair".to_string(), 3), ("table".to_string(), 5)]);
+}

@@ -245,13 +245,19 @@ impl Scenario {
             |e: config::ConfigError| ScenarioError::Load { source_name: source_name.into(), message: e.to_string() };
         let defaults = defaults_source()
             .map_err(|message| ScenarioError::Load { source_name: "defaults".into(), message: message.clone() })?;
-        let merged = config::Config::builder()
-            .add_source(defaults)
+        let given = config::Config::builder()
             .add_source(config::File::from_str(text, config::FileFormat::Toml))
             .add_source(environment(prefix))
             .build()
             .map_err(load)?;
+        // A table the file (or the environment) gives replaces the default one: the layers
+        // merge tables key by key, which would add the default objects to the file's.
+        let objects_given = given.get_table("world.objects").is_ok();
+        let merged = config::Config::builder().add_source(defaults).add_source(given).build().map_err(load)?;
         let mut scenario: Scenario = merged.try_deserialize().map_err(load)?;
+        if !objects_given {
+            scenario.world.objects = WorldSpec::default().objects;
+        }
         // People are labelled `person`: a dynamic class unless the file says otherwise.
         scenario.segmentation.add_person_class(&mut scenario.fusion.classes);
         scenario.validate().map_err(|(key, value, allowed)| ScenarioError::Invalid {
@@ -328,7 +334,15 @@ impl Scenario {
 /// `scenario_config` fuzz target parses one scenario per input.
 fn defaults_source() -> Result<config::Config, &'static String> {
     static DEFAULTS: std::sync::OnceLock<Result<config::Config, String>> = std::sync::OnceLock::new();
-    DEFAULTS.get_or_init(|| config::Config::try_from(&Scenario::default()).map_err(|e| e.to_string())).as_ref().cloned()
+    DEFAULTS
+        .get_or_init(|| {
+            // Without the default objects: they apply only when no layer gives a table of its own.
+            let mut defaults = Scenario::default();
+            defaults.world.objects.clear();
+            config::Config::try_from(&defaults).map_err(|e| e.to_string())
+        })
+        .as_ref()
+        .cloned()
 }
 
 /// Where the file of a library scenario would be in a checkout (for messages and docs).
