@@ -185,9 +185,22 @@ async fn a_robot_that_cannot_match_graphs_aligns_from_its_neighbours_alignments(
     }
     let sent = robots[0].handle.comms.send(GetCommsStatus).await.unwrap().sent;
     assert!(sent.get(MessageKind::Alignments).count > 0);
+    // The status says how each alignment started: robot 1's own matches with robot 2 started
+    // its round, with a scored hypothesis.
+    let own: Vec<_> = all[0].iter().filter(|n| n.robot == RobotId(2) && n.aligned_via.is_none()).collect();
+    assert_eq!(own.len(), 1, "{:?}", all[0]);
+    let why = &own[0].match_attempts;
+    assert!(why.attempts > 0 && why.last_refusal.is_none() && why.last_significance.is_some(), "{why:?}");
     let unrelayed = run_team_with(three_paths(), 45, None, blind(false)).await;
     let alone = unrelayed[2].handle.matcher.send(GetNeighbours).await.unwrap();
     assert!(alone.iter().all(|n| n.state != Some(ProtocolStage::Aligned)), "{alone:?}");
+    // ... and why robot 3 is not aligned: every match it made refused before scoring anything.
+    for n in &alone {
+        let why = &n.match_attempts;
+        assert!(why.attempts > 0 && why.best_significance.is_none(), "{why:?}");
+        assert!(why.last_refusal.as_deref().is_some_and(|r| r.starts_with("too few objects")), "{why:?}");
+        assert!(why.summary().contains("too few objects"), "{}", why.summary());
+    }
     let sent = unrelayed[0].handle.comms.send(GetCommsStatus).await.unwrap().sent;
     assert_eq!(sent.get(MessageKind::Alignments).count, 0);
 }

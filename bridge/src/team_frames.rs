@@ -106,6 +106,7 @@ mod tests {
             contradicted_by: Vec::new(),
             keyframes_held: 0,
             objects_revision: None,
+            match_attempts: Default::default(),
         }
     }
 

@@ -74,18 +74,32 @@ impl Matcher {
                 outcome
             }
         };
-        let matched = match outcome {
-            MatchOutcome::Aligned(alignment) if alignment.matches.len() < min_matched => None,
-            MatchOutcome::Aligned(alignment) if refuted_recently(&refuted, &alignment.local_from_remote, now) => None,
+        // Refusals before any hypothesis was scored (too few objects, no candidates) carry none.
+        let significance = match &outcome {
+            MatchOutcome::Aligned(a) => Some(a.significance),
+            MatchOutcome::Refused(r) => r.best_guess.is_some().then_some(r.significance),
+        };
+        let (matched, refusal) = match outcome {
+            MatchOutcome::Aligned(alignment) if alignment.matches.len() < min_matched => {
+                let n = alignment.matches.len();
+                (None, Some(format!("{n} objects matched, fewer than matcher.min_matched_objects ({min_matched})")))
+            }
+            MatchOutcome::Aligned(alignment) if refuted_recently(&refuted, &alignment.local_from_remote, now) => (
+                None,
+                Some(format!("the match lands on a transform keyframe registration refuted within {REFUTED_FOR_S} s")),
+            ),
             MatchOutcome::Aligned(alignment) => {
                 let pairs: Vec<(ObjectId, ObjectId)> = alignment.matches.iter().map(|m| (m.local, m.remote)).collect();
-                Some(RoundStart { local_from_remote: alignment.local_from_remote, pairs, via: None })
+                (Some(RoundStart { local_from_remote: alignment.local_from_remote, pairs, via: None }), None)
             }
             MatchOutcome::Refused(refusal) => {
                 tracing::debug!(robot = %self.robot, neighbour = %robot, reason = %refusal.reason, "object graphs not matched");
-                None
+                (None, Some(refusal.reason.to_string()))
             }
         };
+        if let Some(entry) = self.neighbours.get_mut(&robot) {
+            entry.attempts.record(now, significance, refusal);
+        }
         // Graph matching found nothing to pursue: a neighbour's alignment may still place it.
         let Some(RoundStart { local_from_remote, pairs, via }) =
             matched.or_else(|| self.hinted(robot, local.objects(), remote.objects(), now))

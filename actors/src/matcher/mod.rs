@@ -21,7 +21,9 @@ mod neighbour;
 mod relay;
 mod rounds;
 
-pub use neighbour::{ClosureCounts, ClosureMemory, GetNeighbours, MatcherState, NeighbourMemory, NeighbourStatus};
+pub use neighbour::{
+    ClosureCounts, ClosureMemory, GetNeighbours, MatchAttempts, MatcherState, NeighbourMemory, NeighbourStatus,
+};
 
 use crate::clock::Clock;
 use crate::config::{Association, MatcherSection};
@@ -174,6 +176,7 @@ impl Matcher {
             aligned_via: None,
             refuted_hints: Vec::new(),
             refuted_few: Vec::new(),
+            attempts: MatchAttempts::default(),
             last_match: None,
         })
     }
@@ -426,6 +429,7 @@ impl Handler<GetNeighbours> for Matcher {
                     aligned_via: e.aligned_via,
                     keyframes_held: e.keyframes.len(),
                     objects_revision: e.objects.as_ref().map(|d| d.revision),
+                    match_attempts: e.attempts.clone(),
                 })
                 .collect(),
         )

@@ -27,6 +27,55 @@ pub struct NeighbourStatus {
     /// cycle of alignments, beyond `matcher.relay.contradiction_m` / `_deg`): one of the cycle's
     /// alignments is wrong (`model::matching::relay::contradicting`).
     pub contradicted_by: Vec<RobotId>,
+    /// What object-graph matching with this neighbour has concluded so far: why a pair that
+    /// holds each other's object graphs is not aligned.
+    pub match_attempts: MatchAttempts,
+}
+
+/// The object-graph matches made against one neighbour, and why the latest started no
+/// alignment round. Status only: a snapshot does not keep it (a restarted robot matches again).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MatchAttempts {
+    /// Matches made (one whose inputs had not changed since the last counts too: its outcome is
+    /// reused).
+    pub attempts: u32,
+    /// When the latest was made, s.
+    pub last_at_s: Option<f64>,
+    /// Why the latest started no round (the matcher's refusal, too few matched objects, or a
+    /// transform keyframe registration refuted lately); `None` when it started one.
+    pub last_refusal: Option<String>,
+    /// The latest match's significance, −log₁₀ NFA (`matcher.matching.min_significance` is
+    /// what a claim needs); `None` when it had no hypothesis to score.
+    pub last_significance: Option<f64>,
+    /// The highest significance any match reached: how close the pair came.
+    pub best_significance: Option<f64>,
+    /// Rounds whose keyframe registration refuted the match's transform.
+    pub rounds_refuted: u32,
+}
+
+impl MatchAttempts {
+    /// One line: how many matches, the latest's verdict and the best significance.
+    pub fn summary(&self) -> String {
+        let Some(at) = self.last_at_s else { return "no object-graph match made".into() };
+        let verdict = self.last_refusal.as_deref().unwrap_or("started a round");
+        let best = self.best_significance.map_or(String::new(), |b| format!("; best significance {b:.2}"));
+        let refuted = match self.rounds_refuted {
+            0 => String::new(),
+            n => format!("; {n} round(s) refuted by keyframe registration"),
+        };
+        format!("{} matches; the latest, at {at:.1} s: {verdict}{best}{refuted}", self.attempts)
+    }
+
+    /// Records a match made at `at_s`: its significance and why it started no round.
+    pub(super) fn record(&mut self, at_s: f64, significance: Option<f64>, refusal: Option<String>) {
+        self.attempts += 1;
+        self.last_at_s = Some(at_s);
+        self.last_refusal = refusal;
+        self.last_significance = significance.filter(|s| s.is_finite());
+        if let Some(s) = self.last_significance {
+            self.best_significance = Some(self.best_significance.map_or(s, |b| b.max(s)));
+        }
+    }
 }
 
 pub(super) struct NeighbourEntry {
@@ -71,6 +120,8 @@ pub(super) struct NeighbourEntry {
     /// Hints whose rounds from fewer pairs than a graph match needs were refuted, and when: such
     /// a round is not tried again within `REFUTED_FOR_S`, while one with enough pairs still is.
     pub(super) refuted_few: Vec<(Pose3, Stamp)>,
+    /// What graph matching has concluded (status only).
+    pub(super) attempts: MatchAttempts,
     /// The last graph match and what it was made from: the same local objects against the same
     /// object data give the same outcome (`match_graphs` is a pure function), so it is reused.
     pub(super) last_match: Option<LastMatch>,

@@ -204,6 +204,7 @@ impl Matcher {
             RoundVerdict::Refuted => {
                 tracing::info!(robot = %self.robot, neighbour = %robot, factors,
                     local_from_remote = %Brief(&n.state.local_from_remote), "object match refuted");
+                entry.attempts.rounds_refuted += 1;
                 match entry.round_via {
                     None => entry.refuted.push((n.state.local_from_remote, now)),
                     Some(_) => {

@@ -342,6 +342,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                     "aligned_via": n.aligned_via.map(|r| r.0),
                     "contradicted_by": n.contradicted_by.iter().map(|r| r.0).collect::<Vec<_>>(),
                     "closures": n.closures,
+                    "match_attempts": n.match_attempts,
                     "local_from_remote": n.local_from_remote.map(|p| {
                         let (t, q) = (p.translation.vector, p.rotation.quaternion());
                         [t.x, t.y, t.z, q.i, q.j, q.k, q.w]

@@ -121,10 +121,17 @@ pub fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
     for a in &report.alignments {
         let _ = writeln!(
             s,
-            "  {} ← {}: {}{}{}{}",
+            "  {} ← {}: {}{}{}{}{}",
             a.local,
             a.remote,
             a.state,
+            match (a.first_aligned_s, &a.match_attempts.last_refusal) {
+                (None, Some(why)) => format!(
+                    " — {why}{}",
+                    a.match_attempts.best_significance.map_or(String::new(), |b| format!(", best significance {b:.2}"))
+                ),
+                _ => String::new(),
+            },
             match (a.first_aligned_s, a.translation_error_m, a.rotation_error_deg) {
                 (Some(t), Some(e), Some(r)) => format!(" at {t:.0} s{}, error {e:.2} m / {r:.2}°", a.relayed_note()),
                 _ => String::new(),

@@ -85,6 +85,9 @@ pub struct AlignmentReport {
     /// local robot's status, `matcher.relay.contradiction_m`): one alignment of the cycle is
     /// wrong.
     pub contradicted_by: Vec<String>,
+    /// The object-graph matches made against the remote and why the latest started no round
+    /// (the local robot's status): why a pair is not aligned.
+    pub match_attempts: sgm_actors::matcher::MatchAttempts,
 }
 
 impl AlignmentReport {
@@ -387,6 +390,7 @@ pub fn compute(record: &RunRecord) -> Report {
                     .iter()
                     .filter_map(|v| Some(record.robots.get(v.index()?)?.name.clone()))
                     .collect(),
+                match_attempts: n.match_attempts.clone(),
             });
         }
     }

@@ -186,6 +186,13 @@ pub fn render(report: &Report, timing: &Timing) -> String {
             a.inconsistent_factors
         );
     }
+    let unaligned: Vec<_> = report.alignments.iter().filter(|a| a.first_aligned_s.is_none()).collect();
+    if !unaligned.is_empty() {
+        let _ = writeln!(s, "\nNot aligned, and why (the local robot's latest object-graph match):\n");
+        for a in unaligned {
+            let _ = writeln!(s, "- {} ← {}: {}", a.local, a.remote, a.match_attempts.summary());
+        }
+    }
     let _ = writeln!(s, "\n## Messages (paper Table 4 layout; whole team)\n\n| message | count | mean (KiB) | max (KiB) | total (KiB) |\n|---|---|---|---|---|");
     let mut row = |name: &str, m: &MessageRow| {
         let (mean, max, total) = (kib(m.bytes_mean), kib(m.bytes_max as f64), kib(m.bytes_total as f64));
