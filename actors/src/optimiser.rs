@@ -41,6 +41,8 @@ pub struct Optimiser {
     graph: KeyframeGraph,
     /// Neighbour keyframe priors moved since the last solve (solved at the next tick).
     refreshed_since_solve: bool,
+    /// Hold the anchors level (gravity-aligned worlds).
+    level_anchors: bool,
 }
 
 /// What of the Optimiser a snapshot keeps: the whole pose graph and its outlier decisions.
@@ -56,7 +58,21 @@ pub struct GetOptimiserStatus;
 
 impl Optimiser {
     pub fn new(robot: RobotId, config: OptimiserConfig) -> Self {
-        Self { robot, config, links: None, graph: KeyframeGraph::default(), refreshed_since_solve: false }
+        Self {
+            robot,
+            config,
+            links: None,
+            graph: KeyframeGraph::default(),
+            refreshed_since_solve: false,
+            level_anchors: false,
+        }
+    }
+
+    /// Gravity-aligned worlds (`matcher.max_tilt_deg = 0`: an IMU's): every neighbour's anchor is
+    /// held level at each solve ([`KeyframeGraph::level_anchors`]).
+    pub fn with_level_anchors(mut self, level: bool) -> Self {
+        self.level_anchors = level;
+        self
     }
 
     pub fn freeze(&self) -> OptimiserState {
@@ -78,6 +94,9 @@ impl Optimiser {
     /// Solves, then publishes the poses and the newest keyframes' marginal covariances.
     fn solve_and_publish(&mut self) {
         self.refreshed_since_solve = false;
+        if self.level_anchors {
+            self.graph.level_anchors();
+        }
         let solved = match self.graph.solve(self.config.reject_outliers, MARGINALS) {
             Ok(solved) => solved,
             Err(e) => {

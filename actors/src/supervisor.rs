@@ -175,8 +175,10 @@ pub fn start_robot_restored(
         }
     });
     let optimiser_config = config.optimiser.clone();
+    // `matcher.max_tilt_deg = 0` declares the robots' worlds gravity-aligned: anchors are level.
+    let level_anchors = config.matcher.matching.max_tilt_deg == 0.0;
     let optimiser = Supervisor::start(move |_| {
-        let optimiser = Optimiser::new(robot, optimiser_config);
+        let optimiser = Optimiser::new(robot, optimiser_config).with_level_anchors(level_anchors);
         match optimiser_state {
             Some(state) => optimiser.thawed(state),
             None => optimiser,

@@ -20,6 +20,12 @@
 //! no factor reaches it; against keyframe covariances of centimetres and milliradians it moves
 //! the estimate by less than a micrometre.
 //!
+//! In gravity-aligned worlds (each robot's from an IMU: `matcher.max_tilt_deg = 0`) the anchor
+//! is known to be level — yaw and translation only — to about the two worlds' tilt errors, so
+//! its prior holds roll and pitch ([`KeyframeGraph::level_anchors`]): inter-robot factors from
+//! registrations that leave the tilt weakly determined (walls without a shared floor, a sensor at
+//! 1.5 m against one at 0.5 m) no longer tilt one map against the other.
+//!
 //! With outlier rejection, each neighbour's inter-robot factors first go through pairwise
 //! consistency maximisation ([`super::consistency`]): those outside the largest mutually
 //! consistent set are rejected before the solve (when at least two agree: otherwise there is no
@@ -36,7 +42,7 @@ use super::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
 use super::marginals::marginal_covariances_with;
 use super::robust::{optimize_gnc_incremental_with, rejection_weights, weighted};
 use super::solver::{least_squares, optimize_with, LmParams, SolveError, Structure};
-use crate::geometry::{medoid, pose_error, Pose3};
+use crate::geometry::{medoid, pose_error, pose_from_yaw_translation, yaw_of, Pose3};
 use crate::scene_graph::{Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, RobotId};
 use nalgebra::Matrix6;
 use std::collections::{BTreeMap, BTreeSet};
@@ -145,6 +151,11 @@ pub struct Refreshed {
 
 /// Standard deviations of the anchor's weak prior (rotation rad, translation m).
 const ANCHOR_PRIOR_SIGMAS: [f64; 6] = [100.0, 100.0, 100.0, 1000.0, 1000.0, 1000.0];
+
+/// Standard deviation of a levelled anchor's roll and pitch, rad (0.2°): two gravity-aligned
+/// worlds share their vertical to about their odometries' tilt errors (the simulated one's is
+/// 0.1°; an IMU's gravity estimate is of that order).
+pub const LEVEL_ANCHOR_SIGMA_RAD: f64 = 0.2 * std::f64::consts::PI / 180.0;
 
 /// S with Sᵀ S = Ω, or `None` unless Ω is symmetric positive definite.
 fn sqrt_information(information: &Matrix6<f64>) -> Option<Matrix6<f64>> {
@@ -411,6 +422,34 @@ impl KeyframeGraph {
     /// then computes the marginal covariances of the newest `marginals` local keyframes. One
     /// symbolic factorisation serves both (`cargo bench -p sgm-model --bench optimiser_cycle`).
     /// On an error the graph keeps its previous decision.
+    /// Holds every anchor level, for gravity-aligned worlds: its prior's roll and pitch get
+    /// σ = [`LEVEL_ANCHOR_SIGMA_RAD`] (yaw and translation keep [`ANCHOR_PRIOR_SIGMAS`]), about
+    /// a mean that is the anchor levelled — its yaw and translation, no roll or pitch — taken
+    /// again at each call (before each solve), so that the prior's residual is the anchor's tilt
+    /// however far its yaw has moved since it was made:
+    ///
+    /// ```text
+    /// e = Log(L(A)⁻¹ · A'),   L(A) = (R_z(yaw(A)), t(A)),   Σ = diag(σ_t², σ_t², 100², 1000² I₃)
+    /// ```
+    ///
+    /// (A the anchor when called, A' its value in the solve; yaw as in [`crate::geometry::yaw_of`],
+    /// A = R_z(yaw) R_y(pitch) R_x(roll), so L(A)⁻¹ · A has the rotation R_y(pitch) R_x(roll)).
+    pub fn level_anchors(&mut self) {
+        let mut sigmas = ANCHOR_PRIOR_SIGMAS;
+        sigmas[0] = LEVEL_ANCHOR_SIGMA_RAD;
+        sigmas[1] = LEVEL_ANCHOR_SIGMA_RAD;
+        let sqrt_information =
+            Matrix6::from_diagonal(&nalgebra::Vector6::from_iterator(sigmas.iter().map(|s| 1.0 / s)));
+        for &a in self.anchors.values() {
+            let anchor = self.graph.values[a];
+            let level = pose_from_yaw_translation(yaw_of(&anchor), anchor.translation.vector);
+            for prior in self.graph.priors.iter_mut().filter(|p| p.variable == a) {
+                prior.mean = level;
+                prior.sqrt_information = sqrt_information;
+            }
+        }
+    }
+
     pub fn solve(&mut self, reject_outliers: bool, marginals: usize) -> Result<Solved, SolveError> {
         let structure = Structure::new(&self.graph)?;
         let params = LmParams::default();
@@ -676,6 +715,63 @@ mod tests {
         // Frozen and thawed, the anchor is kept.
         let thawed = KeyframeGraph::thaw(graph.freeze()).expect("consistent");
         assert_eq!(thawed, graph);
+    }
+
+    /// Factors whose rotations say the neighbour's world is tilted by 1° about our keyframes'
+    /// line (the x axis, through the anchor's translation, so that no translation sees it), with
+    /// σ = 5°: free, the anchor takes the tilt; levelled it keeps what the prior's σ = 0.2°
+    /// allows against them — 4 keyframes, each a 5° factor in series with its 0.1 rad prior
+    /// (information 1/(1/131 + 1/100) = 56.7 rad⁻² each, 227 in all, against 1/σ_t² = 82 070),
+    /// so 1° · 227 / (227 + 82 070) = 0.003°. Yaw and translation are the factors' either way.
+    #[test]
+    fn a_levelled_anchor_keeps_its_tilt_against_weak_rotation_evidence() {
+        let roll = 1f64.to_radians();
+        let translation = Vector3::new(40.0, 0.0, 0.0);
+        let tilted = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), roll)
+            * nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.5);
+        let truth_anchor = Pose3::from_parts(translation.into(), tilted);
+        let measured = pose_from_yaw_translation(0.2, Vector3::zeros());
+        let sigma_rotation = 5f64.to_radians();
+        let weak_rotation = Matrix6::from_diagonal(&nalgebra::Vector6::new(
+            sigma_rotation.powi(-2),
+            sigma_rotation.powi(-2),
+            sigma_rotation.powi(-2),
+            1e4,
+            1e4,
+            1e4,
+        ));
+        let solve = |level: bool| {
+            let (mut graph, truth) = straight_chain(10);
+            let ks = [2usize, 4, 6, 8];
+            let keyframes: Vec<_> = ks
+                .iter()
+                .map(|&k| {
+                    (
+                        KeyframeId(100 + k as u32),
+                        truth_anchor.inverse() * truth[k] * measured,
+                        Matrix6::identity() * 0.01,
+                    )
+                })
+                .collect();
+            let factors: Vec<_> = ks
+                .iter()
+                .map(|&k| (KeyframeId(k as u32), KeyframeId(100 + k as u32), measured, weak_rotation))
+                .collect();
+            graph.add_neighbour(RobotId(3), &pose_from_yaw_translation(0.5, translation), &keyframes, &factors);
+            if level {
+                graph.level_anchors();
+            }
+            graph.solve(false, 0).expect("solves").anchors[0].1
+        };
+        for (level, expected_tilt) in [(false, roll), (true, roll * 227.0 / (227.0 + 82_070.0))] {
+            let anchor = solve(level);
+            let tilt = (anchor.rotation * Vector3::z()).angle(&Vector3::z());
+            assert!((tilt - expected_tilt).abs() < 0.005f64.to_radians(), "level {level}: tilt {}°", tilt.to_degrees());
+            let yaw = crate::geometry::yaw_of(&anchor);
+            assert!((yaw - 0.5).abs() < 0.02f64.to_radians(), "level {level}: yaw {yaw}");
+            let off = (anchor.translation.vector - translation).norm();
+            assert!(off < 1e-3, "level {level}: {off} m");
+        }
     }
 
     #[test]
