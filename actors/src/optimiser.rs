@@ -69,7 +69,7 @@ impl Optimiser {
     }
 
     /// Gravity-aligned worlds (`matcher.max_tilt_deg = 0`: an IMU's): every neighbour's anchor is
-    /// held level at each solve ([`KeyframeGraph::level_anchors`]).
+    /// held level at each solve ([`KeyframeGraph::set_level_anchors`]; a thawed graph takes it too).
     pub fn with_level_anchors(mut self, level: bool) -> Self {
         self.level_anchors = level;
         self
@@ -94,9 +94,7 @@ impl Optimiser {
     /// Solves, then publishes the poses and the newest keyframes' marginal covariances.
     fn solve_and_publish(&mut self) {
         self.refreshed_since_solve = false;
-        if self.level_anchors {
-            self.graph.level_anchors();
-        }
+        self.graph.set_level_anchors(self.level_anchors);
         let solved = match self.graph.solve(self.config.reject_outliers, MARGINALS) {
             Ok(solved) => solved,
             Err(e) => {

@@ -176,4 +176,11 @@ fn a_files_object_table_replaces_the_default_one() {
     std::env::remove_var("SGM_OBJECTS_TABLE_TEST__WORLD__OBJECTS__TABLE");
     let both = both.unwrap().world.objects.into_iter().collect::<Vec<_>>();
     assert_eq!(both, vec![("chair".to_string(), 3), ("table".to_string(), 5)]);
+    // ... and over the default table when the file gives none.
+    std::env::set_var("SGM_OBJECTS_DEFAULT_TEST__WORLD__OBJECTS__TREE", "20");
+    let over = Scenario::from_toml(ONE_ROBOT, "test.toml", "SGM_OBJECTS_DEFAULT_TEST");
+    std::env::remove_var("SGM_OBJECTS_DEFAULT_TEST__WORLD__OBJECTS__TREE");
+    let mut expected = sgm_scenarios::scenario::WorldSpec::default().objects;
+    expected.insert("tree".into(), 20);
+    assert_eq!(over.unwrap().world.objects, expected);
 }

@@ -49,20 +49,22 @@ pub struct MatchAttempts {
     pub last_significance: Option<f64>,
     /// The highest significance any match reached: how close the pair came.
     pub best_significance: Option<f64>,
-    /// Rounds whose keyframe registration refuted the match's transform.
+    /// Alignment rounds whose keyframe registration refuted their transform: rounds from a
+    /// graph match, from a neighbour's relayed alignment (a hint) or, with Scan Context
+    /// association, from a place candidate.
     pub rounds_refuted: u32,
 }
 
 impl MatchAttempts {
     /// One line: how many matches, the latest's verdict and the best significance.
     pub fn summary(&self) -> String {
-        let Some(at) = self.last_at_s else { return "no object-graph match made".into() };
-        let verdict = self.last_refusal.as_deref().unwrap_or("started a round");
-        let best = self.best_significance.map_or(String::new(), |b| format!("; best significance {b:.2}"));
         let refuted = match self.rounds_refuted {
             0 => String::new(),
             n => format!("; {n} round(s) refuted by keyframe registration"),
         };
+        let Some(at) = self.last_at_s else { return format!("no object-graph match made{refuted}") };
+        let verdict = self.last_refusal.as_deref().unwrap_or("started a round");
+        let best = self.best_significance.map_or(String::new(), |b| format!("; best significance {b:.2}"));
         format!("{} matches; the latest, at {at:.1} s: {verdict}{best}{refuted}", self.attempts)
     }
 

@@ -22,7 +22,7 @@
 //!
 //! In gravity-aligned worlds (each robot's from an IMU: `matcher.max_tilt_deg = 0`) the anchor
 //! is known to be level — yaw and translation only — to about the two worlds' tilt errors, so
-//! its prior holds roll and pitch ([`KeyframeGraph::level_anchors`]): inter-robot factors from
+//! its prior holds roll and pitch ([`KeyframeGraph::set_level_anchors`]): inter-robot factors from
 //! registrations that leave the tilt weakly determined (walls without a shared floor, a sensor at
 //! 1.5 m against one at 0.5 m) no longer tilt one map against the other.
 //!
@@ -129,6 +129,13 @@ pub struct KeyframeGraph {
     /// Neighbour keyframe variables whose tie holds a pose update's mean: newer than the pose
     /// the keyframe is served with, which a keyframe received again does not take back.
     updated: BTreeSet<usize>,
+    /// Gravity-aligned worlds: anchors held level ([`KeyframeGraph::set_level_anchors`]).
+    level: bool,
+}
+
+/// `pose` without roll or pitch: its yaw and translation.
+fn levelled(pose: &Pose3) -> Pose3 {
+    pose_from_yaw_translation(yaw_of(pose), pose.translation.vector)
 }
 
 /// Pose updates held per neighbour for keyframes not yet in the graph, at most. A keyframe
@@ -221,6 +228,7 @@ impl KeyframeGraph {
                 m
             }),
             updated: state.updated.into_iter().collect(),
+            level: false,
         })
     }
 
@@ -418,43 +426,57 @@ impl KeyframeGraph {
         self.candidates.push(false);
     }
 
-    /// Solves (GNC-TLS over the candidate factors with `reject_outliers`, else least squares),
-    /// then computes the marginal covariances of the newest `marginals` local keyframes. One
-    /// symbolic factorisation serves both (`cargo bench -p sgm-model --bench optimiser_cycle`).
-    /// On an error the graph keeps its previous decision.
-    /// Holds every anchor level, for gravity-aligned worlds: its prior's roll and pitch get
-    /// σ = [`LEVEL_ANCHOR_SIGMA_RAD`] (yaw and translation keep [`ANCHOR_PRIOR_SIGMAS`]), about
+    /// Gravity-aligned worlds (`level`): every solve holds every anchor level
+    /// ([`Self::fit_anchor_priors`]). Not part of the frozen state: the owner sets it.
+    pub fn set_level_anchors(&mut self, level: bool) {
+        self.level = level;
+    }
+
+    /// The anchors' priors for the next solve. Level (gravity-aligned worlds): roll and pitch get
+    /// σ_θ = [`LEVEL_ANCHOR_SIGMA_RAD`] (yaw and translation keep [`ANCHOR_PRIOR_SIGMAS`]), about
     /// a mean that is the anchor levelled — its yaw and translation, no roll or pitch — taken
-    /// again at each call (before each solve), so that the prior's residual is the anchor's tilt
-    /// however far its yaw has moved since it was made:
+    /// again before each solve (after PCM may have moved the anchor), so that the prior's
+    /// residual is the anchor's tilt however far its yaw has moved since it was made:
     ///
     /// ```text
-    /// e = Log(L(A)⁻¹ · A'),   L(A) = (R_z(yaw(A)), t(A)),   Σ = diag(σ_t², σ_t², 100², 1000² I₃)
+    /// e = Log(L(A)⁻¹ · A'),   L(A) = (R_z(yaw(A)), t(A)),   Σ = diag(σ_θ², σ_θ², 100², 1000² I₃)
     /// ```
     ///
-    /// (A the anchor when called, A' its value in the solve; yaw as in [`crate::geometry::yaw_of`],
-    /// A = R_z(yaw) R_y(pitch) R_x(roll), so L(A)⁻¹ · A has the rotation R_y(pitch) R_x(roll)).
-    pub fn level_anchors(&mut self) {
+    /// (A the anchor before the solve, A' its value in the solve; yaw as in
+    /// [`crate::geometry::yaw_of`], A = R_z(yaw) R_y(pitch) R_x(roll), so L(A)⁻¹ · A has the
+    /// rotation R_y(pitch) R_x(roll)). Not level: the weak prior of [`ANCHOR_PRIOR_SIGMAS`] at
+    /// its mean (what a graph thawed from a levelled one goes back to).
+    fn fit_anchor_priors(&mut self) {
         let mut sigmas = ANCHOR_PRIOR_SIGMAS;
-        sigmas[0] = LEVEL_ANCHOR_SIGMA_RAD;
-        sigmas[1] = LEVEL_ANCHOR_SIGMA_RAD;
+        if self.level {
+            sigmas[0] = LEVEL_ANCHOR_SIGMA_RAD;
+            sigmas[1] = LEVEL_ANCHOR_SIGMA_RAD;
+        }
         let sqrt_information =
             Matrix6::from_diagonal(&nalgebra::Vector6::from_iterator(sigmas.iter().map(|s| 1.0 / s)));
         for &a in self.anchors.values() {
             let anchor = self.graph.values[a];
-            let level = pose_from_yaw_translation(yaw_of(&anchor), anchor.translation.vector);
             for prior in self.graph.priors.iter_mut().filter(|p| p.variable == a) {
-                prior.mean = level;
+                if self.level {
+                    prior.mean = levelled(&anchor);
+                }
                 prior.sqrt_information = sqrt_information;
             }
         }
     }
 
+    /// Solves (GNC-TLS over the candidate factors with `reject_outliers`, else least squares),
+    /// then computes the marginal covariances of the newest `marginals` local keyframes. One
+    /// symbolic factorisation serves both (`cargo bench -p sgm-model --bench optimiser_cycle`).
+    /// On an error the graph keeps its previous decision.
     pub fn solve(&mut self, reject_outliers: bool, marginals: usize) -> Result<Solved, SolveError> {
         let structure = Structure::new(&self.graph)?;
         let params = LmParams::default();
-        let rejected = if reject_outliers {
+        if reject_outliers {
             self.inconsistent = self.check_consistency(&Consistency::default());
+        }
+        self.fit_anchor_priors();
+        let rejected = if reject_outliers {
             // PCM's outliers weigh nothing in this solve (zero information, same structure),
             // then count as rejected.
             let excluded: Vec<usize> = self.inconsistent.values().flatten().copied().collect();
@@ -530,6 +552,8 @@ impl KeyframeGraph {
             // Moving the anchor takes a consistent set of at least three, and a strict majority.
             let decisive = kept.len() >= 3 && 2 * kept.len() > list.len();
             if let (true, Some(consensus), Some(&anchor)) = (decisive, medoid(&poses), self.anchors.get(&robot)) {
+                // Level worlds: the consensus levelled, as the anchor is held.
+                let consensus = if self.level { levelled(&consensus) } else { consensus };
                 let e = pose_error(&consensus, &self.graph.values[anchor]);
                 if e.translation_m > consistency.tolerance_m || e.max_axis_rotation_deg() > consistency.tolerance_deg {
                     self.graph.values[anchor] = consensus;
@@ -758,9 +782,7 @@ mod tests {
                 .map(|&k| (KeyframeId(k as u32), KeyframeId(100 + k as u32), measured, weak_rotation))
                 .collect();
             graph.add_neighbour(RobotId(3), &pose_from_yaw_translation(0.5, translation), &keyframes, &factors);
-            if level {
-                graph.level_anchors();
-            }
+            graph.set_level_anchors(level);
             graph.solve(false, 0).expect("solves").anchors[0].1
         };
         for (level, expected_tilt) in [(false, roll), (true, roll * 227.0 / (227.0 + 82_070.0))] {

@@ -245,19 +245,23 @@ impl Scenario {
             |e: config::ConfigError| ScenarioError::Load { source_name: source_name.into(), message: e.to_string() };
         let defaults = defaults_source()
             .map_err(|message| ScenarioError::Load { source_name: "defaults".into(), message: message.clone() })?;
-        let given = config::Config::builder()
+        // A table the file gives replaces the default one: the layers merge tables key by key,
+        // which would add the default objects to the file's. The environment's keys go over
+        // whichever table applies.
+        let file = config::Config::builder()
             .add_source(config::File::from_str(text, config::FileFormat::Toml))
-            .add_source(environment(prefix))
             .build()
             .map_err(load)?;
-        // A table the file (or the environment) gives replaces the default one: the layers
-        // merge tables key by key, which would add the default objects to the file's.
-        let objects_given = given.get_table("world.objects").is_ok();
-        let merged = config::Config::builder().add_source(defaults).add_source(given).build().map_err(load)?;
-        let mut scenario: Scenario = merged.try_deserialize().map_err(load)?;
-        if !objects_given {
-            scenario.world.objects = WorldSpec::default().objects;
+        let mut layers = config::Config::builder().add_source(defaults);
+        if file.get_table("world.objects").is_err() {
+            layers =
+                layers.add_source(default_objects().map_err(|message| ScenarioError::Load {
+                    source_name: "defaults".into(),
+                    message: message.clone(),
+                })?);
         }
+        let merged = layers.add_source(file).add_source(environment(prefix)).build().map_err(load)?;
+        let mut scenario: Scenario = merged.try_deserialize().map_err(load)?;
         // People are labelled `person`: a dynamic class unless the file says otherwise.
         scenario.segmentation.add_person_class(&mut scenario.fusion.classes);
         scenario.validate().map_err(|(key, value, allowed)| ScenarioError::Invalid {
@@ -336,10 +340,27 @@ fn defaults_source() -> Result<config::Config, &'static String> {
     static DEFAULTS: std::sync::OnceLock<Result<config::Config, String>> = std::sync::OnceLock::new();
     DEFAULTS
         .get_or_init(|| {
-            // Without the default objects: they apply only when no layer gives a table of its own.
+            // Without the default objects: they are a layer of their own (`default_objects`), laid
+            // only under a file that gives no table.
             let mut defaults = Scenario::default();
             defaults.world.objects.clear();
             config::Config::try_from(&defaults).map_err(|e| e.to_string())
+        })
+        .as_ref()
+        .cloned()
+}
+
+/// The default `[world.objects]` table as a layer of its own, laid under a file that gives none.
+fn default_objects() -> Result<config::Config, &'static String> {
+    static OBJECTS: std::sync::OnceLock<Result<config::Config, String>> = std::sync::OnceLock::new();
+    OBJECTS
+        .get_or_init(|| {
+            let mut builder = config::Config::builder();
+            for (class, count) in WorldSpec::default().objects {
+                builder =
+                    builder.set_default(format!("world.objects.{class}"), count as u64).map_err(|e| e.to_string())?;
+            }
+            builder.build().map_err(|e| e.to_string())
         })
         .as_ref()
         .cloned()
