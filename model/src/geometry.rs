@@ -41,6 +41,11 @@ pub fn yaw_of(pose: &Pose3) -> f64 {
     pose.rotation.euler_angles().2
 }
 
+/// `pose` levelled: its yaw ([`yaw_of`]) and translation, no roll or pitch.
+pub fn levelled(pose: &Pose3) -> Pose3 {
+    pose_from_yaw_translation(yaw_of(pose), pose.translation.vector)
+}
+
 /// A pose for log lines and messages: "(x, y, z) m, yaw θ°" (centimetres, tenths of a degree).
 pub struct Brief<'a>(pub &'a Pose3);
 

@@ -42,7 +42,7 @@ use super::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
 use super::marginals::marginal_covariances_with;
 use super::robust::{optimize_gnc_incremental_with, rejection_weights, weighted};
 use super::solver::{least_squares, optimize_with, LmParams, SolveError, Structure};
-use crate::geometry::{medoid, pose_error, pose_from_yaw_translation, yaw_of, Pose3};
+use crate::geometry::{levelled, medoid, pose_error, Pose3};
 use crate::scene_graph::{Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, RobotId};
 use nalgebra::Matrix6;
 use std::collections::{BTreeMap, BTreeSet};
@@ -131,11 +131,6 @@ pub struct KeyframeGraph {
     updated: BTreeSet<usize>,
     /// Gravity-aligned worlds: anchors held level ([`KeyframeGraph::set_level_anchors`]).
     level: bool,
-}
-
-/// `pose` without roll or pitch: its yaw and translation.
-fn levelled(pose: &Pose3) -> Pose3 {
-    pose_from_yaw_translation(yaw_of(pose), pose.translation.vector)
 }
 
 /// Pose updates held per neighbour for keyframes not yet in the graph, at most. A keyframe
@@ -443,7 +438,7 @@ impl KeyframeGraph {
     /// ```
     ///
     /// (A the anchor before the solve, A' its value in the solve; yaw as in
-    /// [`crate::geometry::yaw_of`], A = R_z(yaw) R_y(pitch) R_x(roll), so L(A)⁻¹ · A has the
+    /// [`crate::geometry::levelled`], A = R_z(yaw) R_y(pitch) R_x(roll), so L(A)⁻¹ · A has the
     /// rotation R_y(pitch) R_x(roll)). Not level: the weak prior of [`ANCHOR_PRIOR_SIGMAS`] at
     /// its mean (what a graph thawed from a levelled one goes back to).
     fn fit_anchor_priors(&mut self) {

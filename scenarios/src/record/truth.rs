@@ -2,7 +2,7 @@
 //! carried (looked up exactly at their stamps, interpolated between them up to half a second).
 
 use crate::sim::trajectory::Route;
-use sgm_model::geometry::{pose_from_yaw_translation, yaw_of, Pose3};
+use sgm_model::geometry::{levelled, Pose3};
 use sgm_model::scene_graph::Stamp;
 
 /// Samples further apart than this are not interpolated.
@@ -28,7 +28,7 @@ impl TruthTrack {
     /// at `origin` (the scan the odometry started on), levelled, its yaw and position kept
     /// (`model::odometry::estimator`).
     pub fn odometry_origin(&self, origin: Stamp) -> Option<Pose3> {
-        self.pose_at(origin).map(|p| pose_from_yaw_translation(yaw_of(&p), p.translation.vector))
+        self.pose_at(origin).map(|p| levelled(&p))
     }
 
     pub fn pose_at(&self, t: Stamp) -> Option<Pose3> {
