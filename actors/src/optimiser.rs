@@ -117,6 +117,13 @@ impl Optimiser {
 
 impl Actor for Optimiser {
     type Context = Context<Self>;
+
+    fn started(&mut self, _: &mut Context<Self>) {
+        if self.level_anchors {
+            // Said once, because frames declared level that are not cost accuracy silently.
+            tracing::info!(robot = %self.robot, "frames declared gravity-aligned (matcher.max_tilt_deg = 0): neighbours' anchors held level");
+        }
+    }
 }
 
 impl Supervised for Optimiser {
