@@ -81,6 +81,7 @@ impl Fusion {
     ) -> Self {
         let mut clustering = classes.cluster_config(config.cluster_tolerance_m);
         clustering.min_height_m = config.min_object_height_m;
+        clustering.merge_stacked = config.merge_stacked_objects;
         let fusion_config = ScanFusionConfig {
             clustering,
             max_range_m: config.max_range_m,

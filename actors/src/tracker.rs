@@ -58,6 +58,10 @@ pub struct MapSummary {
     /// Objects found moving (`tracker.tracking.moving_m`): never confirmed, so neither shared
     /// nor matched.
     pub moving_objects: usize,
+    /// Objects merged into another, one object seen as two (`tracker.tracking.merge_stacked`).
+    pub merged_objects: u64,
+    /// Tentative objects removed, unseen for `tracker.tracking.tentative_expiry_s`.
+    pub expired_objects: u64,
 }
 
 /// One object of the map, in the world frame.
@@ -370,6 +374,8 @@ impl Handler<GetMapSummary> for Tracker {
             objects,
             clouds: graph.cloud_stats(),
             moving_objects: self.map.objects.moving_count(),
+            merged_objects: self.map.objects.merged_count(),
+            expired_objects: self.map.objects.expired_count(),
         })
     }
 }

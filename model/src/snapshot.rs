@@ -26,8 +26,9 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// Version 3: the scene graph's semantic layer is a bounded cloud store (each scan marked
 /// compacted or not, and the count evicted). Version 4: replay windows per sender incarnation.
 /// Version 5: Comms keeps the pose each neighbour was last told of each keyframe we served, and
-/// the optimiser counts the neighbour priors those poses refreshed.
-pub const FORMAT_VERSION: u32 = 5;
+/// the optimiser counts the neighbour priors those poses refreshed. Version 6: the object
+/// tracker counts the objects it merged and the tentative ones it let expire.
+pub const FORMAT_VERSION: u32 = 6;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).

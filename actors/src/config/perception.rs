@@ -24,6 +24,10 @@ pub struct FusionConfig {
     /// Clusters flatter than this are not objects: labels that bled onto the ground behind an
     /// object in the image, m. Default 0.2.
     pub min_object_height_m: f64,
+    /// Clusters of one class stacked in one column (a lamp post cut in two by a gap between
+    /// beams, a bookshelf by an occluder) are one object candidate
+    /// (`model::perception::clustering`). Default true.
+    pub merge_stacked_objects: bool,
     /// Each labelled return takes the most common class among its neighbours first: labels
     /// that bled across depth edges in the image go back to what surrounds them in 3D
     /// (`model::perception::label_vote`).
@@ -42,6 +46,7 @@ impl Default for FusionConfig {
             max_range_m: 60.0,
             object_range_m: 30.0,
             min_object_height_m: 0.2,
+            merge_stacked_objects: true,
             label_vote: LabelVote::default(),
             classes: default_classes(),
             deskew: true,
@@ -121,6 +126,12 @@ impl TrackerSection {
         check(t.confirm_after >= 1, "tracker.tracking.confirm_after", t.confirm_after, "≥ 1")?;
         check(non_negative(t.moving_m), "tracker.tracking.moving_m", t.moving_m, "finite and ≥ 0 (0: off)")?;
         check(positive(t.moving_window_s), "tracker.tracking.moving_window_s", t.moving_window_s, "> 0")?;
+        check(
+            non_negative(t.tentative_expiry_s),
+            "tracker.tracking.tentative_expiry_s",
+            t.tentative_expiry_s,
+            "finite and ≥ 0 (0: never)",
+        )?;
         let l = &self.loop_closure;
         check(positive(l.search_radius_m), "tracker.loop_closure.search_radius_m", l.search_radius_m, "> 0")?;
         check(non_negative(l.time_gap_s), "tracker.loop_closure.time_gap_s", l.time_gap_s, "finite and ≥ 0")?;

@@ -122,6 +122,8 @@ mod tests {
             }],
             clouds: Default::default(),
             moving_objects: 0,
+            merged_objects: 0,
+            expired_objects: 0,
         };
         let header = std_msgs::Header { frame_id: "alpha/odom".into(), ..Default::default() };
         let array = map_markers(&header, &map, &classes);

@@ -320,6 +320,8 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 "keyframes": map.keyframes.len(),
                 "objects": map.objects.len(),
                 "moving_objects": map.moving_objects,
+                "merged_objects": map.merged_objects,
+                "expired_objects": map.expired_objects,
                 "accepted": InputCounts::snapshot(&side.counts.accepted),
                 "refused": InputCounts::snapshot(&side.counts.refused),
                 "sync": sync_counts,

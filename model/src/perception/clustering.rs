@@ -3,8 +3,23 @@
 //! and occupied voxels that touch (26-neighbourhood) form one cluster — connected components by
 //! union–find over the sorted voxel keys, near-linear in the number of points. Two points in
 //! one cluster are linked by a chain of steps shorter than 2√3 · tolerance; points farther than
-//! 2 · tolerance from every other voxel's points are never joined. Clusters are kept when their
-//! point count and extent are plausible for the class.
+//! 2 · tolerance from every other voxel's points are never joined.
+//!
+//! Pieces of one column are then joined (`merge_stacked`): a LiDAR leaves gaps along a tall
+//! object (the beams of a Livox or spinning pattern fan out with height, an occluder cuts a
+//! lamp post or a bookshelf in two), and two pieces of one object become two candidates, then
+//! two map objects one above the other: a duplicate the tracker cannot join, because one
+//! keyframe's candidates are assigned to distinct objects. Two clusters of one class are one
+//! column when their footprints (the xy boxes, grown by half a voxel each way) overlap by at
+//! least half the smaller one:
+//!
+//! ```text
+//! |F_a ∩ F_b| ≥ ½ min(|F_a|, |F_b|),   F = [lo.x − t/2, hi.x + t/2] × [lo.y − t/2, hi.y + t/2]
+//! ```
+//!
+//! (t: `tolerance_m`; joined transitively). Objects of one class do not stand on each other in
+//! the worlds we model; different classes (a chair under a table) are never joined. Clusters
+//! are kept when their point count and extent are plausible for the class.
 
 use crate::scene_graph::LabelId;
 use nalgebra::{Point3, Vector3};
@@ -40,11 +55,19 @@ pub struct ClusterConfig {
     /// Clusters flatter than this along z are refused (labels bleeding onto the ground behind
     /// an object, in the sensor's upright frame), m. Default 0: off.
     pub min_height_m: f64,
+    /// Join clusters of one class stacked in one column (module doc). Default true.
+    pub merge_stacked: bool,
 }
 
 impl Default for ClusterConfig {
     fn default() -> Self {
-        Self { tolerance_m: 0.3, default_limits: ClassLimits::default(), classes: BTreeMap::new(), min_height_m: 0.0 }
+        Self {
+            tolerance_m: 0.3,
+            default_limits: ClassLimits::default(),
+            classes: BTreeMap::new(),
+            min_height_m: 0.0,
+            merge_stacked: true,
+        }
     }
 }
 
@@ -93,13 +116,6 @@ pub fn cluster(points: &[Point3<f64>], labels: &[Option<LabelId>], config: &Clus
         }
         // Union–find over voxels, joining each voxel to its 13 "forward" neighbours.
         let mut parent: Vec<usize> = (0..voxels.len()).collect();
-        fn root(parent: &mut [usize], mut v: usize) -> usize {
-            while parent[v] != v {
-                parent[v] = parent[parent[v]];
-                v = parent[v];
-            }
-            v
-        }
         for (v, k) in voxels.iter().enumerate() {
             for dx in -1..=1i64 {
                 for dy in -1..=1i64 {
@@ -109,10 +125,7 @@ pub fn cluster(points: &[Point3<f64>], labels: &[Option<LabelId>], config: &Clus
                         }
                         let neighbour = [k[0] + dx, k[1] + dy, k[2] + dz];
                         if let Ok(w) = voxels.binary_search(&neighbour) {
-                            let (a, b) = (root(&mut parent, v), root(&mut parent, w));
-                            if a != b {
-                                parent[a.max(b)] = a.min(b);
-                            }
+                            unite(&mut parent, v, w);
                         }
                     }
                 }
@@ -129,30 +142,108 @@ pub fn cluster(points: &[Point3<f64>], labels: &[Option<LabelId>], config: &Clus
         let mut ordered: Vec<(usize, Vec<usize>)> =
             clusters.into_iter().map(|(r, pts)| (first_of_root.get(&r).copied().unwrap_or(usize::MAX), pts)).collect();
         ordered.sort_by_key(|(first, _)| *first);
-        for (_, cluster_points) in ordered {
-            if cluster_points.len() < limits.min_points || cluster_points.len() > limits.max_points {
+        let mut pieces: Vec<Piece> = ordered.iter().map(|(_, members)| Piece::of(points, members)).collect();
+        if config.merge_stacked {
+            pieces = join_columns(pieces, size);
+        }
+        for piece in pieces {
+            if piece.count < limits.min_points || piece.count > limits.max_points {
                 continue;
             }
-            let (mut lo, mut hi, mut sum) = (Vector3::repeat(f64::MAX), Vector3::repeat(f64::MIN), Vector3::zeros());
-            for &k in &cluster_points {
-                let p = points[k].coords;
-                lo = lo.inf(&p);
-                hi = hi.sup(&p);
-                sum += p;
-            }
-            let extent = hi - lo;
+            let extent = piece.hi - piece.lo;
             if extent.max() > limits.max_extent_m || extent.z < config.min_height_m {
                 continue;
             }
             out.push(ObjectCandidate {
                 label,
-                centroid: Point3::from(sum / cluster_points.len() as f64),
+                centroid: Point3::from(piece.sum / piece.count as f64),
                 size: extent,
-                points: cluster_points.len(),
+                points: piece.count,
             });
         }
     }
     out
+}
+
+/// Union–find: the root of `v`'s set (halving the path on the way).
+fn root(parent: &mut [usize], mut v: usize) -> usize {
+    while parent[v] != v {
+        parent[v] = parent[parent[v]];
+        v = parent[v];
+    }
+    v
+}
+
+/// Union–find: joins the sets of `a` and `b`; the smaller root stays the root.
+fn unite(parent: &mut [usize], a: usize, b: usize) {
+    let (a, b) = (root(parent, a), root(parent, b));
+    if a != b {
+        parent[a.max(b)] = a.min(b);
+    }
+}
+
+/// One cluster's bounds and point sum.
+#[derive(Clone, Copy)]
+struct Piece {
+    lo: Vector3<f64>,
+    hi: Vector3<f64>,
+    sum: Vector3<f64>,
+    count: usize,
+}
+
+impl Piece {
+    fn of(points: &[Point3<f64>], members: &[usize]) -> Self {
+        let (mut lo, mut hi, mut sum) = (Vector3::repeat(f64::MAX), Vector3::repeat(f64::MIN), Vector3::zeros());
+        for &k in members {
+            let p = points[k].coords;
+            lo = lo.inf(&p);
+            hi = hi.sup(&p);
+            sum += p;
+        }
+        Self { lo, hi, sum, count: members.len() }
+    }
+
+    fn join(&mut self, other: &Piece) {
+        self.lo = self.lo.inf(&other.lo);
+        self.hi = self.hi.sup(&other.hi);
+        self.sum += other.sum;
+        self.count += other.count;
+    }
+
+    /// The footprint grown by `grow` each way: (x₀, x₁, y₀, y₁).
+    fn footprint(&self, grow: f64) -> [f64; 4] {
+        [self.lo.x - grow, self.hi.x + grow, self.lo.y - grow, self.hi.y + grow]
+    }
+}
+
+/// Whether two pieces stand in one column (module doc).
+fn one_column(a: &Piece, b: &Piece, tolerance_m: f64) -> bool {
+    let (fa, fb) = (a.footprint(0.5 * tolerance_m), b.footprint(0.5 * tolerance_m));
+    let overlap = (fa[1].min(fb[1]) - fa[0].max(fb[0])).max(0.0) * (fa[3].min(fb[3]) - fa[2].max(fb[2])).max(0.0);
+    let area = |f: [f64; 4]| (f[1] - f[0]) * (f[3] - f[2]);
+    overlap > 0.0 && overlap >= 0.5 * area(fa).min(area(fb))
+}
+
+/// Joins the pieces that stand in one column (transitively, by union–find), keeping the order of
+/// each column's first piece.
+fn join_columns(pieces: Vec<Piece>, tolerance_m: f64) -> Vec<Piece> {
+    let mut parent: Vec<usize> = (0..pieces.len()).collect();
+    for a in 0..pieces.len() {
+        for b in a + 1..pieces.len() {
+            if one_column(&pieces[a], &pieces[b], tolerance_m) {
+                unite(&mut parent, a, b);
+            }
+        }
+    }
+    let mut joined: Vec<Option<Piece>> = vec![None; pieces.len()];
+    for (k, piece) in pieces.iter().enumerate() {
+        let r = root(&mut parent, k);
+        match &mut joined[r] {
+            Some(column) => column.join(piece),
+            slot => *slot = Some(*piece),
+        }
+    }
+    joined.into_iter().flatten().collect()
 }
 
 #[cfg(test)]
@@ -217,5 +308,44 @@ mod tests {
         let mut config = ClusterConfig::default();
         config.classes.insert(1, ClassLimits { max_extent_m: 50.0, ..ClassLimits::default() });
         assert_eq!(cluster(&points, &labels, &config).len(), 4);
+    }
+
+    /// A lamp post seen with a gap between beams: its pole (0.15 m across, up to 1.2 m) and its
+    /// head (0.5 m across, 3.5–4 m up) are 2.3 m apart, two clusters, one column; a second post
+    /// 3 m away and two chairs 1.2 m apart stay apart, and a table over a chair (another class)
+    /// is never joined to it.
+    #[test]
+    fn pieces_of_one_column_are_one_candidate() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let (mut points, mut labels) = (Vec::new(), Vec::new());
+        let mut add = |pts: Vec<Point3<f64>>, label: u16| {
+            labels.extend(std::iter::repeat_n(Some(LabelId(label)), pts.len()));
+            points.extend(pts);
+        };
+        for x in [0.0, 3.0] {
+            let pole = (0..120)
+                .map(|k| Point3::new(x + rng.random_range(-0.07..0.07), rng.random_range(-0.07..0.07), 0.01 * k as f64))
+                .collect();
+            add(pole, 1);
+            add(boxed(&mut rng, [x, 0.0, 3.75], 0.25, 80), 1);
+        }
+        add(boxed(&mut rng, [10.0, 0.0, 0.4], 0.25, 100), 2); // chair
+        add(boxed(&mut rng, [11.2, 0.0, 0.4], 0.25, 100), 2); // its neighbour
+        add(boxed(&mut rng, [10.0, 0.0, 1.6], 0.4, 100), 3); // a table over the first chair
+        let config = ClusterConfig::default();
+        let candidates = cluster(&points, &labels, &config);
+        let posts: Vec<_> = candidates.iter().filter(|c| c.label == LabelId(1)).collect();
+        assert_eq!(posts.len(), 2, "{posts:?}");
+        for (post, x) in posts.iter().zip([0.0, 3.0]) {
+            assert_eq!(post.points, 200);
+            assert!((post.centroid.x - x).abs() < 0.05 && post.size.z > 3.9, "{post:?}");
+            // The centroid is the mean of all the column's returns: 120 on the pole (mean 0.6 m
+            // up), 80 in the head (3.75 m).
+            assert!((post.centroid.z - (120.0 * 0.595 + 80.0 * 3.75) / 200.0).abs() < 0.05, "{post:?}");
+        }
+        assert_eq!(candidates.iter().filter(|c| c.label == LabelId(2)).count(), 2, "the chairs stay apart");
+        assert_eq!(candidates.iter().filter(|c| c.label == LabelId(3)).count(), 1);
+        let apart = cluster(&points, &labels, &ClusterConfig { merge_stacked: false, ..config });
+        assert_eq!(apart.iter().filter(|c| c.label == LabelId(1)).count(), 4, "two pieces per post without it");
     }
 }

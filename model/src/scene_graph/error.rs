@@ -9,6 +9,8 @@ pub enum SceneGraphError {
     UnknownKeyframe(KeyframeId),
     #[error("object {0} is not in the scene graph")]
     UnknownObject(ObjectId),
+    #[error("objects {keep} and {gone} cannot be merged: one object, or two labels")]
+    NotOneObject { keep: ObjectId, gone: ObjectId },
     #[error("{what} is not finite")]
     NonFinite { what: &'static str },
     #[error("keyframe {id} has stamp {stamp} s, earlier than the latest keyframe's {latest} s")]

@@ -176,6 +176,47 @@ impl SceneGraph {
         Ok(())
     }
 
+    /// Folds object `gone` into `keep`, one object the tracker saw as two: `keep` takes every
+    /// sighting of `gone`, and its anchor, centroid and size when `gone`'s anchor is the more
+    /// recent; `gone` and its links are removed. Both must exist, be distinct and share a label;
+    /// otherwise nothing changes.
+    pub fn merge_objects(&mut self, keep: ObjectId, gone: ObjectId) -> Result<(), SceneGraphError> {
+        let (Some(k), Some(g)) = (self.objects.get(&keep), self.objects.get(&gone)) else {
+            let missing = if self.objects.contains_key(&keep) { gone } else { keep };
+            return Err(SceneGraphError::UnknownObject(missing));
+        };
+        if keep == gone || k.label != g.label {
+            return Err(SceneGraphError::NotOneObject { keep, gone });
+        }
+        let fresher = (self.stamp_of(g.anchor)?, g.anchor) > (self.stamp_of(k.anchor)?, k.anchor);
+        let removed = self.remove_object(gone)?;
+        for keyframe in &removed.observed_in {
+            self.objects_by_keyframe.entry(*keyframe).or_default().insert(keep);
+        }
+        let object = self.objects.get_mut(&keep).ok_or(SceneGraphError::UnknownObject(keep))?;
+        object.observed_in.extend(removed.observed_in);
+        if fresher {
+            object.anchor = removed.anchor;
+            object.centroid_in_anchor = removed.centroid_in_anchor;
+            object.size = removed.size;
+        }
+        Ok(())
+    }
+
+    /// Removes an object and its cross-layer links; returns it.
+    pub fn remove_object(&mut self, id: ObjectId) -> Result<Object, SceneGraphError> {
+        let object = self.objects.remove(&id).ok_or(SceneGraphError::UnknownObject(id))?;
+        for keyframe in &object.observed_in {
+            if let Some(seen) = self.objects_by_keyframe.get_mut(keyframe) {
+                seen.remove(&id);
+                if seen.is_empty() {
+                    self.objects_by_keyframe.remove(keyframe);
+                }
+            }
+        }
+        Ok(object)
+    }
+
     fn stamp_of(&self, keyframe: KeyframeId) -> Result<Stamp, SceneGraphError> {
         self.keyframes.get(&keyframe).map(|k| k.stamp).ok_or(SceneGraphError::UnknownKeyframe(keyframe))
     }
@@ -345,6 +386,40 @@ mod tests {
         // In keyframe 2's body the object was at (-3.8, 2.0, 0.5); now world = R·p + t.
         let expected = Point3::new(10.0 - 2.0, 1.0 - 3.8, 0.5);
         assert!((g.centroid_in_world(id).unwrap() - expected).norm() < 1e-12);
+    }
+
+    /// Two objects that are one: the kept id takes every link, and the centroid and size of
+    /// the fresher sighting; what cannot be merged (an unknown id, itself, another label)
+    /// leaves the graph as it was.
+    #[test]
+    fn merging_two_objects_keeps_every_link_and_the_fresher_estimate() {
+        let mut g = graph_with_three_keyframes();
+        let post = LabelId(3);
+        let a = g.add_object(post, Point3::new(7.0, 2.0, 0.6), Vector3::new(0.2, 0.2, 1.2), KeyframeId(0)).unwrap();
+        let b = g.add_object(post, Point3::new(7.0, 2.0, 3.7), Vector3::new(0.5, 0.5, 0.5), KeyframeId(1)).unwrap();
+        g.observe_object(b, Point3::new(7.0, 2.0, 2.0), Vector3::new(0.5, 0.5, 4.0), KeyframeId(2)).unwrap();
+        let chair = g.add_object(LabelId(1), Point3::new(9.0, 2.0, 0.5), Vector3::repeat(0.5), KeyframeId(2)).unwrap();
+        let before = g.clone();
+        for (keep, gone) in [(a, ObjectId(99)), (ObjectId(99), a), (a, a), (a, chair)] {
+            assert!(g.merge_objects(keep, gone).is_err(), "{keep} ← {gone}");
+            assert_eq!(g, before);
+        }
+        g.merge_objects(a, b).unwrap();
+        assert_eq!(g.object_count(), 2);
+        assert!(g.object(b).is_none());
+        let kept = g.object(a).unwrap();
+        assert_eq!(kept.anchor, KeyframeId(2), "b's sighting at keyframe 2 is the freshest");
+        assert!((g.centroid_in_world(a).unwrap() - Point3::new(7.0, 2.0, 2.0)).norm() < 1e-12);
+        assert_eq!(kept.size, Vector3::new(0.5, 0.5, 4.0));
+        assert_eq!(g.keyframes_observing(a).collect::<Vec<_>>(), [0, 1, 2].map(KeyframeId));
+        for k in 0..3 {
+            assert!(!g.objects_observed_in(KeyframeId(k)).any(|o| o == b));
+            assert!(g.objects_observed_in(KeyframeId(k)).any(|o| o == a), "keyframe {k}");
+        }
+        // Removing an object drops its links too.
+        assert_eq!(g.remove_object(chair).unwrap().id, chair);
+        assert_eq!(g.objects_observed_in(KeyframeId(2)).collect::<Vec<_>>(), vec![a]);
+        assert!(g.remove_object(chair).is_err());
     }
 
     #[test]

@@ -28,6 +28,10 @@ pub struct RobotReport {
     pub confirmed_objects: usize,
     /// Objects found moving (`tracker.tracking.moving_m`): kept out of the shared map.
     pub moving_objects: usize,
+    /// Objects merged into another, one object seen as two (`tracker.tracking.merge_stacked`).
+    pub merged_objects: u64,
+    /// Tentative objects removed, unseen for `tracker.tracking.tentative_expiry_s`.
+    pub expired_objects: u64,
     /// Confirmed objects whose class has a world object within 2 m (the robot's start frame
     /// placed on the truth), counted once per world object. None when the world is unknown
     /// (a replay).
@@ -276,6 +280,9 @@ fn object_quality(
     let (mut found, mut spurious, mut error_sum) = (0, 0, 0.0);
     for o in map.objects.iter().filter(|o| o.confirmed) {
         let p = truth.truth_from_world * o.centroid;
+        if std::env::var("SGM_DBG_OBJ").is_ok() {
+            eprintln!("DBGALL {} label {} at {:.2},{:.2},{:.2}", truth.name, o.label.0, p.x, p.y, p.z);
+        }
         let nearest = world
             .iter()
             .enumerate()
@@ -288,7 +295,22 @@ fn object_quality(
                 found += 1;
                 error_sum += d;
             }
-            _ => spurious += 1,
+            _ => {
+                spurious += 1;
+                if std::env::var("SGM_DBG_OBJ").is_ok() {
+                    let any =
+                        world.iter().map(|(l, c)| (*l, (c.xy() - p.xy()).norm())).min_by(|a, b| a.1.total_cmp(&b.1));
+                    eprintln!(
+                        "DBGOBJ {} label {} nearest_same {:?} nearest_any {:?} at {:.1},{:.1}",
+                        truth.name,
+                        o.label.0,
+                        nearest.map(|n| (n.1, claimed[n.0])),
+                        any,
+                        p.x,
+                        p.y
+                    );
+                }
+            }
         }
     }
     (found, spurious, (found > 0).then(|| error_sum / found as f64))
@@ -346,6 +368,8 @@ pub fn compute(record: &RunRecord) -> Report {
                 frames: truth.frames,
                 clouds: map.map(|m| m.clouds).unwrap_or_default(),
                 moving_objects: map.map_or(0, |m| m.moving_objects),
+                merged_objects: map.map_or(0, |m| m.merged_objects),
+                expired_objects: map.map_or(0, |m| m.expired_objects),
                 deskew: record.deskew.get(k).copied().flatten().unwrap_or_default(),
                 odometry: record.odometry.get(k).copied().flatten(),
             }

@@ -154,17 +154,19 @@ pub fn render(report: &Report, timing: &Timing) -> String {
         if report.team_ate_robots.is_empty() { "no robot".into() } else { report.team_ate_robots.join(", ") },
         report.team_ate_robots.first().map_or("—", String::as_str)
     );
-    let _ = writeln!(s, "## Robots\n\n| robot | ATE RMSE (m) | keyframes | objects (confirmed, moving) | distance (m) | frames |\n|---|---|---|---|---|---|");
+    let _ = writeln!(s, "## Robots\n\n| robot | ATE RMSE (m) | keyframes | objects (confirmed, moving) | merged, expired | distance (m) | frames |\n|---|---|---|---|---|---|---|");
     for r in &report.robots {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} ({}, {}) | {:.0} | {} |",
+            "| {} | {} | {} | {} ({}, {}) | {}, {} | {:.0} | {} |",
             r.name,
             metres(r.ate_rmse_m),
             r.keyframes,
             r.objects,
             r.confirmed_objects,
             r.moving_objects,
+            r.merged_objects,
+            r.expired_objects,
             r.distance_m,
             r.frames
         );
