@@ -37,6 +37,9 @@ pub struct MapView {
     /// Keyframes whose scan the map holds (evicted ones are absent), by id.
     pub keyframes: BTreeMap<KeyframeId, ViewKeyframe>,
     pub objects: LocalObjects,
+    /// What neighbours are told of each of those keyframes' poses: our own measurements'
+    /// estimate (the Tracker's `told_pose`), not the joint solve's. Empty: the map poses.
+    pub told: BTreeMap<KeyframeId, Pose3>,
 }
 
 /// What changed between two snapshots in the keyframes a reader can register against.
@@ -69,7 +72,7 @@ impl MapView {
             objects.objects.push(GraphObject { id: o.id, label: o.label, centroid, size: Some(o.size) });
             objects.observed_in.insert(o.id, o.observed_in.iter().copied().collect());
         }
-        Self { keyframes, objects }
+        Self { keyframes, objects, told: BTreeMap::new() }
     }
 
     /// The keyframes `self` holds that `older` did not, and those it no longer holds.
@@ -182,6 +185,7 @@ mod tests {
                 .map(|k| (KeyframeId(*k), ViewKeyframe { world_from_body: Pose3::identity(), scan: scan.clone() }))
                 .collect(),
             objects: LocalObjects::default(),
+            told: BTreeMap::new(),
         };
         let changes = view(&[2, 3, 5, 6]).changes_since(&view(&[1, 2, 3, 4]));
         assert_eq!(changes.added, vec![KeyframeId(5), KeyframeId(6)]);

@@ -89,12 +89,15 @@ pub struct NewKeyframe {
 pub struct MapChanged(pub std::sync::Arc<crate::map_view::MapView>);
 
 /// Optimiser → Tracker: optimised keyframe poses (world frame) and marginal
-/// covariances over (ω, v).
+/// covariances over (ω, v), and what the robot's own measurements alone say of each keyframe
+/// (`KeyframeGraph::own_poses`; empty unless `comms.pose_updates.own_estimates`): what
+/// neighbours are then told.
 #[derive(Message, Clone, Debug, Default)]
 #[rtype(result = "()")]
 pub struct PosesOptimised {
     pub poses: Vec<(KeyframeId, Pose3)>,
     pub covariances: Vec<(KeyframeId, Matrix6<f64>)>,
+    pub own_poses: Vec<(KeyframeId, Pose3)>,
 }
 
 /// Comms → Matcher: a neighbour's object data arrived.

@@ -7,7 +7,10 @@
 //! each neighbour's transform as the graph now estimates it (its anchor) to the Matcher. A
 //! neighbour's later estimates of keyframes it served us (`KeyframePoses`, through Comms) move
 //! the means of their priors (or wait for keyframes not yet in the graph), and the graph is
-//! solved again at the next tick.
+//! solved again at the next tick. With `comms.pose_updates.own_estimates`, what we tell
+//! neighbours of our own keyframes is a second solve's, of our graph without them
+//! (`KeyframeGraph::own_poses`): the joint poses hold each neighbour's own factors, and telling
+//! them back echoes its information into its graph.
 //!
 //! A wrong loop closure or inter-robot factor (a false match that passed every check) would
 //! bend the whole trajectory toward it. With `reject_outliers`, each solve is GNC-TLS over those
@@ -43,6 +46,8 @@ pub struct Optimiser {
     refreshed_since_solve: bool,
     /// Hold the anchors level (gravity-aligned worlds).
     level_anchors: bool,
+    /// Solve our own poses for what neighbours are told (`comms.pose_updates.own_estimates`).
+    own_estimates: bool,
 }
 
 /// What of the Optimiser a snapshot keeps: the whole pose graph and its outlier decisions.
@@ -65,7 +70,16 @@ impl Optimiser {
             graph: KeyframeGraph::default(),
             refreshed_since_solve: false,
             level_anchors: false,
+            own_estimates: false,
         }
+    }
+
+    /// Neighbours are told our own measurements' estimate of our keyframes
+    /// (`comms.pose_updates.own_estimates`): each solve is followed by a solve of the graph
+    /// without them ([`KeyframeGraph::own_poses`]), sent with the poses.
+    pub fn with_own_estimates(mut self, own: bool) -> Self {
+        self.own_estimates = own;
+        self
     }
 
     /// Gravity-aligned worlds (`matcher.max_tilt_deg = 0`: an IMU's): every neighbour's anchor is
@@ -106,8 +120,18 @@ impl Optimiser {
             let status = self.graph.status();
             tracing::info!(robot = %self.robot, rejected = status.rejected_factors, candidates = status.candidate_factors, "outlier factors");
         }
+        // What neighbours are told of our keyframes, when asked: our own measurements' word, not
+        // the joint solve's, which holds the neighbours' own factors already. None: the joint.
+        let own_poses = if self.own_estimates {
+            self.graph.own_poses().unwrap_or_else(|e| {
+                tracing::warn!(robot = %self.robot, "own poses not solved ({e}): neighbours are told the joint ones");
+                solved.poses.clone()
+            })
+        } else {
+            Vec::new()
+        };
         if let Some(links) = &self.links {
-            links.tracker.do_send(PosesOptimised { poses: solved.poses, covariances: solved.covariances });
+            links.tracker.do_send(PosesOptimised { poses: solved.poses, covariances: solved.covariances, own_poses });
             if !solved.anchors.is_empty() {
                 links.matcher.do_send(NeighbourTransforms(solved.anchors));
             }

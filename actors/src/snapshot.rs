@@ -207,6 +207,7 @@ mod tests {
                 last_odometry: None,
                 covariances: Default::default(),
                 last_loop_attempt: None,
+                own_poses: Default::default(),
             },
             matcher: MatcherState::default(),
             optimiser: OptimiserState {

@@ -177,8 +177,10 @@ pub fn start_robot_restored(
     let optimiser_config = config.optimiser.clone();
     // `matcher.max_tilt_deg = 0` declares the robots' worlds gravity-aligned: anchors are level.
     let level_anchors = config.matcher.matching.max_tilt_deg == 0.0;
+    let own_estimates = config.comms.pose_updates.own_estimates;
     let optimiser = Supervisor::start(move |_| {
-        let optimiser = Optimiser::new(robot, optimiser_config).with_level_anchors(level_anchors);
+        let optimiser =
+            Optimiser::new(robot, optimiser_config).with_level_anchors(level_anchors).with_own_estimates(own_estimates);
         match optimiser_state {
             Some(state) => optimiser.thawed(state),
             None => optimiser,

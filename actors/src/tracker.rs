@@ -86,6 +86,8 @@ pub struct TrackerState {
     pub last_odometry: Option<(KeyframeId, Pose3)>,
     pub covariances: BTreeMap<KeyframeId, Matrix6<f64>>,
     pub last_loop_attempt: Option<f64>,
+    /// Each keyframe's pose from our own measurements alone (what neighbours are told).
+    pub own_poses: BTreeMap<KeyframeId, Pose3>,
 }
 
 /// A thawed robot numbers its next keyframe from the next multiple of this above the
@@ -106,6 +108,10 @@ pub struct Tracker {
     /// The latest marginal covariance of each keyframe, as served: the wire's packed upper
     /// triangle (84 bytes, not a 288-byte `Matrix6<f64>`; one per keyframe, kept for hours).
     covariances: BTreeMap<KeyframeId, [f32; 21]>,
+    /// Each keyframe's pose from our own measurements alone, as of the latest solve
+    /// (`KeyframeGraph::own_poses`, with `comms.pose_updates.own_estimates`; empty without):
+    /// what neighbours are told ([`Tracker::told_pose`]).
+    own_poses: BTreeMap<KeyframeId, Pose3>,
     /// The newest frame handled, for latency measurement outside the robot.
     progress: crate::progress::FrameProgress,
     workers: Workers,
@@ -131,6 +137,7 @@ impl Tracker {
             links: None,
             map: Mapper::default(),
             covariances: BTreeMap::new(),
+            own_poses: BTreeMap::new(),
             progress: crate::progress::FrameProgress::default(),
             workers: Workers::sequential(),
         }
@@ -145,6 +152,7 @@ impl Tracker {
             last_odometry: self.map.last_odometry,
             covariances: self.covariances.iter().map(|(k, p)| (*k, expand_covariance(p))).collect(),
             last_loop_attempt: self.map.last_loop_attempt,
+            own_poses: self.own_poses.clone(),
         }
     }
 
@@ -173,6 +181,7 @@ impl Tracker {
             motion: None,
         };
         self.covariances = state.covariances.iter().map(|(k, m)| (*k, pack_covariance(m))).collect();
+        self.own_poses = state.own_poses;
         self
     }
 
@@ -210,9 +219,25 @@ impl Tracker {
     }
 
     /// Shares the map as it is now with the Matcher and Comms.
+    /// What neighbours are told of keyframe `id`'s pose: our own measurements' estimate
+    /// ([`PosesOptimised::own_poses`]), or the map's when there is none (`own_estimates` off).
+    /// A keyframe made since the latest solve has none yet; it takes the correction of the
+    /// latest one before it that has,
+    ///
+    /// ```text
+    /// told(k) = own(j) · map(j)⁻¹ · map(k)      (j: the latest keyframe before k with an own pose)
+    /// ```
+    ///
+    /// and its map pose before any solve.
+    fn told_pose(&self, id: KeyframeId) -> Option<Pose3> {
+        told_pose(&self.own_poses, &self.map.graph, id)
+    }
+
     fn publish_map(&self) {
         if let Some(links) = &self.links {
-            let view = Arc::new(MapView::of(&self.map, &self.classes, &self.config));
+            let mut view = MapView::of(&self.map, &self.classes, &self.config);
+            view.told = view.keyframes.keys().filter_map(|k| Some((*k, self.told_pose(*k)?))).collect();
+            let view = Arc::new(view);
             links.matcher_map.do_send(MapChanged(view.clone()));
             links.comms_map.do_send(MapChanged(view));
         }
@@ -249,6 +274,7 @@ impl Tracker {
 
     fn serve_keyframe(&self, id: KeyframeId) -> Option<WireMessage> {
         let kf = self.map.graph.keyframe(id)?;
+        let told = self.told_pose(id)?;
         let scan = self.map.graph.semantic_scan(id)?;
         let points: Vec<Point3<f64>> = scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
         let cloud = cloud_codec::encode(&points, self.cloud_resolution_m).ok()?.bytes;
@@ -258,11 +284,24 @@ impl Tracker {
         Some(WireMessage::KeyframeResponse(KeyframeResponse {
             keyframe: id,
             stamp: kf.stamp,
-            world_from_body: WirePose::from(&kf.world_from_body),
+            world_from_body: WirePose::from(&told),
             covariance,
             cloud,
         }))
     }
+}
+
+/// [`Tracker::told_pose`] over `own` poses and the map's `graph`.
+fn told_pose(own: &BTreeMap<KeyframeId, Pose3>, graph: &SceneGraph, id: KeyframeId) -> Option<Pose3> {
+    let map_pose = graph.keyframe(id)?.world_from_body;
+    if let Some(pose) = own.get(&id) {
+        return Some(*pose);
+    }
+    let before = own.range(..id).next_back().and_then(|(j, own_j)| {
+        let map_j = graph.keyframe(*j)?.world_from_body;
+        Some(own_j * map_j.inverse() * map_pose)
+    });
+    Some(before.unwrap_or(map_pose))
 }
 
 impl Actor for Tracker {
@@ -300,6 +339,7 @@ impl Handler<PosesOptimised> for Tracker {
                 return;
             }
             self.covariances.extend(msg.covariances.iter().map(|(k, m)| (*k, pack_covariance(m))));
+            self.own_poses = msg.own_poses.into_iter().collect();
             self.publish_map();
         });
     }
@@ -383,3 +423,31 @@ impl Handler<GetMapSummary> for Tracker {
 connects!(Tracker => TrackerLinks);
 freezes!(Tracker => TrackerState);
 stops_on_injected_failure!(Tracker => "tracker");
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+    use sgm_model::geometry::pose_from_yaw_translation;
+
+    /// Keyframes 0–2 solved (our own estimates 0.2 m left of the map's and turned 1°), keyframe
+    /// 3 made since: it carries keyframe 2's correction; without own poses, the map's; an
+    /// unknown keyframe, none.
+    #[test]
+    fn a_keyframe_made_since_the_solve_carries_the_latest_correction() {
+        let mut graph = SceneGraph::new();
+        let map = |k: u32| pose_from_yaw_translation(0.1 * f64::from(k), Vector3::new(2.0 * f64::from(k), 0.0, 0.0));
+        for k in 0..4u32 {
+            graph.add_keyframe(Keyframe { id: KeyframeId(k), stamp: f64::from(k), world_from_body: map(k) }).unwrap();
+        }
+        let correction = pose_from_yaw_translation(1f64.to_radians(), Vector3::new(0.0, 0.2, 0.0));
+        let own: BTreeMap<KeyframeId, Pose3> = (0..3u32).map(|k| (KeyframeId(k), correction * map(k))).collect();
+        assert_eq!(told_pose(&own, &graph, KeyframeId(1)), Some(correction * map(1)));
+        let told = told_pose(&own, &graph, KeyframeId(3)).unwrap();
+        let expected = correction * map(3);
+        assert!((told.translation.vector - expected.translation.vector).norm() < 1e-12);
+        assert!(told.rotation.angle_to(&expected.rotation) < 1e-12);
+        assert_eq!(told_pose(&BTreeMap::new(), &graph, KeyframeId(3)), Some(map(3)));
+        assert_eq!(told_pose(&own, &graph, KeyframeId(9)), None);
+    }
+}

@@ -27,7 +27,8 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// compacted or not, and the count evicted). Version 4: replay windows per sender incarnation.
 /// Version 5: Comms keeps the pose each neighbour was last told of each keyframe we served, and
 /// the optimiser counts the neighbour priors those poses refreshed. Version 6: the object
-/// tracker counts the objects it merged and the tentative ones it let expire.
+/// tracker counts the objects it merged and the tentative ones it let expire, and the Tracker
+/// keeps each keyframe's pose from the robot's own measurements (what neighbours are told).
 pub const FORMAT_VERSION: u32 = 6;
 pub const HEADER_LEN: usize = 56;
 

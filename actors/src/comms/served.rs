@@ -6,11 +6,16 @@
 //! (a loop closure, an alignment) move the keyframe in our world; the neighbour's T_r(j) stays
 //! where it was, and its inter-robot factors on the keyframe then pull its anchor by our
 //! correction. So we remember, per neighbour, the pose each keyframe was last told at, and when
-//! our map's estimate has moved farther than `move_m` or turned more than `turn_deg` from it,
+//! our estimate has moved farther than `move_m` or turned more than `turn_deg` from it,
 //! the keyframe's new pose goes out in a `KeyframePoses` message — at most once per
 //! `interval_s` per neighbour, only to a neighbour heard within `link_timeout_s` (and not
 //! down), in envelopes of at most
-//! `limits.max_ids` poses. A keyframe whose scan our map evicted is no longer in the map view:
+//! `limits.max_ids` poses. Our estimate is the map's (the joint solve's), or with `own_estimates`
+//! what our own measurements alone say of the keyframe (`MapView::told`: a solve of our graph
+//! without the neighbours, `KeyframeGraph::own_poses`): the joint one holds the neighbour's own
+//! keyframes and factors, and telling it back counts the neighbour's information twice, round
+//! after round. A keyframe
+//! whose scan our map evicted is no longer in the map view:
 //! it is forgotten, and never told again (so what is remembered is bounded by the map's cloud
 //! budget per neighbour). A neighbour that restarted (a new incarnation) is told every served
 //! keyframe at its next update. An update lost on the radio is made good only when the keyframe next
@@ -88,7 +93,8 @@ impl ServedPoses {
             let mut moved = Vec::new();
             for (&id, pose) in told.iter_mut() {
                 let Some(kf) = view.keyframes.get(&id) else { continue };
-                let now_pose = kf.world_from_body;
+                // Our own measurements' estimate with `own_estimates` (module doc); else the map's.
+                let now_pose = view.told.get(&id).copied().unwrap_or(kf.world_from_body);
                 let shift = (now_pose.translation.vector - pose.translation.vector).norm();
                 let turn = (pose.rotation.inverse() * now_pose.rotation).angle();
                 if all || shift > config.move_m || turn > turn_rad {
@@ -220,5 +226,23 @@ mod tests {
         s.served(RobotId(2), KeyframeId(1), at(0.0, 0.0));
         let off = PoseUpdatesConfig { enabled: false, ..config };
         assert!(s.due(0.0, &moved, &off, 2, |_| true).is_empty());
+    }
+
+    /// A solve that moved keyframe 1 only because of the neighbour's own factors leaves our own
+    /// estimate (`MapView::told`) where it was: nothing is told. When our own estimate moves
+    /// (a loop closure of ours), that is what is told, not the joint pose.
+    #[test]
+    fn what_is_told_is_our_own_estimate_not_the_joint_one() {
+        let mut s = ServedPoses::default();
+        s.served(RobotId(2), KeyframeId(1), at(0.0, 0.0));
+        let mut joint_moved = view(&[(1, at(0.3, 1.0))]);
+        joint_moved.told = [(KeyframeId(1), at(0.0, 0.0))].into();
+        assert!(tell(&mut s, 0.0, &joint_moved).is_empty(), "the joint solve's move is the neighbour's own");
+        let mut own_moved = view(&[(1, at(0.3, 1.0))]);
+        own_moved.told = [(KeyframeId(1), at(0.2, 0.0))].into();
+        let out = s.due(1.0, &own_moved, &PoseUpdatesConfig::default(), 256, |_| true);
+        assert_eq!(told(&out), [(2, vec![1])]);
+        let pose = out[0].1[0].poses[0].to_pose().unwrap();
+        assert!((pose.translation.x - 0.2).abs() < 1e-6, "{pose:?}");
     }
 }

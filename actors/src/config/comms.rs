@@ -81,11 +81,17 @@ pub struct PoseUpdatesConfig {
     pub move_m: f64,
     /// Or that turned by more than this, degrees. Default 0.1.
     pub turn_deg: f64,
+    /// Tell (and serve) what our own measurements alone say of each keyframe — a second solve
+    /// of our graph without the neighbours (`KeyframeGraph::own_poses`) — instead of the joint
+    /// solve's pose, which holds the neighbours' own factors and echoes them back. Default
+    /// false: the echo keeps each robot's copy of a neighbour's map closer to that map, which
+    /// the outdoor teams measured better (book: Optimiser, keyframe pose updates).
+    pub own_estimates: bool,
 }
 
 impl Default for PoseUpdatesConfig {
     fn default() -> Self {
-        Self { enabled: true, interval_s: 10.0, move_m: 0.05, turn_deg: 0.1 }
+        Self { enabled: true, interval_s: 10.0, move_m: 0.05, turn_deg: 0.1, own_estimates: false }
     }
 }
 

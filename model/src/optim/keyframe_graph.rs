@@ -510,6 +510,54 @@ impl KeyframeGraph {
         Ok(Solved { poses, covariances, rejection_changed, anchors })
     }
 
+    /// Each local keyframe's pose from this robot's own measurements alone: the graph without
+    /// its neighbours (anchors, their keyframes, inter-robot factors) and without the factors
+    /// the last solve rejected, solved from the current values:
+    ///
+    /// ```text
+    /// X_own = argmin Σ_prior ‖r‖² + Σ_{odometry, loops kept} ‖r‖²     (local keyframes only)
+    /// ```
+    ///
+    /// What a neighbour holding our keyframes is told (their priors' means): the joint solve's
+    /// poses already hold that neighbour's own keyframes and factors, and telling those back
+    /// would count its information twice, round after round (each robot's estimate echoing in
+    /// the other's). Without neighbours the joint poses are returned as they are.
+    pub fn own_poses(&self) -> Result<Vec<(KeyframeId, Pose3)>, SolveError> {
+        let local: Vec<(KeyframeId, usize)> = self
+            .index
+            .iter()
+            .filter_map(|(r, i)| if let KeyframeRef::Local(k) = r { Some((*k, *i)) } else { None })
+            .collect();
+        if self.anchors.is_empty() {
+            return Ok(local.iter().map(|(k, i)| (*k, self.graph.values[*i])).collect());
+        }
+        let mut own = Graph3::default();
+        let mut new_of: BTreeMap<usize, usize> = BTreeMap::new();
+        for (_, i) in &local {
+            new_of.insert(*i, own.keys.len());
+            own.keys.push(self.graph.keys[*i]);
+            own.values.push(self.graph.values[*i]);
+            own.fixed.push(self.graph.fixed[*i]);
+        }
+        for p in &self.graph.priors {
+            if let Some(&variable) = new_of.get(&p.variable) {
+                own.priors.push(Prior { variable, ..p.clone() });
+            }
+        }
+        for (k, b) in self.graph.betweens.iter().enumerate() {
+            if self.rejected.binary_search(&k).is_ok() {
+                continue;
+            }
+            if let (Some(&from), Some(&to)) = (new_of.get(&b.from), new_of.get(&b.to)) {
+                own.betweens.push(Between { from, to, ..b.clone() });
+            }
+        }
+        let structure = Structure::new(&own)?;
+        optimize_with(&mut own, &LmParams::default(), &structure, &least_squares)?;
+        // The own graph's variables are the local keyframes, in order.
+        Ok(local.iter().map(|(k, _)| *k).zip(own.values).collect())
+    }
+
     /// PCM over each neighbour's inter-robot factors at the current values: the factors
     /// outside the largest consistent set, per neighbour. When that set's transform (the medoid
     /// of what its factors imply) is farther from the anchor than the consistency tolerance,
@@ -701,6 +749,40 @@ mod tests {
             );
         }
         (graph, truth)
+    }
+
+    /// A neighbour's keyframes, held tight (covariance 1e-8), and two inter-robot factors that disagree with our
+    /// odometry by 0.5 m at keyframe 4: the joint solve bends our chain toward the neighbour,
+    /// while our own poses are the odometry's alone (the exact chain, closed form). Without a
+    /// neighbour, our own poses are the solve's.
+    #[test]
+    fn own_poses_leave_the_neighbours_out() {
+        let (mut graph, truth) = straight_chain(5);
+        let solved = graph.solve(false, 0).expect("solves");
+        assert_eq!(graph.own_poses().expect("own"), solved.poses, "no neighbour: the joint poses");
+        let local_from_remote = pose_from_yaw_translation(0.0, Vector3::new(0.0, 3.0, 0.0));
+        let (tight, held) = (Matrix6::identity() * 1e8, Matrix6::identity() * 1e-8);
+        // Keyframe 7 3 m left of our keyframe 1, keyframe 8 3.5 m left of our keyframe 4 (the
+        // factors say 3 m for both: our keyframe 4 should be 0.5 m further left).
+        let beside = pose_from_yaw_translation(0.0, Vector3::new(0.0, 3.0, 0.0));
+        let seven = local_from_remote.inverse() * truth[1] * beside;
+        let eight =
+            local_from_remote.inverse() * truth[4] * pose_from_yaw_translation(0.0, Vector3::new(0.0, 3.5, 0.0));
+        graph.add_neighbour(
+            RobotId(2),
+            &local_from_remote,
+            &[(KeyframeId(7), seven, held), (KeyframeId(8), eight, held)],
+            &[(KeyframeId(1), KeyframeId(7), beside, tight), (KeyframeId(4), KeyframeId(8), beside, tight)],
+        );
+        let joint = graph.solve(false, 0).expect("solves");
+        let bent = (joint.poses[4].1.translation.vector - truth[4].translation.vector).norm();
+        assert!(bent > 0.1, "the joint solve bends our chain: {bent} m");
+        let own = graph.own_poses().expect("own");
+        assert_eq!(own.len(), 5);
+        for ((k, pose), t) in own.iter().zip(&truth) {
+            assert!((pose.translation.vector - t.translation.vector).norm() < 1e-6, "keyframe {k}: {pose:?}");
+            assert!(pose.rotation.angle_to(&t.rotation) < 1e-9);
+        }
     }
 
     #[test]
