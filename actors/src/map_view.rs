@@ -37,8 +37,9 @@ pub struct MapView {
     /// Keyframes whose scan the map holds (evicted ones are absent), by id.
     pub keyframes: BTreeMap<KeyframeId, ViewKeyframe>,
     pub objects: LocalObjects,
-    /// What neighbours are told of each of those keyframes' poses: our own measurements'
-    /// estimate (the Tracker's `told_pose`), not the joint solve's. Empty: the map poses.
+    /// What neighbours are told of each of those keyframes' poses, with
+    /// `comms.pose_updates.own_estimates`: our own measurements' estimate (the Tracker's
+    /// `told_pose`), not the joint solve's. Empty without it: the map poses are told.
     pub told: BTreeMap<KeyframeId, Pose3>,
 }
 

@@ -218,7 +218,6 @@ impl Tracker {
         Ok(id)
     }
 
-    /// Shares the map as it is now with the Matcher and Comms.
     /// What neighbours are told of keyframe `id`'s pose: our own measurements' estimate
     /// ([`PosesOptimised::own_poses`]), or the map's when there is none (`own_estimates` off).
     /// A keyframe made since the latest solve has none yet; it takes the correction of the
@@ -233,10 +232,14 @@ impl Tracker {
         told_pose(&self.own_poses, &self.map.graph, id)
     }
 
+    /// Shares the map as it is now with the Matcher and Comms (with what neighbours are told of
+    /// its keyframes, when that is our own estimates rather than the map's poses).
     fn publish_map(&self) {
         if let Some(links) = &self.links {
             let mut view = MapView::of(&self.map, &self.classes, &self.config);
-            view.told = view.keyframes.keys().filter_map(|k| Some((*k, self.told_pose(*k)?))).collect();
+            if !self.own_poses.is_empty() {
+                view.told = view.keyframes.keys().filter_map(|k| Some((*k, self.told_pose(*k)?))).collect();
+            }
             let view = Arc::new(view);
             links.matcher_map.do_send(MapChanged(view.clone()));
             links.comms_map.do_send(MapChanged(view));

@@ -544,6 +544,11 @@ impl KeyframeGraph {
                 own.priors.push(Prior { variable, ..p.clone() });
             }
         }
+        // A graph that held a neighbour before its first keyframe put no prior on our keyframes
+        // (`add_keyframe` anchors only the graph's first variable): the first of ours takes it.
+        if own.priors.is_empty() && !own.values.is_empty() {
+            own.add_prior_at_current(0, GTSAM_PRIOR_SIGMAS_3D);
+        }
         for (k, b) in self.graph.betweens.iter().enumerate() {
             if self.rejected.binary_search(&k).is_ok() {
                 continue;

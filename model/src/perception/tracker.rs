@@ -108,7 +108,8 @@ pub struct ObjectTracker {
 /// What one keyframe's candidates became.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TrackUpdate {
-    /// Candidate index → the object it was associated with or created.
+    /// Candidate index → the object it was associated with or created (after merges: the object
+    /// it is now part of, so an id may repeat).
     pub objects: Vec<ObjectId>,
     pub created: Vec<ObjectId>,
     /// Objects that reached `confirm_after` sightings with this keyframe.

@@ -280,9 +280,6 @@ fn object_quality(
     let (mut found, mut spurious, mut error_sum) = (0, 0, 0.0);
     for o in map.objects.iter().filter(|o| o.confirmed) {
         let p = truth.truth_from_world * o.centroid;
-        if std::env::var("SGM_DBG_OBJ").is_ok() {
-            eprintln!("DBGALL {} label {} at {:.2},{:.2},{:.2}", truth.name, o.label.0, p.x, p.y, p.z);
-        }
         let nearest = world
             .iter()
             .enumerate()
@@ -295,22 +292,7 @@ fn object_quality(
                 found += 1;
                 error_sum += d;
             }
-            _ => {
-                spurious += 1;
-                if std::env::var("SGM_DBG_OBJ").is_ok() {
-                    let any =
-                        world.iter().map(|(l, c)| (*l, (c.xy() - p.xy()).norm())).min_by(|a, b| a.1.total_cmp(&b.1));
-                    eprintln!(
-                        "DBGOBJ {} label {} nearest_same {:?} nearest_any {:?} at {:.1},{:.1}",
-                        truth.name,
-                        o.label.0,
-                        nearest.map(|n| (n.1, claimed[n.0])),
-                        any,
-                        p.x,
-                        p.y
-                    );
-                }
-            }
+            _ => spurious += 1,
         }
     }
     (found, spurious, (found > 0).then(|| error_sum / found as f64))
