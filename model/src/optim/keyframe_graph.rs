@@ -495,11 +495,7 @@ impl KeyframeGraph {
         let rejection_changed = rejected != self.rejected;
         self.rejected = rejected;
         let weights = rejection_weights(self.graph.betweens.len(), &self.rejected);
-        let local: Vec<(KeyframeId, usize)> = self
-            .index
-            .iter()
-            .filter_map(|(r, i)| if let KeyframeRef::Local(k) = r { Some((*k, *i)) } else { None })
-            .collect();
+        let local = self.local_variables();
         let poses: Vec<(KeyframeId, Pose3)> = local.iter().map(|(k, i)| (*k, self.graph.values[*i])).collect();
         let latest: Vec<(KeyframeId, usize)> = local.iter().rev().take(marginals).copied().collect();
         let variables: Vec<usize> = latest.iter().map(|(_, i)| *i).collect();
@@ -508,6 +504,14 @@ impl KeyframeGraph {
             .unwrap_or_default();
         let anchors = self.anchors.iter().map(|(r, i)| (*r, self.graph.values[*i])).collect();
         Ok(Solved { poses, covariances, rejection_changed, anchors })
+    }
+
+    /// The local keyframes and their variables, in id order.
+    fn local_variables(&self) -> Vec<(KeyframeId, usize)> {
+        self.index
+            .iter()
+            .filter_map(|(r, i)| if let KeyframeRef::Local(k) = r { Some((*k, *i)) } else { None })
+            .collect()
     }
 
     /// Each local keyframe's pose from this robot's own measurements alone: the graph without
@@ -523,11 +527,7 @@ impl KeyframeGraph {
     /// would count its information twice, round after round (each robot's estimate echoing in
     /// the other's). Without neighbours the joint poses are returned as they are.
     pub fn own_poses(&self) -> Result<Vec<(KeyframeId, Pose3)>, SolveError> {
-        let local: Vec<(KeyframeId, usize)> = self
-            .index
-            .iter()
-            .filter_map(|(r, i)| if let KeyframeRef::Local(k) = r { Some((*k, *i)) } else { None })
-            .collect();
+        let local = self.local_variables();
         if self.anchors.is_empty() {
             return Ok(local.iter().map(|(k, i)| (*k, self.graph.values[*i])).collect());
         }
