@@ -29,7 +29,9 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// the optimiser counts the neighbour priors those poses refreshed. Version 6: the object
 /// tracker counts the objects it merged and the tentative ones it let expire, and the Tracker
 /// keeps each keyframe's pose from the robot's own measurements (what neighbours are told).
-pub const FORMAT_VERSION: u32 = 6;
+/// Version 7: the object tracker keeps the returns of each object's latest estimate (the
+/// weights of a merge's centroid).
+pub const FORMAT_VERSION: u32 = 7;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).

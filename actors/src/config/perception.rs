@@ -127,6 +127,12 @@ impl TrackerSection {
         check(non_negative(t.moving_m), "tracker.tracking.moving_m", t.moving_m, "finite and ≥ 0 (0: off)")?;
         check(positive(t.moving_window_s), "tracker.tracking.moving_window_s", t.moving_window_s, "> 0")?;
         check(
+            non_negative(t.max_stack_gap_m),
+            "tracker.tracking.max_stack_gap_m",
+            t.max_stack_gap_m,
+            "finite and ≥ 0",
+        )?;
+        check(
             non_negative(t.tentative_expiry_s),
             "tracker.tracking.tentative_expiry_s",
             t.tentative_expiry_s,

@@ -12,10 +12,11 @@
 //! so its centroid wanders. An object is *moving* when, within `moving_window_s`, its centroid
 //! has been farther than
 //!
-//!   ‖p_now − p_k‖ > `moving_m` + ½ max(size_x, size_y)      (p_k: an earlier sighting in the window)
+//!   ‖(p_now − p_k)_xy‖ > `moving_m` + ½ max(size_x, size_y)      (p_k: an earlier sighting in the window)
 //!
-//! from where it was seen (each sighting kept in its keyframe's frame, so the comparison goes
-//! through the current keyframe poses). A static object's centroid moves with its partial views,
+//! from where it was seen, horizontally (things move over the ground; a column seen whole, then
+//! only its top, moves its centroid up, not away), each sighting kept in its keyframe's frame,
+//! so the comparison goes through the current keyframe poses. A static object's centroid moves with its partial views,
 //! by at most about half its extent, and an id that hops along a row of alike neighbours by
 //! about their spacing (2 m, as `moving_m` was first, took real objects in `quickstart`; 3 m
 //! takes one spurious object there); the short window keeps odometry drift out (a revisit after
@@ -28,12 +29,18 @@
 //! between beams, before `clustering` joined columns, or a bookshelf cut by an occluder) stays
 //! two objects for ever, one above the other. After each keyframe, an object it saw and another
 //! of the same label are one (`merge_stacked`) when either centroid lies in the other's
-//! footprint:
+//! footprint and their vertical extents are at most `max_stack_gap_m` apart:
 //!
 //!   |x_a − x_b| ≤ ½ size_x  and  |y_a − y_b| ≤ ½ size_y      (of a or of b; world axes)
+//!   max(lo_a, lo_b) − min(hi_a, hi_b) ≤ `max_stack_gap_m`   (lo, hi = z ∓ ½ size_z)
 //!
-//! The older object keeps its id and takes the other's sightings (scene graph:
-//! `merge_objects`); moving objects are left alone. A segmenter's false positive (a blob, a
+//! (a lamp post's pieces are a metre apart at most; a chair on the floor above stands
+//! 2 m or more over one below). The older object keeps its id and takes the other's sightings;
+//! its centroid becomes the mean of both estimates' returns, as `clustering` joins a column,
+//! and its size the box holding both (scene graph: `merge_objects`); its sightings are the keyframes that
+//! saw either, so two pieces seen by one keyframe count once toward `confirm_after`. Merging
+//! repeats until no piece is left, since the grown box may reach another. Moving objects are
+//! left alone. A segmenter's false positive (a blob, a
 //! label that bled onto a wall) is seen once or twice where nothing is; left in the map, later
 //! false positives of its class within c_max attach to it until it is confirmed, and the
 //! matcher meets objects that no other robot has. A *tentative* object (fewer than
@@ -42,7 +49,7 @@
 use super::clustering::ObjectCandidate;
 use crate::scene_graph::{KeyframeId, ObjectId, SceneGraph, SceneGraphError};
 use crate::spatial::lap::{self, CostMatrix};
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 
@@ -64,6 +71,9 @@ pub struct TrackerConfig {
     /// Objects of one label standing in one column (either centroid in the other's footprint)
     /// are merged after each keyframe. Default true.
     pub merge_stacked: bool,
+    /// Objects in one column with more free height than this between them stay apart (a chair
+    /// on each floor of a building), m. Default 2.0.
+    pub max_stack_gap_m: f64,
     /// A tentative object (not yet confirmed) not seen for this long is removed, s. 0: never.
     /// Default 10.
     pub tentative_expiry_s: f64,
@@ -78,6 +88,7 @@ impl Default for TrackerConfig {
             moving_m: 3.0,
             moving_window_s: 10.0,
             merge_stacked: true,
+            max_stack_gap_m: 2.0,
             tentative_expiry_s: 10.0,
         }
     }
@@ -103,6 +114,9 @@ pub struct ObjectTracker {
     /// Tentative objects removed so far.
     #[serde(default)]
     expired: u64,
+    /// Each object's returns in its latest estimate (the weights of a merge's centroid).
+    #[serde(default)]
+    points: BTreeMap<ObjectId, usize>,
 }
 
 /// What one keyframe's candidates became.
@@ -130,6 +144,12 @@ impl ObjectTracker {
 
     pub fn is_confirmed(&self, id: ObjectId, config: &TrackerConfig) -> bool {
         self.sightings(id) >= config.confirm_after && !self.moving.contains(&id)
+    }
+
+    /// The returns in `id`'s latest estimate (0 when unknown: a snapshot from before they were
+    /// kept).
+    fn points(&self, id: ObjectId) -> usize {
+        self.points.get(&id).copied().unwrap_or(0)
     }
 
     /// Whether `id` was found moving.
@@ -172,7 +192,7 @@ impl ObjectTracker {
         let reach = config.moving_m + 0.5 * candidate.size.x.max(candidate.size.y);
         let moved = recent
             .iter()
-            .any(|(k, c)| graph.keyframe(*k).is_some_and(|f| (f.world_from_body * c - p_now).norm() > reach));
+            .any(|(k, c)| graph.keyframe(*k).is_some_and(|f| (f.world_from_body * c - p_now).xy().norm() > reach));
         if moved {
             self.moving.insert(id);
             self.recent.remove(&id);
@@ -230,6 +250,7 @@ impl ObjectTracker {
             if *count == config.confirm_after && !self.moving.contains(&id) {
                 update.newly_confirmed.push(id);
             }
+            self.points.insert(id, c.points);
             update.objects.push(id);
         }
         if config.merge_stacked {
@@ -240,7 +261,8 @@ impl ObjectTracker {
     }
 
     /// Merges each object this keyframe saw with the objects of its label in one column with
-    /// it (module doc), into the older id.
+    /// it (module doc), into the older id, until none is left: each merge grows the kept
+    /// object's box, which may reach another piece.
     fn merge_stacked(
         &mut self,
         graph: &mut SceneGraph,
@@ -248,45 +270,75 @@ impl ObjectTracker {
         config: &TrackerConfig,
     ) -> Result<(), SceneGraphError> {
         let seen: BTreeSet<ObjectId> = update.objects.iter().copied().collect();
-        for id in seen {
-            let Some(object) = graph.object(id) else { continue };
-            let (label, size) = (object.label, object.size);
-            let Some(p) = graph.centroid_in_world(id) else { continue };
-            if self.moving.contains(&id) {
-                continue;
-            }
-            let column: Vec<ObjectId> = graph
-                .objects()
-                .filter(|o| o.id != id && o.label == label && !self.moving.contains(&o.id))
-                .filter(|o| {
-                    graph
-                        .centroid_in_world(o.id)
-                        .is_some_and(|q| in_footprint(&q, &p, &size) || in_footprint(&p, &q, &o.size))
-                })
-                .map(|o| o.id)
-                .collect();
-            for other in column {
+        for mut id in seen {
+            while let Some(other) = self.first_in_column(graph, id, config) {
                 let (keep, gone) = (id.min(other), id.max(other));
-                if graph.object(keep).is_none() || graph.object(gone).is_none() {
-                    continue;
-                }
-                let was_confirmed = self.is_confirmed(keep, config) || self.is_confirmed(gone, config);
-                graph.merge_objects(keep, gone)?;
-                let gone_sightings = self.sightings.remove(&gone).unwrap_or(0);
-                *self.sightings.entry(keep).or_insert(0) += gone_sightings;
-                self.recent.remove(&gone);
-                self.merged += 1;
-                for o in update.objects.iter_mut().filter(|o| **o == gone) {
-                    *o = keep;
-                }
-                update.created.retain(|o| *o != gone);
-                update.newly_confirmed.retain(|o| *o != gone);
-                if !was_confirmed && self.is_confirmed(keep, config) && !update.newly_confirmed.contains(&keep) {
-                    update.newly_confirmed.push(keep);
-                }
-                update.merged.push((keep, gone));
+                self.fold(graph, update, keep, gone, config)?;
+                id = keep;
             }
         }
+        Ok(())
+    }
+
+    /// The first object of `id`'s label in one column with it (module doc), if `id` is still
+    /// in the map and neither is moving.
+    fn first_in_column(&self, graph: &SceneGraph, id: ObjectId, config: &TrackerConfig) -> Option<ObjectId> {
+        let object = graph.object(id)?;
+        if self.moving.contains(&id) {
+            return None;
+        }
+        let p = graph.centroid_in_world(id)?;
+        let a = Column { centroid: p, size: object.size };
+        graph
+            .objects()
+            .filter(|o| o.id != id && o.label == object.label && !self.moving.contains(&o.id))
+            .find(|o| {
+                graph
+                    .centroid_in_world(o.id)
+                    .is_some_and(|q| a.is_one_with(&Column { centroid: q, size: o.size }, config.max_stack_gap_m))
+            })
+            .map(|o| o.id)
+    }
+
+    /// Folds `gone` into `keep` (scene graph: the union of the two) and carries the tracker's
+    /// state over: the sightings are the keyframes that saw either (two pieces seen by one
+    /// keyframe are one sighting), the recent sightings both lists, newest kept.
+    fn fold(
+        &mut self,
+        graph: &mut SceneGraph,
+        update: &mut TrackUpdate,
+        keep: ObjectId,
+        gone: ObjectId,
+        config: &TrackerConfig,
+    ) -> Result<(), SceneGraphError> {
+        let was_confirmed = self.is_confirmed(keep, config) || self.is_confirmed(gone, config);
+        let (p_keep, p_gone) = (self.points(keep), self.points(gone));
+        let gone_share = if p_keep + p_gone == 0 { 0.5 } else { p_gone as f64 / (p_keep + p_gone) as f64 };
+        graph.merge_objects(keep, gone, gone_share)?;
+        self.points.remove(&gone);
+        self.points.insert(keep, p_keep + p_gone);
+        let gone_sightings = self.sightings.remove(&gone).unwrap_or(0);
+        let seen_by = u32::try_from(graph.keyframes_observing(keep).count()).unwrap_or(u32::MAX);
+        let sightings = self.sightings.entry(keep).or_insert(0);
+        *sightings = seen_by.max(*sightings).max(gone_sightings);
+        if let Some(gone_recent) = self.recent.remove(&gone) {
+            let recent = self.recent.entry(keep).or_default();
+            let mut both: Vec<_> = recent.drain(..).chain(gone_recent).collect();
+            let stamp = |k: &KeyframeId| graph.keyframe(*k).map_or(f64::NEG_INFINITY, |f| f.stamp);
+            both.sort_by(|(a, _), (b, _)| stamp(a).total_cmp(&stamp(b)).then(a.cmp(b)));
+            let skip = both.len().saturating_sub(MAX_RECENT);
+            recent.extend(both.into_iter().skip(skip));
+        }
+        self.merged += 1;
+        for o in update.objects.iter_mut().filter(|o| **o == gone) {
+            *o = keep;
+        }
+        update.created.retain(|o| *o != gone);
+        update.newly_confirmed.retain(|o| *o != gone);
+        if !was_confirmed && self.is_confirmed(keep, config) && !update.newly_confirmed.contains(&keep) {
+            update.newly_confirmed.push(keep);
+        }
+        update.merged.push((keep, gone));
         Ok(())
     }
 
@@ -313,6 +365,7 @@ impl ObjectTracker {
             graph.remove_object(id)?;
             self.sightings.remove(&id);
             self.recent.remove(&id);
+            self.points.remove(&id);
             self.expired += 1;
             update.expired.push(id);
         }
@@ -320,9 +373,30 @@ impl ObjectTracker {
     }
 }
 
-/// Whether `p` lies within the footprint (xy extent `size`, world axes) of an object at `centre`.
-fn in_footprint(p: &Point3<f64>, centre: &Point3<f64>, size: &nalgebra::Vector3<f64>) -> bool {
-    (p.x - centre.x).abs() <= 0.5 * size.x && (p.y - centre.y).abs() <= 0.5 * size.y
+/// An object's centroid and extent (world axes), as the column test takes them.
+struct Column {
+    centroid: Point3<f64>,
+    size: Vector3<f64>,
+}
+
+impl Column {
+    /// Whether `p` lies within the footprint (the xy extent).
+    fn holds(&self, p: &Point3<f64>) -> bool {
+        (p.x - self.centroid.x).abs() <= 0.5 * self.size.x && (p.y - self.centroid.y).abs() <= 0.5 * self.size.y
+    }
+
+    /// The free height between the two vertical extents; 0 when they overlap.
+    fn gap_to(&self, other: &Column) -> f64 {
+        let (lo_a, hi_a) = (self.centroid.z - 0.5 * self.size.z, self.centroid.z + 0.5 * self.size.z);
+        let (lo_b, hi_b) = (other.centroid.z - 0.5 * other.size.z, other.centroid.z + 0.5 * other.size.z);
+        (lo_a.max(lo_b) - hi_a.min(hi_b)).max(0.0)
+    }
+
+    /// One object in one column (module doc): either centroid in the other's footprint, with
+    /// at most `max_gap_m` of free height between them.
+    fn is_one_with(&self, other: &Column, max_gap_m: f64) -> bool {
+        (self.holds(&other.centroid) || other.holds(&self.centroid)) && self.gap_to(other) <= max_gap_m
+    }
 }
 
 #[cfg(test)]
@@ -514,6 +588,29 @@ mod tests {
         assert_eq!(off.moving_count(), 0);
     }
 
+    /// An 8 m tree seen whole, then less and less of its trunk as occluders rise in front of
+    /// it: its centroid climbs 0.9 m a keyframe, 3.6 m in all (beyond `moving_m` + ½ its width,
+    /// 3.3 m) and it is not moving, since it has not moved over the ground.
+    #[test]
+    fn a_centroid_that_climbs_is_not_motion() {
+        let mut graph = SceneGraph::new();
+        let mut tracker = ObjectTracker::default();
+        keyframes(&mut graph, 5, |_| 0.0);
+        let config = TrackerConfig::default();
+        for k in 0..5u32 {
+            let lo = 1.8 * f64::from(k);
+            let view = ObjectCandidate {
+                label: LabelId(2),
+                centroid: Point3::new(6.0, 1.0, 0.5 * (lo + 8.0)),
+                size: Vector3::new(0.6, 0.6, 8.0 - lo),
+                points: 200,
+            };
+            let update = tracker.update(&mut graph, KeyframeId(k), &[view], &config).unwrap();
+            assert!(update.created.is_empty() || k == 0, "one object throughout: {update:?}");
+        }
+        assert_eq!(tracker.moving_count(), 0);
+    }
+
     /// A static object whose sightings drift apart slowly (the odometry's drift over a long
     /// mission, each re-anchoring within c_max): 4.5 m over 150 s, but never more than 0.9 m
     /// within the window, so never moving.
@@ -533,9 +630,11 @@ mod tests {
 
     /// A lamp post seen, at the first keyframe, as two pieces one above the other (pole and
     /// head: two candidates, so two objects), then whole: the pieces are one object from the
-    /// first keyframe on. Seen whole, its centroid is 1.3 m above the pole's, beyond c_max
-    /// (1 m): a new object, merged too. Confirmed at the third sighting; a chair 1.2 m from it,
-    /// of the same label, stays apart. Without `merge_stacked` three objects stand there.
+    /// first keyframe on, the box of both (0.1–3.9 m up, centre 2.0 m), one sighting. Seen
+    /// whole, its centroid (1.9 m up) is within c_max of that box's centre, 1.3 m above the
+    /// pole's: without the union it would be a new object. Confirmed at the third keyframe, not
+    /// the second (two pieces seen by one keyframe are one sighting); a chair 1.2 m from it, of
+    /// the same label, stays apart. Without `merge_stacked` four objects stand there.
     #[test]
     fn pieces_of_one_column_become_one_object() {
         let piece = |x: f64, z: f64, size: f64| ObjectCandidate {
@@ -548,7 +647,7 @@ mod tests {
             let mut graph = SceneGraph::new();
             let mut tracker = ObjectTracker::default();
             keyframes(&mut graph, 3, |_| 0.0);
-            let first = [piece(5.0, 0.6, 0.15), piece(5.02, 3.7, 0.5), piece(6.2, 0.5, 0.5)];
+            let first = [piece(5.0, 0.6, 0.15), piece(5.02, 3.4, 0.5), piece(6.2, 0.5, 0.5)];
             let whole = [piece(5.01, 1.9, 0.5), piece(6.2, 0.5, 0.5)];
             let updates: Vec<TrackUpdate> = (0..3)
                 .map(|k| {
@@ -565,14 +664,77 @@ mod tests {
         assert_eq!(updates[0].objects, vec![post, post, chair], "both pieces are the post");
         assert_eq!(updates[0].merged.len(), 1);
         assert_eq!(updates[0].created, vec![post, chair], "the head's object was created and merged");
-        assert_eq!((updates[1].objects.clone(), updates[1].merged.len()), (vec![post, chair], 1));
-        assert!(updates[2].merged.is_empty(), "the post is found where it was last seen whole");
-        assert_eq!(tracker.sightings(post), 4);
-        assert_eq!(updates[1].newly_confirmed, vec![post], "confirmed at its third sighting");
+        let box_centre = graph.centroid_in_world(post).map(|p| p.z);
+        assert!(updates[1..].iter().all(|u| u.objects == vec![post, chair] && u.merged.is_empty()), "{updates:?}");
+        assert_eq!(tracker.sightings(post), 3);
+        assert_eq!(updates[2].newly_confirmed, vec![post, chair], "confirmed at its third sighting");
         assert_eq!(graph.keyframes_observing(post).count(), 3);
-        assert_eq!(tracker.merged_count(), 2);
+        assert_eq!(tracker.merged_count(), 1);
+        assert!(box_centre.is_some_and(|z| (z - 1.9).abs() < 1e-9), "the whole post's latest view");
         let (graph, _, _) = run(&TrackerConfig { merge_stacked: false, ..config });
         assert_eq!(graph.object_count(), 4, "without it: pole, head, whole post, chair");
+    }
+
+    /// A column seen in three pieces over three keyframes: the pole (0–1 m up), the head
+    /// (3.5–4.5 m; 2.5 m above the pole, too far to be one with it alone), then the middle
+    /// (1.5–2.8 m), which is one with both. All three are one object after the third keyframe:
+    /// the middle folds into the pole, and the grown box reaches the head.
+    #[test]
+    fn a_column_seen_in_three_pieces_is_merged_whole() {
+        let piece = |lo: f64, hi: f64| ObjectCandidate {
+            label: LabelId(3),
+            centroid: Point3::new(5.0, 0.0, 0.5 * (lo + hi)),
+            size: Vector3::new(0.3, 0.3, hi - lo),
+            points: 50,
+        };
+        let mut graph = SceneGraph::new();
+        let mut tracker = ObjectTracker::default();
+        keyframes(&mut graph, 3, |_| 0.0);
+        let config = TrackerConfig::default();
+        let pieces = [piece(0.0, 1.0), piece(3.5, 4.5), piece(1.5, 2.8)];
+        let mut updates = Vec::new();
+        for k in 0..3u32 {
+            updates.push(tracker.update(&mut graph, KeyframeId(k), &pieces[k as usize..=k as usize], &config).unwrap());
+            if k == 1 {
+                assert_eq!(graph.object_count(), 2, "pole and head apart after two keyframes");
+            }
+        }
+        let (pole, head) = (updates[0].objects[0], updates[1].objects[0]);
+        assert!(updates[2].created.is_empty(), "the middle's object was folded away: {updates:?}");
+        assert_eq!(graph.object_count(), 1);
+        assert_eq!(updates[2].objects, vec![pole]);
+        assert_eq!(updates[2].merged.len(), 2);
+        assert!(graph.object(head).is_none());
+        let post = graph.object(pole).unwrap();
+        // Pole and middle (50 returns each): centroid 1.325 m up, size 2.8 m, read back as the box
+        // 1.325 ± 1.4; with the head (50 returns, 4.0 m): ⅔ · 1.325 + ⅓ · 4.0, box up to 4.5 m.
+        let centroid = graph.centroid_in_world(pole).map(|p| p.z).unwrap_or(f64::NAN);
+        assert!((centroid - (2.0 * 1.325 + 4.0) / 3.0).abs() < 1e-9, "{post:?}");
+        assert!((post.size.z - (4.5 - (1.325 - 1.4))).abs() < 1e-9, "{post:?}");
+        assert_eq!(graph.keyframes_observing(pole).count(), 3);
+        assert_eq!(tracker.sightings(pole), 3);
+    }
+
+    /// Two chairs in one column, one on each floor (3 m apart: 2.1 m of free height between
+    /// them), are two objects; 1.8 m apart (a chair cut by a gap between beams, as merges on
+    /// the library scenarios were up to 1.6 m) they are one.
+    #[test]
+    fn a_chair_on_the_floor_above_stays_apart() {
+        let chair = |z: f64| ObjectCandidate {
+            label: LabelId(6),
+            centroid: Point3::new(5.0, 0.0, z),
+            size: Vector3::new(0.5, 0.5, 0.9),
+            points: 50,
+        };
+        for (above, objects) in [(3.45, 2), (3.15, 1)] {
+            let mut graph = SceneGraph::new();
+            let mut tracker = ObjectTracker::default();
+            keyframes(&mut graph, 2, |_| 0.0);
+            let config = TrackerConfig::default();
+            tracker.update(&mut graph, KeyframeId(0), &[chair(0.45)], &config).unwrap();
+            tracker.update(&mut graph, KeyframeId(1), &[chair(above)], &config).unwrap();
+            assert_eq!(graph.object_count(), objects, "the upper chair at {above} m");
+        }
     }
 
     /// A false positive seen once (a blob of class 2 at (4, 3)) is gone once it has not been

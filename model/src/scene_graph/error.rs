@@ -9,7 +9,7 @@ pub enum SceneGraphError {
     UnknownKeyframe(KeyframeId),
     #[error("object {0} is not in the scene graph")]
     UnknownObject(ObjectId),
-    #[error("objects {keep} and {gone} cannot be merged: one object, or two labels")]
+    #[error("objects {keep} and {gone} cannot be merged: one object, two labels, or a share outside [0, 1]")]
     NotOneObject { keep: ObjectId, gone: ObjectId },
     #[error("{what} is not finite")]
     NonFinite { what: &'static str },

@@ -177,29 +177,45 @@ impl SceneGraph {
     }
 
     /// Folds object `gone` into `keep`, one object the tracker saw as two: `keep` takes every
-    /// sighting of `gone`, and its anchor, centroid and size when `gone`'s anchor is the more
-    /// recent; `gone` and its links are removed. Both must exist, be distinct and share a label;
-    /// otherwise nothing changes.
-    pub fn merge_objects(&mut self, keep: ObjectId, gone: ObjectId) -> Result<(), SceneGraphError> {
+    /// sighting of `gone` and the more recent of the two anchors. Its centroid is the mean of
+    /// both pieces' points, `gone_share` ∈ [0, 1] being the share of them in `gone`'s estimate,
+    /// and its size the box holding both (world axes; the box of each is its centroid ± ½ size):
+    /// one object seen in two pieces, a lamp post cut by a gap between beams, is their union.
+    ///
+    /// ```text
+    /// centroid = (1 − w) c_keep + w c_gone,     w = gone_share
+    /// lo = min(c_k − ½ s_k, c_g − ½ s_g),  hi = max(c_k + ½ s_k, c_g + ½ s_g),  size = hi − lo
+    /// ```
+    ///
+    /// `gone` and its links are removed. Both must exist, be distinct and share a label, and
+    /// `gone_share` must lie in [0, 1]; otherwise nothing changes.
+    pub fn merge_objects(&mut self, keep: ObjectId, gone: ObjectId, gone_share: f64) -> Result<(), SceneGraphError> {
         let (Some(k), Some(g)) = (self.objects.get(&keep), self.objects.get(&gone)) else {
             let missing = if self.objects.contains_key(&keep) { gone } else { keep };
             return Err(SceneGraphError::UnknownObject(missing));
         };
-        if keep == gone || k.label != g.label {
+        if keep == gone || k.label != g.label || !(0.0..=1.0).contains(&gone_share) {
             return Err(SceneGraphError::NotOneObject { keep, gone });
         }
         let fresher = (self.stamp_of(g.anchor)?, g.anchor) > (self.stamp_of(k.anchor)?, k.anchor);
+        let anchor = if fresher { g.anchor } else { k.anchor };
+        let world_from_anchor =
+            self.keyframes.get(&anchor).ok_or(SceneGraphError::UnknownKeyframe(anchor))?.world_from_body;
+        let (Some(c_k), Some(c_g)) = (self.centroid_in_world(keep), self.centroid_in_world(gone)) else {
+            return Err(SceneGraphError::UnknownKeyframe(if fresher { k.anchor } else { g.anchor }));
+        };
+        let lo = (c_k.coords - 0.5 * k.size).inf(&(c_g.coords - 0.5 * g.size));
+        let hi = (c_k.coords + 0.5 * k.size).sup(&(c_g.coords + 0.5 * g.size));
+        let centroid_in_world = Point3::from(c_k.coords.lerp(&c_g.coords, gone_share));
         let removed = self.remove_object(gone)?;
         for keyframe in &removed.observed_in {
             self.objects_by_keyframe.entry(*keyframe).or_default().insert(keep);
         }
         let object = self.objects.get_mut(&keep).ok_or(SceneGraphError::UnknownObject(keep))?;
         object.observed_in.extend(removed.observed_in);
-        if fresher {
-            object.anchor = removed.anchor;
-            object.centroid_in_anchor = removed.centroid_in_anchor;
-            object.size = removed.size;
-        }
+        object.anchor = anchor;
+        object.centroid_in_anchor = world_from_anchor.inverse_transform_point(&centroid_in_world);
+        object.size = hi - lo;
         Ok(())
     }
 
@@ -388,29 +404,40 @@ mod tests {
         assert!((g.centroid_in_world(id).unwrap() - expected).norm() < 1e-12);
     }
 
-    /// Two objects that are one: the kept id takes every link, and the centroid and size of
-    /// the fresher sighting; what cannot be merged (an unknown id, itself, another label)
-    /// leaves the graph as it was.
+    /// Two objects that are one: the kept id takes every link, the fresher anchor, the mean of
+    /// both pieces' returns and the box holding both; what cannot be merged (an unknown id,
+    /// itself, another label, a share outside [0, 1]) leaves the graph as it was.
     #[test]
-    fn merging_two_objects_keeps_every_link_and_the_fresher_estimate() {
+    fn merging_two_objects_keeps_every_link_and_the_box_of_both() {
         let mut g = graph_with_three_keyframes();
         let post = LabelId(3);
+        // The lower piece of a lamp post, 0–1.2 m, and its upper piece, 3.0–5.0 m, a little off.
         let a = g.add_object(post, Point3::new(7.0, 2.0, 0.6), Vector3::new(0.2, 0.2, 1.2), KeyframeId(0)).unwrap();
         let b = g.add_object(post, Point3::new(7.0, 2.0, 3.7), Vector3::new(0.5, 0.5, 0.5), KeyframeId(1)).unwrap();
-        g.observe_object(b, Point3::new(7.0, 2.0, 2.0), Vector3::new(0.5, 0.5, 4.0), KeyframeId(2)).unwrap();
+        g.observe_object(b, Point3::new(7.1, 2.0, 4.0), Vector3::new(0.4, 0.2, 2.0), KeyframeId(2)).unwrap();
         let chair = g.add_object(LabelId(1), Point3::new(9.0, 2.0, 0.5), Vector3::repeat(0.5), KeyframeId(2)).unwrap();
         let before = g.clone();
-        for (keep, gone) in [(a, ObjectId(99)), (ObjectId(99), a), (a, a), (a, chair)] {
-            assert!(g.merge_objects(keep, gone).is_err(), "{keep} ← {gone}");
+        for (keep, gone, share) in [
+            (a, ObjectId(99), 0.5),
+            (ObjectId(99), a, 0.5),
+            (a, a, 0.5),
+            (a, chair, 0.5),
+            (a, b, 1.5),
+            (a, b, f64::NAN),
+        ] {
+            assert!(g.merge_objects(keep, gone, share).is_err(), "{keep} ← {gone} ({share})");
             assert_eq!(g, before);
         }
-        g.merge_objects(a, b).unwrap();
+        // The pole's estimate holds three times the head's returns.
+        g.merge_objects(a, b, 0.25).unwrap();
         assert_eq!(g.object_count(), 2);
         assert!(g.object(b).is_none());
         let kept = g.object(a).unwrap();
         assert_eq!(kept.anchor, KeyframeId(2), "b's sighting at keyframe 2 is the freshest");
-        assert!((g.centroid_in_world(a).unwrap() - Point3::new(7.0, 2.0, 2.0)).norm() < 1e-12);
-        assert_eq!(kept.size, Vector3::new(0.5, 0.5, 4.0));
+        // ¾ (7.0, 2.0, 0.6) + ¼ (7.1, 2.0, 4.0); the box x: [6.9, 7.3], y: [1.9, 2.1], z: [0.0, 5.0].
+        let centroid = g.centroid_in_world(a).unwrap();
+        assert!((centroid - Point3::new(7.025, 2.0, 1.45)).norm() < 1e-12, "{centroid}");
+        assert!((kept.size - Vector3::new(0.4, 0.2, 5.0)).norm() < 1e-12, "{}", kept.size);
         assert_eq!(g.keyframes_observing(a).collect::<Vec<_>>(), [0, 1, 2].map(KeyframeId));
         for k in 0..3 {
             assert!(!g.objects_observed_in(KeyframeId(k)).any(|o| o == b));
