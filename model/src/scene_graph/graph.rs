@@ -449,6 +449,40 @@ mod tests {
         assert!(g.remove_object(chair).is_err());
     }
 
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(128))]
+        /// Whatever two objects of one label a merge folds, from keyframes turned any way: the
+        /// kept centroid lies on the segment between the two, at `gone_share` of the way; the
+        /// kept box holds both boxes; the kept object is seen by every keyframe that saw either.
+        #[test]
+        fn a_merge_keeps_both_boxes_and_weighs_the_centroid(
+            yaws in proptest::array::uniform2(-3.1f64..3.1),
+            a in proptest::array::uniform3(-20.0f64..20.0),
+            b in proptest::array::uniform3(-20.0f64..20.0),
+            size_a in proptest::array::uniform3(0.0f64..5.0),
+            size_b in proptest::array::uniform3(0.0f64..5.0),
+            share in 0.0f64..=1.0,
+        ) {
+            let mut g = SceneGraph::new();
+            g.add_keyframe(kf(0, 0.0, 1.0, yaws[0])).unwrap();
+            g.add_keyframe(kf(1, 1.0, -2.0, yaws[1])).unwrap();
+            let (a, b) = (Point3::from(a), Point3::from(b));
+            let (size_a, size_b) = (Vector3::from(size_a), Vector3::from(size_b));
+            let keep = g.add_object(LabelId(2), a, size_a, KeyframeId(0)).unwrap();
+            let gone = g.add_object(LabelId(2), b, size_b, KeyframeId(1)).unwrap();
+            g.merge_objects(keep, gone, share).unwrap();
+            proptest::prop_assert!(g.object(gone).is_none());
+            let merged = g.object(keep).unwrap();
+            proptest::prop_assert_eq!(merged.anchor, KeyframeId(1));
+            let centroid = g.centroid_in_world(keep).unwrap();
+            proptest::prop_assert!((centroid - (a + share * (b - a))).norm() < 1e-9, "{}", centroid);
+            let lo = (a.coords - 0.5 * size_a).inf(&(b.coords - 0.5 * size_b));
+            let hi = (a.coords + 0.5 * size_a).sup(&(b.coords + 0.5 * size_b));
+            proptest::prop_assert!((merged.size - (hi - lo)).norm() < 1e-9, "{}", merged.size);
+            proptest::prop_assert_eq!(g.keyframes_observing(keep).collect::<Vec<_>>(), vec![KeyframeId(0), KeyframeId(1)]);
+        }
+    }
+
     #[test]
     fn failed_pose_update_changes_nothing() {
         let mut g = graph_with_three_keyframes();
