@@ -37,7 +37,8 @@
 //! (the pieces merged on the library scenarios were at most 1.6 m apart; a chair on the floor
 //! above stands 2.1 m or more over one below). The older object keeps its id and takes the other's sightings;
 //! its centroid becomes the mean of both estimates' returns, as `clustering` joins a column,
-//! and its size the box holding both (scene graph: `merge_objects`); its sightings are the keyframes that
+//! and its size the extent of both (scene graph: `merge_objects`; read back, like every
+//! object's, as a box centred on the centroid); its sightings are the keyframes that
 //! saw either, so two pieces seen by one keyframe count once toward `confirm_after`. Merging
 //! repeats until no piece is left, since the grown box may reach another. Moving objects are
 //! left alone. A segmenter's false positive (a blob, a
@@ -68,8 +69,9 @@ pub struct TrackerConfig {
     pub moving_m: f64,
     /// The window over which an object's sightings are compared, s. Default 10.
     pub moving_window_s: f64,
-    /// Objects of one label standing in one column (either centroid in the other's footprint)
-    /// are merged after each keyframe. Default true.
+    /// Objects of one label standing in one column (either centroid in the other's footprint,
+    /// at most `max_stack_gap_m` of free height between them) are merged after each keyframe.
+    /// Default true.
     pub merge_stacked: bool,
     /// Objects in one column with more free height than this between them stay apart (a chair
     /// on each floor of a building), m. Default 2.0.
@@ -114,7 +116,8 @@ pub struct ObjectTracker {
     /// Tentative objects removed so far.
     #[serde(default)]
     expired: u64,
-    /// Each object's returns in its latest estimate (the weights of a merge's centroid).
+    /// Each object's returns in its latest estimate (the weights of a merge's centroid); after a
+    /// merge, the sum of both, until the object's next sighting replaces its estimate.
     #[serde(default)]
     points: BTreeMap<ObjectId, usize>,
 }
@@ -146,8 +149,7 @@ impl ObjectTracker {
         self.sightings(id) >= config.confirm_after && !self.moving.contains(&id)
     }
 
-    /// The returns in `id`'s latest estimate (0 when unknown: a snapshot from before they were
-    /// kept).
+    /// The returns in `id`'s latest estimate (0 when unknown).
     fn points(&self, id: ObjectId) -> usize {
         self.points.get(&id).copied().unwrap_or(0)
     }
@@ -311,7 +313,7 @@ impl ObjectTracker {
         gone: ObjectId,
         config: &TrackerConfig,
     ) -> Result<(), SceneGraphError> {
-        let was_confirmed = self.is_confirmed(keep, config) || self.is_confirmed(gone, config);
+        let keep_was_confirmed = self.is_confirmed(keep, config);
         let (p_keep, p_gone) = (self.points(keep), self.points(gone));
         let gone_share = if p_keep + p_gone == 0 { 0.5 } else { p_gone as f64 / (p_keep + p_gone) as f64 };
         graph.merge_objects(keep, gone, gone_share)?;
@@ -335,7 +337,8 @@ impl ObjectTracker {
         }
         update.created.retain(|o| *o != gone);
         update.newly_confirmed.retain(|o| *o != gone);
-        if !was_confirmed && self.is_confirmed(keep, config) && !update.newly_confirmed.contains(&keep) {
+        // `keep` is confirmed now if either was: an id newly confirmed for whoever follows ids.
+        if !keep_was_confirmed && self.is_confirmed(keep, config) && !update.newly_confirmed.contains(&keep) {
             update.newly_confirmed.push(keep);
         }
         update.merged.push((keep, gone));
@@ -630,7 +633,7 @@ mod tests {
 
     /// A lamp post seen, at the first keyframe, as two pieces one above the other (pole and
     /// head: two candidates, so two objects), then whole: the pieces are one object from the
-    /// first keyframe on, the box of both (0.1–3.9 m up, centre 2.0 m), one sighting. Seen
+    /// first keyframe on, their returns' mean (2.0 m up: 50 returns each), one sighting. Seen
     /// whole, its centroid (1.9 m up) is within c_max of that box's centre, 1.3 m above the
     /// pole's: without the union it would be a new object. Confirmed at the third keyframe, not
     /// the second (two pieces seen by one keyframe are one sighting); a chair 1.2 m from it, of
@@ -713,6 +716,37 @@ mod tests {
         assert!((post.size.z - (4.5 - (1.325 - 1.4))).abs() < 1e-9, "{post:?}");
         assert_eq!(graph.keyframes_observing(pole).count(), 3);
         assert_eq!(tracker.sightings(pole), 3);
+    }
+
+    /// A tentative chair (one sighting) and a confirmed one 1.2 m from it (three), merged when a
+    /// wider view of the second reaches the first: the merged object keeps the older, tentative
+    /// id, and that id is reported newly confirmed.
+    #[test]
+    fn a_confirmed_piece_folded_into_a_tentative_one_confirms_the_kept_id() {
+        let chair = |x: f64, width: f64| ObjectCandidate {
+            label: LabelId(6),
+            centroid: Point3::new(x, 0.0, 0.45),
+            size: Vector3::new(width, 0.5, 0.9),
+            points: 50,
+        };
+        let mut graph = SceneGraph::new();
+        let mut tracker = ObjectTracker::default();
+        keyframes(&mut graph, 5, |_| 0.0);
+        let config = TrackerConfig::default();
+        let seen = [
+            vec![chair(5.0, 0.5)],
+            vec![chair(6.2, 0.5)],
+            vec![chair(6.2, 0.5)],
+            vec![chair(6.2, 0.5)],
+            vec![chair(6.2, 2.6)],
+        ];
+        let updates: Vec<TrackUpdate> =
+            (0..5u32).map(|k| tracker.update(&mut graph, KeyframeId(k), &seen[k as usize], &config).unwrap()).collect();
+        let (first, second) = (updates[0].objects[0], updates[1].objects[0]);
+        assert_eq!(updates[3].newly_confirmed, vec![second]);
+        assert_eq!(updates[4].merged, vec![(first, second)]);
+        assert_eq!(updates[4].newly_confirmed, vec![first], "{:?}", updates[4]);
+        assert!(tracker.is_confirmed(first, &config) && graph.object_count() == 1);
     }
 
     /// Two chairs in one column, one on each floor (3 m apart: 2.1 m of free height between

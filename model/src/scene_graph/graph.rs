@@ -179,8 +179,11 @@ impl SceneGraph {
     /// Folds object `gone` into `keep`, one object the tracker saw as two: `keep` takes every
     /// sighting of `gone` and the more recent of the two anchors. Its centroid is the mean of
     /// both pieces' points, `gone_share` ∈ [0, 1] being the share of them in `gone`'s estimate,
-    /// and its size the box holding both (world axes; the box of each is its centroid ± ½ size):
-    /// one object seen in two pieces, a lamp post cut by a gap between beams, is their union.
+    /// and its size the extent of both (world axes; the box of each read as its centroid ± ½
+    /// size): one object seen in two pieces, a lamp post cut by a gap between beams, is their
+    /// union. The size is stored beside the centroid, not the extent's centre, so a box read
+    /// back as centroid ± ½ size is off by the difference where the pieces' returns are uneven
+    /// (as every object's box is where its returns crowd to one end).
     ///
     /// ```text
     /// centroid = (1 − w) c_keep + w c_gone,     w = gone_share
@@ -405,10 +408,10 @@ mod tests {
     }
 
     /// Two objects that are one: the kept id takes every link, the fresher anchor, the mean of
-    /// both pieces' returns and the box holding both; what cannot be merged (an unknown id,
+    /// both pieces' returns and the extent of both; what cannot be merged (an unknown id,
     /// itself, another label, a share outside [0, 1]) leaves the graph as it was.
     #[test]
-    fn merging_two_objects_keeps_every_link_and_the_box_of_both() {
+    fn merging_two_objects_keeps_every_link_and_the_extent_of_both() {
         let mut g = graph_with_three_keyframes();
         let post = LabelId(3);
         // The lower piece of a lamp post, 0–1.2 m, and its upper piece, 3.0–5.0 m, a little off.
@@ -452,8 +455,9 @@ mod tests {
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(128))]
         /// Whatever two objects of one label a merge folds, from keyframes turned any way: the
-        /// kept centroid lies on the segment between the two, at `gone_share` of the way; the
-        /// kept box holds both boxes; the kept object is seen by every keyframe that saw either.
+        /// kept centroid lies on the segment between the two, at `gone_share` of the way (in
+        /// the world, through the anchors' poses); the kept size is the extent of both boxes;
+        /// the kept object is seen by every keyframe that saw either.
         #[test]
         fn a_merge_keeps_both_boxes_and_weighs_the_centroid(
             yaws in proptest::array::uniform2(-3.1f64..3.1),
