@@ -224,6 +224,9 @@ mod tests {
         std::env::set_var("SGM_TEST_E__MATCHER__SCAN_CONTEXT__MAX_PLACES", "1");
         let e = RobotConfig::load_with_env(None, "SGM_TEST_E").unwrap_err();
         assert_eq!(e.to_string(), "matcher.scan_context.max_places = 1: allowed ≥ 2");
+        std::env::set_var("SGM_TEST_F__TRACKER__TRACKING__MAX_STACK_GAP_M", "-1");
+        let e = RobotConfig::load_with_env(None, "SGM_TEST_F").unwrap_err();
+        assert_eq!(e.to_string(), "tracker.tracking.max_stack_gap_m = -1: allowed finite and ≥ 0");
         writeln!(file, "[comms.limits]\nbogus = 1").unwrap();
         let e = RobotConfig::load_with_env(Some(file.path()), "SGM_TEST_D").unwrap_err();
         assert!(e.to_string().contains("bogus"), "{e}");
