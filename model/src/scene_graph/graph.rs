@@ -204,9 +204,8 @@ impl SceneGraph {
         let anchor = if fresher { g.anchor } else { k.anchor };
         let world_from_anchor =
             self.keyframes.get(&anchor).ok_or(SceneGraphError::UnknownKeyframe(anchor))?.world_from_body;
-        let (Some(c_k), Some(c_g)) = (self.centroid_in_world(keep), self.centroid_in_world(gone)) else {
-            return Err(SceneGraphError::UnknownKeyframe(if fresher { k.anchor } else { g.anchor }));
-        };
+        let c_k = self.centroid_in_world(keep).ok_or(SceneGraphError::UnknownKeyframe(k.anchor))?;
+        let c_g = self.centroid_in_world(gone).ok_or(SceneGraphError::UnknownKeyframe(g.anchor))?;
         let lo = (c_k.coords - 0.5 * k.size).inf(&(c_g.coords - 0.5 * g.size));
         let hi = (c_k.coords + 0.5 * k.size).sup(&(c_g.coords + 0.5 * g.size));
         let centroid_in_world = Point3::from(c_k.coords.lerp(&c_g.coords, gone_share));
