@@ -203,7 +203,7 @@ impl Handler<SensorFrame> for Fusion {
                     }
                 }
             };
-            let fused = self.fusion.fuse(&frame.points_in_body, labels);
+            let fused = self.fusion.fuse(&frame.points_in_body, labels, &frame.odom_from_body.rotation);
             for pixel in &fused.new_unknown_ids {
                 let segmenter = self.fusion.segmenter();
                 tracing::warn!(

@@ -58,16 +58,19 @@ fn scene() -> (Vec<Point3<f64>>, CameraModel, LabelImage, Pose3) {
 fn fusion_and_clustering(c: &mut Criterion) {
     let (points, camera, image, camera_from_lidar) = scene();
     let config = ClusterConfig::default();
+    let level = UnitQuaternion::identity();
     c.bench_function("fusion_20k", |b| {
         b.iter(|| label_points(black_box(&points), &camera_from_lidar, &camera, &image))
     });
     let labels = label_points(&points, &camera_from_lidar, &camera, &image).unwrap_or_default();
     let objects_only: Vec<_> = labels.iter().enumerate().map(|(k, l)| if k % 2 == 1 { *l } else { None }).collect();
-    c.bench_function("clustering_20k_objects_only", |b| b.iter(|| cluster(black_box(&points), &objects_only, &config)));
+    c.bench_function("clustering_20k_objects_only", |b| {
+        b.iter(|| cluster(black_box(&points), &objects_only, &config, &level))
+    });
     c.bench_function("fusion_and_clustering_20k", |b| {
         b.iter(|| {
             let labels = label_points(black_box(&points), &camera_from_lidar, &camera, &image).unwrap_or_default();
-            cluster(&points, &labels, &config)
+            cluster(&points, &labels, &config, &level)
         })
     });
     // The label vote as Fusion runs it: every labelled return votes (ground as class 0), object

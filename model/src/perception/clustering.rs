@@ -20,9 +20,17 @@
 //! (t: `tolerance_m`; joined transitively). Objects of one class do not stand on each other in
 //! the worlds we model; different classes (a chair under a table) are never joined. Clusters
 //! are kept when their point count and extent are plausible for the class.
+//!
+//! Extents (a candidate's size, the footprints above, the height test) are measured along the
+//! axes of the frame the caller names, `axes_from_points`: the rotation of the odometry frame
+//! from the body frame, gravity-aligned when an IMU is present and turned like the map up to
+//! drift. A bench 2 m long along the world's x then has size (2, 0.5, ·) whichever way the robot
+//! faced, the tracker and the object cloud read it along the map's axes, and a column stays a
+//! column on a tilted body. Clustering itself (the voxels) and the centroid are in the points'
+//! own frame.
 
 use crate::scene_graph::LabelId;
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Point3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -52,8 +60,8 @@ pub struct ClusterConfig {
     pub default_limits: ClassLimits,
     /// Per-class limits, by class id.
     pub classes: BTreeMap<u16, ClassLimits>,
-    /// Clusters flatter than this along z are refused (labels bleeding onto the ground behind
-    /// an object, in the sensor's upright frame), m. Default 0: off.
+    /// Clusters flatter than this along the vertical are refused (labels bleeding onto the
+    /// ground behind an object), m. Default 0: off.
     pub min_height_m: f64,
     /// Join clusters of one class stacked in one column (module doc). Default true.
     pub merge_stacked: bool,
@@ -76,14 +84,20 @@ impl Default for ClusterConfig {
 pub struct ObjectCandidate {
     pub label: LabelId,
     pub centroid: Point3<f64>,
-    /// Axis-aligned extent, m.
+    /// Extent along the axes of `axes_from_points` (module doc): the odometry frame's, m.
     pub size: Vector3<f64>,
     pub points: usize,
 }
 
-/// Clusters `points` by class (`labels[k]` is point k's class; `None` points are ignored).
+/// Clusters `points` by class (`labels[k]` is point k's class; `None` points are ignored),
+/// measuring extents along the axes of `axes_from_points` (module doc).
 /// Output is ordered by class, then by each cluster's first point: deterministic.
-pub fn cluster(points: &[Point3<f64>], labels: &[Option<LabelId>], config: &ClusterConfig) -> Vec<ObjectCandidate> {
+pub fn cluster(
+    points: &[Point3<f64>],
+    labels: &[Option<LabelId>],
+    config: &ClusterConfig,
+    axes_from_points: &UnitQuaternion<f64>,
+) -> Vec<ObjectCandidate> {
     let mut by_class: BTreeMap<LabelId, Vec<usize>> = BTreeMap::new();
     for (k, (p, l)) in points.iter().zip(labels).enumerate() {
         if let Some(l) = l {
@@ -142,7 +156,8 @@ pub fn cluster(points: &[Point3<f64>], labels: &[Option<LabelId>], config: &Clus
         let mut ordered: Vec<(usize, Vec<usize>)> =
             clusters.into_iter().map(|(r, pts)| (first_of_root.get(&r).copied().unwrap_or(usize::MAX), pts)).collect();
         ordered.sort_by_key(|(first, _)| *first);
-        let mut pieces: Vec<Piece> = ordered.iter().map(|(_, members)| Piece::of(points, members)).collect();
+        let mut pieces: Vec<Piece> =
+            ordered.iter().map(|(_, members)| Piece::of(points, members, axes_from_points)).collect();
         if config.merge_stacked {
             pieces = join_columns(pieces, size);
         }
@@ -182,7 +197,7 @@ fn unite(parent: &mut [usize], a: usize, b: usize) {
     }
 }
 
-/// One cluster's bounds and point sum.
+/// One cluster's bounds (along the measuring axes) and point sum (in the points' frame).
 #[derive(Clone, Copy)]
 struct Piece {
     lo: Vector3<f64>,
@@ -192,12 +207,13 @@ struct Piece {
 }
 
 impl Piece {
-    fn of(points: &[Point3<f64>], members: &[usize]) -> Self {
+    fn of(points: &[Point3<f64>], members: &[usize], axes_from_points: &UnitQuaternion<f64>) -> Self {
         let (mut lo, mut hi, mut sum) = (Vector3::repeat(f64::MAX), Vector3::repeat(f64::MIN), Vector3::zeros());
         for &k in members {
             let p = points[k].coords;
-            lo = lo.inf(&p);
-            hi = hi.sup(&p);
+            let along_axes = axes_from_points * p;
+            lo = lo.inf(&along_axes);
+            hi = hi.sup(&along_axes);
             sum += p;
         }
         Self { lo, hi, sum, count: members.len() }
@@ -264,6 +280,10 @@ mod tests {
             .collect()
     }
 
+    fn level() -> UnitQuaternion<f64> {
+        UnitQuaternion::identity()
+    }
+
     #[test]
     fn flat_clusters_are_refused_when_asked() {
         let mut rng = ChaCha8Rng::seed_from_u64(2);
@@ -272,9 +292,10 @@ mod tests {
             (0..200).map(|_| Point3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), -0.8)).collect();
         points.extend(boxed(&mut rng, [10.0, 0.0, 0.0], 0.5, 200));
         let labels = vec![Some(LabelId(3)); points.len()];
-        let all = cluster(&points, &labels, &ClusterConfig::default());
+        let all = cluster(&points, &labels, &ClusterConfig::default(), &level());
         assert_eq!(all.len(), 2);
-        let upright = cluster(&points, &labels, &ClusterConfig { min_height_m: 0.2, ..ClusterConfig::default() });
+        let upright =
+            cluster(&points, &labels, &ClusterConfig { min_height_m: 0.2, ..ClusterConfig::default() }, &level());
         assert_eq!(upright.len(), 1);
         assert!((upright[0].centroid.x - 10.0).abs() < 0.1);
     }
@@ -295,7 +316,7 @@ mod tests {
         add(boxed(&mut rng, [5.0, 5.0, 0.5], 0.3, 300), None); // unlabelled
         let wall: Vec<Point3<f64>> = (0..600).map(|k| Point3::new(20.0 + 0.05 * k as f64, 0.0, 1.0)).collect(); // 30 m long
         add(wall, Some(1));
-        let candidates = cluster(&points, &labels, &ClusterConfig::default());
+        let candidates = cluster(&points, &labels, &ClusterConfig::default(), &level());
         assert_eq!(candidates.len(), 3, "{candidates:?}");
         let chairs: Vec<_> = candidates.iter().filter(|c| c.label == LabelId(1)).collect();
         assert_eq!(chairs.len(), 2);
@@ -307,7 +328,7 @@ mod tests {
         // Per-class limits: walls of class 1 become acceptable with a larger extent.
         let mut config = ClusterConfig::default();
         config.classes.insert(1, ClassLimits { max_extent_m: 50.0, ..ClassLimits::default() });
-        assert_eq!(cluster(&points, &labels, &config).len(), 4);
+        assert_eq!(cluster(&points, &labels, &config, &level()).len(), 4);
     }
 
     /// A lamp post seen with a gap between beams: its pole (0.15 m across, up to 1.2 m) and its
@@ -333,7 +354,7 @@ mod tests {
         add(boxed(&mut rng, [11.2, 0.0, 0.4], 0.25, 100), 2); // its neighbour
         add(boxed(&mut rng, [10.0, 0.0, 1.6], 0.4, 100), 3); // a table over the first chair
         let config = ClusterConfig::default();
-        let candidates = cluster(&points, &labels, &config);
+        let candidates = cluster(&points, &labels, &config, &level());
         let posts: Vec<_> = candidates.iter().filter(|c| c.label == LabelId(1)).collect();
         assert_eq!(posts.len(), 2, "{posts:?}");
         for (post, x) in posts.iter().zip([0.0, 3.0]) {
@@ -345,7 +366,41 @@ mod tests {
         }
         assert_eq!(candidates.iter().filter(|c| c.label == LabelId(2)).count(), 2, "the chairs stay apart");
         assert_eq!(candidates.iter().filter(|c| c.label == LabelId(3)).count(), 1);
-        let apart = cluster(&points, &labels, &ClusterConfig { merge_stacked: false, ..config });
+        let apart = cluster(&points, &labels, &ClusterConfig { merge_stacked: false, ..config }, &level());
         assert_eq!(apart.iter().filter(|c| c.label == LabelId(1)).count(), 4, "two pieces per post without it");
+    }
+
+    /// A bench 2 m long along the world's x, 0.5 m deep, 0.8 m high, seen from a body turned by
+    /// 90° (the bench runs along the body's y) and from one pitched by 20° on a slope: measured
+    /// along the odometry axes it is 2 × 0.5 × 0.8 both times. Along the body's axes it was
+    /// 0.5 × 2 (turned), and 0.8 m high grew to about 1.4 m (pitched).
+    #[test]
+    fn extents_are_measured_along_the_axes_given() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let in_world: Vec<Vector3<f64>> = (0..400)
+            .map(|_| {
+                Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-0.25..0.25), rng.random_range(-0.4..0.4))
+            })
+            .collect();
+        let labels = vec![Some(LabelId(5)); in_world.len()];
+        for odom_from_body in [
+            UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2),
+            UnitQuaternion::from_euler_angles(0.0, 20f64.to_radians(), 0.7),
+        ] {
+            let in_body: Vec<Point3<f64>> = in_world
+                .iter()
+                .map(|p| Point3::from(odom_from_body.inverse() * (p + Vector3::new(4.0, 0.0, 0.0))))
+                .collect();
+            let [ref bench] = cluster(&in_body, &labels, &ClusterConfig::default(), &odom_from_body)[..] else {
+                panic!("one bench");
+            };
+            assert!((bench.size - Vector3::new(2.0, 0.5, 0.8)).amax() < 0.05, "{}", bench.size);
+            // The centroid stays in the body frame.
+            assert!((odom_from_body * bench.centroid.coords - Vector3::new(4.0, 0.0, 0.0)).norm() < 0.05);
+            let [ref along_body] = cluster(&in_body, &labels, &ClusterConfig::default(), &level())[..] else {
+                panic!("one bench");
+            };
+            assert!((along_body.size - bench.size).amax() > 0.5, "{} {}", along_body.size, bench.size);
+        }
     }
 }

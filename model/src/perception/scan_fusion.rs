@@ -13,7 +13,7 @@ use super::clustering::{cluster, ClusterConfig, ObjectCandidate};
 use super::label_map::{LabelMap, Mapped, UnknownLabels, NO_CLASS};
 use super::label_vote::{vote, LabelVote};
 use crate::scene_graph::LabelId;
-use nalgebra::Point3;
+use nalgebra::{Point3, UnitQuaternion};
 
 /// How scans are fused.
 #[derive(Clone, Debug, PartialEq)]
@@ -59,8 +59,15 @@ impl ScanFusion {
         &self.unknown
     }
 
-    /// Fuses one scan: `pixels[k]` is point k's pixel value (`None`: unlabelled).
-    pub fn fuse(&mut self, points_in_body: &[Point3<f64>], pixels: Vec<Option<LabelId>>) -> FusedScan {
+    /// Fuses one scan: `pixels[k]` is point k's pixel value (`None`: unlabelled). Candidates'
+    /// extents are measured along the odometry frame's axes (`clustering`), `odom_from_body`
+    /// being the body's attitude at the scan.
+    pub fn fuse(
+        &mut self,
+        points_in_body: &[Point3<f64>],
+        pixels: Vec<Option<LabelId>>,
+        odom_from_body: &UnitQuaternion<f64>,
+    ) -> FusedScan {
         let mut new_unknown_ids = Vec::new();
         let labels: Vec<Option<LabelId>> = pixels
             .into_iter()
@@ -99,7 +106,7 @@ impl ScanFusion {
                 clustered.push(if d2 <= near { label } else { None });
             }
         }
-        let candidates = cluster(&points, &clustered, &self.config.clustering);
+        let candidates = cluster(&points, &clustered, &self.config.clustering, odom_from_body);
         FusedScan { points_in_body: points, labels: kept, candidates, new_unknown_ids }
     }
 }
@@ -151,7 +158,7 @@ mod tests {
         points.extend(block(60.0)); // beyond the maximum range
         points.push(Point3::new(f64::NAN, 0.0, 0.0));
         let n = points.len();
-        let fused = fusion.fuse(&points, vec![Some(LabelId(1)); n]);
+        let fused = fusion.fuse(&points, vec![Some(LabelId(1)); n], &UnitQuaternion::identity());
         assert_eq!(fused.points_in_body.len(), 54, "the 27 returns at 60 m and the NaN are dropped");
         assert!(fused.labels.iter().all(|l| *l == Some(LabelId(1))), "far returns keep their class");
         assert_eq!(fused.candidates.len(), 1, "only the tree within 20 m is an object");
@@ -168,12 +175,12 @@ mod tests {
         pixels[0] = Some(LabelId(7));
         pixels[1] = Some(LabelId(7));
         pixels[2] = None;
-        let fused = fusion.fuse(&points, pixels.clone());
+        let fused = fusion.fuse(&points, pixels.clone(), &UnitQuaternion::identity());
         assert!(fused.labels.iter().all(Option::is_none), "ground is not an object; 7 is no class");
         assert!(fused.candidates.is_empty());
         assert_eq!(fused.new_unknown_ids, vec![7], "reported once per value");
         assert_eq!(fusion.unknown().points, 2);
-        let again = fusion.fuse(&points, pixels);
+        let again = fusion.fuse(&points, pixels, &UnitQuaternion::identity());
         assert!(again.new_unknown_ids.is_empty(), "already reported");
         assert_eq!(fusion.unknown().points, 4);
         assert_eq!(fusion.unknown().ids.get(&7), Some(&4));
@@ -186,7 +193,7 @@ mod tests {
         points.extend(block(8.0)); // a person
         let mut pixels = vec![Some(LabelId(1)); 27];
         pixels.extend(vec![Some(LabelId(2)); 27]);
-        let fused = fusion.fuse(&points, pixels);
+        let fused = fusion.fuse(&points, pixels, &UnitQuaternion::identity());
         assert_eq!(fused.points_in_body.len(), 27, "the person's returns are gone from the scan");
         assert!(fused.points_in_body.iter().all(|p| p.x < 6.0));
         assert_eq!(fused.candidates.len(), 1);
