@@ -48,13 +48,33 @@ pub struct Optimiser {
     level_anchors: bool,
     /// Solve our own poses for what neighbours are told (`comms.pose_updates.own_estimates`).
     own_estimates: bool,
+    failures: SolveFailures,
+}
+
+/// Solves that failed since the Optimiser started (each is also logged at warn; a thawed
+/// Optimiser counts anew).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct SolveFailures {
+    /// Solves of the pose graph that failed: the map kept its previous poses.
+    pub failed_solves: u64,
+    /// Solves of our own poses (`comms.pose_updates.own_estimates`) that failed: neighbours
+    /// were told the joint poses instead.
+    pub failed_own_solves: u64,
+    /// The latest failure's reason.
+    pub last_failure: Option<String>,
 }
 
 /// What of the Optimiser a snapshot keeps: the whole pose graph and its outlier decisions.
 pub type OptimiserState = KeyframeGraphState;
 
-/// The Optimiser's pose graph at a glance.
-pub type OptimiserStatus = KeyframeGraphStatus;
+/// The Optimiser at a glance: its pose graph, and the solves that failed.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct OptimiserStatus {
+    #[serde(flatten)]
+    pub graph: KeyframeGraphStatus,
+    #[serde(flatten)]
+    pub failures: SolveFailures,
+}
 
 /// Runner / operator → Optimiser: what the pose graph holds.
 #[derive(actix::Message)]
@@ -71,6 +91,7 @@ impl Optimiser {
             refreshed_since_solve: false,
             level_anchors: false,
             own_estimates: false,
+            failures: SolveFailures::default(),
         }
     }
 
@@ -112,7 +133,9 @@ impl Optimiser {
         let solved = match self.graph.solve(self.config.reject_outliers, MARGINALS) {
             Ok(solved) => solved,
             Err(e) => {
-                tracing::warn!(robot = %self.robot, "pose graph not optimised: {e}");
+                tracing::warn!(robot = %self.robot, "pose graph not optimised: {e} (optimiser status failed_solves)");
+                self.failures.failed_solves += 1;
+                self.failures.last_failure = Some(format!("pose graph not optimised: {e}"));
                 return;
             }
         };
@@ -124,7 +147,9 @@ impl Optimiser {
         // the joint solve's, which holds the neighbours' own factors already. None: the joint.
         let own_poses = if self.own_estimates {
             self.graph.own_poses().unwrap_or_else(|e| {
-                tracing::warn!(robot = %self.robot, "own poses not solved ({e}): neighbours are told the joint ones");
+                tracing::warn!(robot = %self.robot, "own poses not solved ({e}): neighbours are told the joint ones (optimiser status failed_own_solves)");
+                self.failures.failed_own_solves += 1;
+                self.failures.last_failure = Some(format!("own poses not solved: {e}"));
                 solved.poses.clone()
             })
         } else {
@@ -207,10 +232,45 @@ impl Handler<Tick> for Optimiser {
 impl Handler<GetOptimiserStatus> for Optimiser {
     type Result = actix::MessageResult<GetOptimiserStatus>;
     fn handle(&mut self, _: GetOptimiserStatus, _: &mut Context<Self>) -> Self::Result {
-        actix::MessageResult(self.graph.status())
+        actix::MessageResult(OptimiserStatus { graph: self.graph.status(), failures: self.failures.clone() })
     }
 }
 
 connects!(Optimiser => OptimiserLinks);
 freezes!(Optimiser => OptimiserState);
 stops_on_injected_failure!(Optimiser => "optimiser");
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix6;
+    use sgm_model::geometry::Pose3;
+    use sgm_model::scene_graph::{Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef};
+
+    fn keyframe(id: u32, x: f64) -> Keyframe {
+        Keyframe { id: KeyframeId(id), stamp: f64::from(id), world_from_body: Pose3::translation(x, 0.0, 0.0) }
+    }
+
+    /// An odometry edge whose information overflows the normal equations (finite, positive
+    /// definite, 1e300 on the diagonal) makes the solve fail: the failure is counted in the
+    /// status with its reason, and the actor keeps taking keyframes.
+    #[actix_rt::test]
+    async fn a_failed_solve_is_counted_in_the_status() {
+        let optimiser = Optimiser::new(RobotId(0), OptimiserConfig::default()).start();
+        optimiser.send(NewKeyframe { keyframe: keyframe(0, 0.0), edges: Vec::new() }).await.unwrap();
+        let status = optimiser.send(GetOptimiserStatus).await.unwrap();
+        assert_eq!(status.failures, SolveFailures::default(), "{status:?}");
+        let edge = KeyframeEdge {
+            kind: KeyframeEdgeKind::Loop,
+            from: KeyframeId(0),
+            to: KeyframeRef::Local(KeyframeId(1)),
+            from_from_to: Pose3::translation(1.0, 0.0, 0.0),
+            information: Matrix6::identity() * 1e300,
+        };
+        optimiser.send(NewKeyframe { keyframe: keyframe(1, 5.0), edges: vec![edge] }).await.unwrap();
+        let status = optimiser.send(GetOptimiserStatus).await.unwrap();
+        assert_eq!(status.failures.failed_solves, 1, "{status:?}");
+        assert!(status.failures.last_failure.as_deref().is_some_and(|r| r.starts_with("pose graph not optimised")));
+        assert_eq!(status.graph.variables, 2);
+    }
+}

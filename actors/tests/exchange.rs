@@ -267,7 +267,7 @@ async fn aligned_robots_keep_adding_inter_robot_closures() {
         assert!(n.closures.rounds >= 2 && n.closures.factors >= 2, "robot {i}: {n:?}");
         assert!(n.closures.bytes > 0, "robot {i}: {n:?}");
         assert_eq!(comms.keyframes_sent_twice, 0);
-        let held = graph.inter_robot.iter().find(|c| c.robot == n.robot).expect("factors with the neighbour");
+        let held = graph.graph.inter_robot.iter().find(|c| c.robot == n.robot).expect("factors with the neighbour");
         assert!(held.factors > n.closures.factors as usize, "robot {i}: first round and closures: {held:?} {n:?}");
         assert_eq!(held.inconsistent, 0, "honest closures all agree: {held:?}");
         all.push(neighbours);

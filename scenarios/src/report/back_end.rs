@@ -21,6 +21,11 @@ pub struct BackEndReport {
     pub false_factors_injected: usize,
     /// Of those, rejected.
     pub false_factors_rejected: usize,
+    /// Solves of a pose graph that failed, over all robots (the map kept its poses).
+    pub failed_solves: u64,
+    /// Solves of a robot's own poses (`comms.pose_updates.own_estimates`) that failed, over all
+    /// robots (neighbours were told the joint poses).
+    pub failed_own_solves: u64,
 }
 
 pub fn compute(record: &RunRecord) -> BackEndReport {
@@ -31,9 +36,11 @@ pub fn compute(record: &RunRecord) -> BackEndReport {
     let mut rejected: BTreeMap<Ends, usize> = BTreeMap::new();
     for (k, status) in record.optimisers.iter().enumerate() {
         let Some(status) = status else { continue };
-        report.candidate_factors += status.candidate_factors;
-        report.rejected_factors += status.rejected_factors;
-        for (robot, local, remote) in &status.rejected_inter_robot {
+        report.candidate_factors += status.graph.candidate_factors;
+        report.rejected_factors += status.graph.rejected_factors;
+        report.failed_solves += status.failures.failed_solves;
+        report.failed_own_solves += status.failures.failed_own_solves;
+        for (robot, local, remote) in &status.graph.rejected_inter_robot {
             *rejected.entry((k, *robot, *local, *remote)).or_default() += 1;
         }
     }

@@ -363,7 +363,7 @@ pub fn compute(record: &RunRecord) -> Report {
         let Some(Some((_, neighbours, _))) = last.maps.get(k) else { continue };
         let graph = record.optimisers.get(k).and_then(|s| s.as_ref());
         for n in neighbours {
-            let held = graph.and_then(|g| g.inter_robot.iter().find(|c| c.robot == n.robot));
+            let held = graph.and_then(|g| g.graph.inter_robot.iter().find(|c| c.robot == n.robot));
             let Some(r) = n.robot.index() else { continue };
             let Some(remote) = record.robots.get(r) else { continue };
             let truth = true_local_from_remote(&fits, &record.robots, k, r);

@@ -226,6 +226,14 @@ pub fn render(report: &Report, timing: &Timing) -> String {
             b.false_factors_injected, b.false_factors_rejected
         );
     }
+    if b.failed_solves > 0 || b.failed_own_solves > 0 {
+        let _ = write!(
+            s,
+            " **{} pose-graph solves failed** (the map kept its poses), {} own-pose solves failed \
+             (neighbours were told the joint poses); the log says why.",
+            b.failed_solves, b.failed_own_solves
+        );
+    }
     let _ = writeln!(s, "\n");
     memory(&mut s, report, timing);
     deskew(&mut s, report);
