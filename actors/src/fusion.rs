@@ -82,6 +82,7 @@ impl Fusion {
         let mut clustering = classes.cluster_config(config.cluster_tolerance_m);
         clustering.min_height_m = config.min_object_height_m;
         clustering.merge_stacked = config.merge_stacked_objects;
+        clustering.far_side_shift = config.far_side_shift;
         let fusion_config = ScanFusionConfig {
             clustering,
             max_range_m: config.max_range_m,

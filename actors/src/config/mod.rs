@@ -227,6 +227,12 @@ mod tests {
         std::env::set_var("SGM_TEST_F__TRACKER__TRACKING__MAX_STACK_GAP_M", "-1");
         let e = RobotConfig::load_with_env(None, "SGM_TEST_F").unwrap_err();
         assert_eq!(e.to_string(), "tracker.tracking.max_stack_gap_m = -1: allowed finite and ≥ 0");
+        std::env::set_var("SGM_TEST_G__TRACKER__TRACKING__SIGHTING_MEMORY", "0");
+        let e = RobotConfig::load_with_env(None, "SGM_TEST_G").unwrap_err();
+        assert_eq!(e.to_string(), "tracker.tracking.sighting_memory = 0: allowed ≥ 1 (1: the latest sighting alone)");
+        std::env::set_var("SGM_TEST_H__FUSION__FAR_SIDE_SHIFT", "1.5");
+        let e = RobotConfig::load_with_env(None, "SGM_TEST_H").unwrap_err();
+        assert_eq!(e.to_string(), "fusion.far_side_shift = 1.5: allowed in [0, 1] (0: off)");
         writeln!(file, "[comms.limits]\nbogus = 1").unwrap();
         let e = RobotConfig::load_with_env(Some(file.path()), "SGM_TEST_D").unwrap_err();
         assert!(e.to_string().contains("bogus"), "{e}");

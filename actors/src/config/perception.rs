@@ -28,6 +28,11 @@ pub struct FusionConfig {
     /// beams, a bookshelf by an occluder) are one object candidate
     /// (`model::perception::clustering`). Default true.
     pub merge_stacked_objects: bool,
+    /// A cluster's returns lie on its visible side; its centroid is moved away from the sensor
+    /// by this times half its width across the line of sight, and its box made symmetric about
+    /// the moved centre (`model::perception::clustering`, "The far side"). 0: off (the mean of
+    /// the returns, the paper's centroid). Default 2/π (a round object's visible half).
+    pub far_side_shift: f64,
     /// Each labelled return takes the most common class among its neighbours first: labels
     /// that bled across depth edges in the image go back to what surrounds them in 3D
     /// (`model::perception::label_vote`).
@@ -47,6 +52,7 @@ impl Default for FusionConfig {
             object_range_m: 30.0,
             min_object_height_m: 0.2,
             merge_stacked_objects: true,
+            far_side_shift: std::f64::consts::FRAC_2_PI,
             label_vote: LabelVote::default(),
             classes: default_classes(),
             deskew: true,
@@ -66,6 +72,12 @@ impl FusionConfig {
             "fusion.min_object_height_m",
             f.min_object_height_m,
             "finite and ≥ 0",
+        )?;
+        check(
+            non_negative(f.far_side_shift) && f.far_side_shift <= 1.0,
+            "fusion.far_side_shift",
+            f.far_side_shift,
+            "in [0, 1] (0: off)",
         )?;
         check(non_negative(f.label_vote.voxel_m), "fusion.label_vote.voxel_m", f.label_vote.voxel_m, "finite and ≥ 0")?;
         Ok(())
@@ -131,6 +143,12 @@ impl TrackerSection {
             "tracker.tracking.max_stack_gap_m",
             t.max_stack_gap_m,
             "finite and ≥ 0",
+        )?;
+        check(
+            t.sighting_memory >= 1,
+            "tracker.tracking.sighting_memory",
+            t.sighting_memory,
+            "≥ 1 (1: the latest sighting alone)",
         )?;
         check(
             non_negative(t.tentative_expiry_s),

@@ -65,6 +65,9 @@ pub struct ClusterConfig {
     pub min_height_m: f64,
     /// Join clusters of one class stacked in one column (module doc). Default true.
     pub merge_stacked: bool,
+    /// κ of the far-side shift (module doc): the centroid moves away from the sensor by κ times
+    /// half the cluster's width across the line of sight. 0: off. Default 2/π.
+    pub far_side_shift: f64,
 }
 
 impl Default for ClusterConfig {
@@ -75,6 +78,7 @@ impl Default for ClusterConfig {
             classes: BTreeMap::new(),
             min_height_m: 0.0,
             merge_stacked: true,
+            far_side_shift: std::f64::consts::FRAC_2_PI,
         }
     }
 }
@@ -169,15 +173,43 @@ pub fn cluster(
             if extent.max() > limits.max_extent_m || extent.z < config.min_height_m {
                 continue;
             }
-            out.push(ObjectCandidate {
-                label,
-                centroid: Point3::from(piece.sum / piece.count as f64),
-                size: extent,
-                points: piece.count,
-            });
+            let (centroid, size) = far_side(points, &piece, axes_from_points, config.far_side_shift);
+            out.push(ObjectCandidate { label, centroid, size, points: piece.count });
         }
     }
     out
+}
+
+/// The centre behind a piece's visible side and the box about it (module doc): the centroid
+/// moved away from the sensor (the points' origin) by κ · ½ w⊥, horizontally, and the
+/// horizontal extent made symmetric about it, reaching every return; (centroid in the points'
+/// frame, size along the measuring axes).
+fn far_side(
+    points: &[Point3<f64>],
+    piece: &Piece,
+    axes_from_points: &UnitQuaternion<f64>,
+    shift: f64,
+) -> (Point3<f64>, Vector3<f64>) {
+    let mean = piece.sum / piece.count as f64;
+    let extent = piece.hi - piece.lo;
+    let level = axes_from_points * mean;
+    let range = level.xy().norm();
+    if shift.is_nan() || shift <= 0.0 || range < 1e-6 {
+        return (Point3::from(mean), extent);
+    }
+    let away = level.xy() / range;
+    let across = nalgebra::Vector2::new(-away.y, away.x);
+    let (mut lo, mut hi) = (f64::MAX, f64::MIN);
+    for &k in &piece.members {
+        let t = across.dot(&(axes_from_points * points[k].coords).xy());
+        lo = lo.min(t);
+        hi = hi.max(t);
+    }
+    let moved = level.xy() + away * (shift * 0.5 * (hi - lo));
+    let centre = Vector3::new(moved.x, moved.y, level.z);
+    let reach = |a: usize| 2.0 * (piece.hi[a] - centre[a]).max(centre[a] - piece.lo[a]);
+    let size = Vector3::new(reach(0), reach(1), extent.z);
+    (Point3::from(axes_from_points.inverse() * centre), size)
 }
 
 /// Union–find: the root of `v`'s set (halving the path on the way).
@@ -197,13 +229,15 @@ fn unite(parent: &mut [usize], a: usize, b: usize) {
     }
 }
 
-/// One cluster's bounds (along the measuring axes) and point sum (in the points' frame).
-#[derive(Clone, Copy)]
+/// One cluster's bounds (along the measuring axes), point sum (in the points' frame) and
+/// members.
+#[derive(Clone)]
 struct Piece {
     lo: Vector3<f64>,
     hi: Vector3<f64>,
     sum: Vector3<f64>,
     count: usize,
+    members: Vec<usize>,
 }
 
 impl Piece {
@@ -216,7 +250,7 @@ impl Piece {
             hi = hi.sup(&along_axes);
             sum += p;
         }
-        Self { lo, hi, sum, count: members.len() }
+        Self { lo, hi, sum, count: members.len(), members: members.to_vec() }
     }
 
     fn join(&mut self, other: &Piece) {
@@ -224,6 +258,7 @@ impl Piece {
         self.hi = self.hi.sup(&other.hi);
         self.sum += other.sum;
         self.count += other.count;
+        self.members.extend_from_slice(&other.members);
     }
 
     /// The footprint grown by `grow` each way: (x₀, x₁, y₀, y₁).
@@ -256,7 +291,7 @@ fn join_columns(pieces: Vec<Piece>, tolerance_m: f64) -> Vec<Piece> {
         let r = root(&mut parent, k);
         match &mut joined[r] {
             Some(column) => column.join(piece),
-            slot => *slot = Some(*piece),
+            slot => *slot = Some(piece.clone()),
         }
     }
     joined.into_iter().flatten().collect()
@@ -280,6 +315,11 @@ mod tests {
             .collect()
     }
 
+    /// These tests' clouds fill their boxes rather than show one side: no far-side shift.
+    fn filled() -> ClusterConfig {
+        ClusterConfig { far_side_shift: 0.0, ..ClusterConfig::default() }
+    }
+
     fn level() -> UnitQuaternion<f64> {
         UnitQuaternion::identity()
     }
@@ -292,10 +332,9 @@ mod tests {
             (0..200).map(|_| Point3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), -0.8)).collect();
         points.extend(boxed(&mut rng, [10.0, 0.0, 0.0], 0.5, 200));
         let labels = vec![Some(LabelId(3)); points.len()];
-        let all = cluster(&points, &labels, &ClusterConfig::default(), &level());
+        let all = cluster(&points, &labels, &filled(), &level());
         assert_eq!(all.len(), 2);
-        let upright =
-            cluster(&points, &labels, &ClusterConfig { min_height_m: 0.2, ..ClusterConfig::default() }, &level());
+        let upright = cluster(&points, &labels, &ClusterConfig { min_height_m: 0.2, ..filled() }, &level());
         assert_eq!(upright.len(), 1);
         assert!((upright[0].centroid.x - 10.0).abs() < 0.1);
     }
@@ -316,7 +355,7 @@ mod tests {
         add(boxed(&mut rng, [5.0, 5.0, 0.5], 0.3, 300), None); // unlabelled
         let wall: Vec<Point3<f64>> = (0..600).map(|k| Point3::new(20.0 + 0.05 * k as f64, 0.0, 1.0)).collect(); // 30 m long
         add(wall, Some(1));
-        let candidates = cluster(&points, &labels, &ClusterConfig::default(), &level());
+        let candidates = cluster(&points, &labels, &filled(), &level());
         assert_eq!(candidates.len(), 3, "{candidates:?}");
         let chairs: Vec<_> = candidates.iter().filter(|c| c.label == LabelId(1)).collect();
         assert_eq!(chairs.len(), 2);
@@ -326,7 +365,7 @@ mod tests {
         let table = candidates.iter().find(|c| c.label == LabelId(2)).unwrap();
         assert_eq!(table.points, 150);
         // Per-class limits: walls of class 1 become acceptable with a larger extent.
-        let mut config = ClusterConfig::default();
+        let mut config = filled();
         config.classes.insert(1, ClassLimits { max_extent_m: 50.0, ..ClassLimits::default() });
         assert_eq!(cluster(&points, &labels, &config, &level()).len(), 4);
     }
@@ -353,7 +392,7 @@ mod tests {
         add(boxed(&mut rng, [10.0, 0.0, 0.4], 0.25, 100), 2); // chair
         add(boxed(&mut rng, [11.2, 0.0, 0.4], 0.25, 100), 2); // its neighbour
         add(boxed(&mut rng, [10.0, 0.0, 1.6], 0.4, 100), 3); // a table over the first chair
-        let config = ClusterConfig::default();
+        let config = filled();
         let candidates = cluster(&points, &labels, &config, &level());
         let posts: Vec<_> = candidates.iter().filter(|c| c.label == LabelId(1)).collect();
         assert_eq!(posts.len(), 2, "{posts:?}");
@@ -391,16 +430,87 @@ mod tests {
                 .iter()
                 .map(|p| Point3::from(odom_from_body.inverse() * (p + Vector3::new(4.0, 0.0, 0.0))))
                 .collect();
-            let [ref bench] = cluster(&in_body, &labels, &ClusterConfig::default(), &odom_from_body)[..] else {
+            let [ref bench] = cluster(&in_body, &labels, &filled(), &odom_from_body)[..] else {
                 panic!("one bench");
             };
             assert!((bench.size - Vector3::new(2.0, 0.5, 0.8)).amax() < 0.05, "{}", bench.size);
             // The centroid stays in the body frame.
             assert!((odom_from_body * bench.centroid.coords - Vector3::new(4.0, 0.0, 0.0)).norm() < 0.05);
-            let [ref along_body] = cluster(&in_body, &labels, &ClusterConfig::default(), &level())[..] else {
+            let [ref along_body] = cluster(&in_body, &labels, &filled(), &level())[..] else {
                 panic!("one bench");
             };
             assert!((along_body.size - bench.size).amax() > 0.5, "{} {}", along_body.size, bench.size);
+        }
+    }
+
+    /// The visible half of a vertical cylinder (a tree's crown, 2.5–5 m up) of radius `r` about
+    /// `axis`, as a sensor at the origin sees it: returns spread evenly over the arc that faces
+    /// it. Their mean lies 2r/π in front of the axis.
+    fn visible_half(axis: [f64; 2], r: f64, n: usize) -> Vec<Point3<f64>> {
+        let toward_sensor = (-axis[1]).atan2(-axis[0]);
+        (0..n)
+            .map(|k| {
+                let t = (k as f64 + 0.5) / n as f64;
+                let angle = toward_sensor - std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * t;
+                let z = 2.5 + 2.5 * ((k * 7) % n) as f64 / n as f64;
+                Point3::new(axis[0] + r * angle.cos(), axis[1] + r * angle.sin(), z)
+            })
+            .collect()
+    }
+
+    /// A crown of radius 1 m seen from one side: the mean of its returns is 2/π m short of the
+    /// axis; moved by the far-side shift (κ = 2/π of half its width, 2 m) it is on the axis, and
+    /// its box, symmetric about the axis, holds every return. A lamp post's pole (0.1 m) moves
+    /// by 6 cm at most.
+    #[test]
+    fn the_far_side_of_a_round_object_is_found() {
+        let crown = visible_half([10.0, 3.0], 1.0, 2000);
+        let labels = vec![Some(LabelId(2)); crown.len()];
+        let [ref mean] =
+            cluster(&crown, &labels, &ClusterConfig { far_side_shift: 0.0, ..ClusterConfig::default() }, &level())[..]
+        else {
+            panic!("one crown");
+        };
+        assert!(
+            ((mean.centroid.xy() - nalgebra::Point2::new(10.0, 3.0)).norm() - 2.0 / std::f64::consts::PI).abs() < 0.01
+        );
+        let [ref far] = cluster(&crown, &labels, &ClusterConfig::default(), &level())[..] else { panic!("one crown") };
+        assert!((far.centroid.xy() - Point3::new(10.0, 3.0, 0.0).xy()).norm() < 0.01, "{far:?}");
+        assert_eq!(far.centroid.z, mean.centroid.z, "the shift is horizontal");
+        for p in &crown {
+            let d = p - far.centroid;
+            assert!(
+                d.x.abs() <= 0.5 * far.size.x + 1e-9 && d.y.abs() <= 0.5 * far.size.y + 1e-9,
+                "{p} outside {far:?}"
+            );
+        }
+        let pole = visible_half([4.0, -2.0], 0.1, 200);
+        let [ref post] = cluster(&pole, &vec![Some(LabelId(3)); 200], &ClusterConfig::default(), &level())[..] else {
+            panic!("one pole");
+        };
+        assert!((post.centroid.xy() - Point3::new(4.0, -2.0, 0.0).xy()).norm() < 0.01, "{post:?}");
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+        /// Any round object (radius 0.1–2 m, 3–25 m away, any bearing), measured along axes
+        /// turned by any yaw: the far side is found within 2% of the radius of the axis, and
+        /// the answer does not depend on the axes' yaw.
+        #[test]
+        fn the_far_side_is_found_whatever_the_bearing_and_the_axes(
+            bearing in -3.1f64..3.1, range in 3.0f64..25.0, r in 0.1f64..2.0, yaw in -3.1f64..3.1,
+        ) {
+            let axis = [range * bearing.cos(), range * bearing.sin()];
+            let crown = visible_half(axis, r, 1000);
+            let labels = vec![Some(LabelId(2)); crown.len()];
+            let turned = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
+            let config = ClusterConfig { tolerance_m: 0.5, ..ClusterConfig::default() };
+            let found = cluster(&crown, &labels, &config, &turned);
+            proptest::prop_assert_eq!(found.len(), 1);
+            let error = (found[0].centroid.xy() - nalgebra::Point2::new(axis[0], axis[1])).norm();
+            proptest::prop_assert!(error < 0.02 * r, "{} m off for r = {}", error, r);
+            let level = cluster(&crown, &labels, &config, &level());
+            proptest::prop_assert!((level[0].centroid - found[0].centroid).norm() < 1e-9);
         }
     }
 }

@@ -134,7 +134,8 @@ mod tests {
         let person = ClassSpec { dynamic: true, matchable: false, ..class("person", 2, true) };
         let classes = ClassTable::new(vec![class("ground", 0, false), class("tree", 1, true), person]).expect("table");
         let config = ScanFusionConfig {
-            clustering: classes.cluster_config(0.5),
+            // Blocks of returns that fill their volume: the mean is the centre, no far-side shift.
+            clustering: ClusterConfig { far_side_shift: 0.0, ..classes.cluster_config(0.5) },
             max_range_m: 50.0,
             object_range_m: 20.0,
             label_vote: LabelVote { voxel_m: 0.0 },

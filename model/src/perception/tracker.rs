@@ -79,6 +79,10 @@ pub struct TrackerConfig {
     /// A tentative object (not yet confirmed) not seen for this long is removed, s. 0: never.
     /// Default 10.
     pub tentative_expiry_s: f64,
+    /// An object's estimate is the mean of its sightings weighted by their returns, each new
+    /// sighting counting for at least 1 / `sighting_memory` of it (module doc). 1: the latest
+    /// sighting alone (the paper's re-anchoring). Default 20.
+    pub sighting_memory: u32,
 }
 
 impl Default for TrackerConfig {
@@ -92,9 +96,26 @@ impl Default for TrackerConfig {
             merge_stacked: true,
             max_stack_gap_m: 2.0,
             tentative_expiry_s: 10.0,
+            sighting_memory: 20,
         }
     }
 }
+
+/// The share of a new sighting (`returns` points) in an estimate made of `fused` points
+/// (module doc): its weight among all, and at least 1 / `memory`.
+///
+/// ```text
+/// share = max(n / (W + n), 1 / memory)      (1 when W = 0 or memory ≤ 1)
+/// ```
+fn sighting_share(fused: usize, returns: usize, memory: u32) -> f64 {
+    if fused == 0 || memory <= 1 {
+        return 1.0;
+    }
+    (returns as f64 / (fused as f64 + returns as f64)).max(1.0 / f64::from(memory))
+}
+
+/// Where an object may be: its estimate, and its latest sighting if it has one.
+type Whereabouts = [Option<Point3<f64>>; 2];
 
 /// At most this many recent sightings are kept per object.
 const MAX_RECENT: usize = 16;
@@ -116,8 +137,8 @@ pub struct ObjectTracker {
     /// Tentative objects removed so far.
     #[serde(default)]
     expired: u64,
-    /// Each object's returns in its latest estimate (the weights of a merge's centroid); after a
-    /// merge, the sum of both, until the object's next sighting replaces its estimate.
+    /// The returns behind each object's estimate: of every sighting averaged into it, and of
+    /// both pieces after a merge (the weights of a sighting's share and of a merge's centroid).
     #[serde(default)]
     points: BTreeMap<ObjectId, usize>,
 }
@@ -152,6 +173,12 @@ impl ObjectTracker {
     /// The returns in `id`'s latest estimate (0 when unknown).
     fn points(&self, id: ObjectId) -> usize {
         self.points.get(&id).copied().unwrap_or(0)
+    }
+
+    /// Where `id` was last seen (its latest recent sighting, through the current keyframe pose).
+    fn latest_sighting(&self, graph: &SceneGraph, id: ObjectId) -> Option<Point3<f64>> {
+        let (k, c) = self.recent.get(&id)?.back()?;
+        Some(graph.keyframe(*k)?.world_from_body * c)
     }
 
     /// Whether `id` was found moving.
@@ -218,16 +245,20 @@ impl ObjectTracker {
             graph.keyframe(keyframe).ok_or(SceneGraphError::UnknownKeyframe(keyframe))?.world_from_body;
         let in_world: Vec<_> = candidates.iter().map(|c| world_from_body * c.centroid).collect();
         let here = world_from_body.translation.vector;
-        let nearby: Vec<(ObjectId, nalgebra::Point3<f64>, crate::scene_graph::LabelId)> = graph
+        // An object is as near as its estimate or its latest sighting, whichever is nearer: an
+        // estimate averaged over sightings lags behind a thing that moves (module doc).
+        let nearby: Vec<(ObjectId, Whereabouts, crate::scene_graph::LabelId)> = graph
             .objects()
             .filter_map(|o| graph.centroid_in_world(o.id).map(|p| (o.id, p, o.label)))
             .filter(|(_, p, _)| (p.coords - here).norm() <= config.search_radius_m)
+            .map(|(id, p, label)| (id, [Some(p), self.latest_sighting(graph, id)], label))
             .collect();
         let mut costs = CostMatrix::filled(candidates.len(), nearby.len(), FORBIDDEN);
         for (i, c) in candidates.iter().enumerate() {
-            for (j, (_, p, label)) in nearby.iter().enumerate() {
+            for (j, (_, at, label)) in nearby.iter().enumerate() {
                 if *label == c.label {
-                    costs.set(i, j, (in_world[i] - p).norm());
+                    let distance = at.iter().flatten().map(|p| (in_world[i] - p).norm()).fold(f64::INFINITY, f64::min);
+                    costs.set(i, j, distance);
                 }
             }
         }
@@ -237,22 +268,27 @@ impl ObjectTracker {
             let matched = assignment[i].filter(|&j| costs.get(i, j) < config.max_track_distance_m).map(|j| nearby[j].0);
             let id = match matched {
                 Some(id) => {
-                    graph.observe_object(id, in_world[i], c.size, keyframe)?;
+                    // A moving object's estimate is where it was seen last.
+                    self.watch_motion(graph, id, keyframe, c, config);
+                    let fused = if self.moving.contains(&id) { 0 } else { self.points(id) };
+                    let share = sighting_share(fused, c.points, config.sighting_memory);
+                    graph.observe_object(id, in_world[i], c.size, keyframe, share)?;
+                    self.points.insert(id, if share < 1.0 { fused.saturating_add(c.points) } else { c.points });
                     id
                 }
                 None => {
                     let id = graph.add_object(c.label, in_world[i], c.size, keyframe)?;
                     update.created.push(id);
+                    self.watch_motion(graph, id, keyframe, c, config);
+                    self.points.insert(id, c.points);
                     id
                 }
             };
-            self.watch_motion(graph, id, keyframe, c, config);
             let count = self.sightings.entry(id).or_insert(0);
             *count += 1;
             if *count == config.confirm_after && !self.moving.contains(&id) {
                 update.newly_confirmed.push(id);
             }
-            self.points.insert(id, c.points);
             update.objects.push(id);
         }
         if config.merge_stacked {
@@ -554,6 +590,38 @@ mod tests {
         }
     }
 
+    /// A chair at (6, 2) seen from keyframes on both sides of it, each view's centroid 0.2 m
+    /// toward the robot (its visible side) and some views with more returns: the estimate is
+    /// the mean of the views weighted by their returns, while the latest view alone is 0.2 m
+    /// off. Past `sighting_memory` views a new one still counts for 1 / `sighting_memory`.
+    #[test]
+    fn sightings_are_averaged_by_their_returns() {
+        let mut graph = SceneGraph::new();
+        keyframes(&mut graph, 24, |_| 0.0);
+        let view = |k: u32| {
+            // Even keyframes see it from below (y < 2), odd ones from above; returns 100 or 300.
+            let toward = if k % 2 == 0 { -0.2 } else { 0.2 };
+            ObjectCandidate { points: if k % 4 < 2 { 100 } else { 300 }, ..candidate(6, 6.0, 2.0 + toward) }
+        };
+        let run = |memory: u32, views: u32| {
+            let (mut graph, mut tracker) = (graph.clone(), ObjectTracker::default());
+            let config = TrackerConfig { sighting_memory: memory, ..TrackerConfig::default() };
+            for k in 0..views {
+                tracker.update(&mut graph, KeyframeId(k), &[view(k)], &config).unwrap();
+            }
+            graph.centroid_in_world(ObjectId(0)).map(|p| p.y).unwrap_or(f64::NAN)
+        };
+        // Four views, 100 + 100 + 300 + 300 returns from below, above, below, above: the mean.
+        let expected = (100.0 * 1.8 + 100.0 * 2.2 + 300.0 * 1.8 + 300.0 * 2.2) / 800.0;
+        assert!((run(20, 4) - expected).abs() < 1e-9, "{}", run(20, 4));
+        assert!((run(1, 4) - 2.2).abs() < 1e-9, "the paper's re-anchoring: the latest view");
+        // Memory 2: each view counts for at least half. 1.8, then ½ of the way to 2.2 (2.0),
+        // 300/500 of the way to 1.8 (1.88), and ½ (not 300/800) of the way to 2.2: 2.04.
+        assert!((run(2, 4) - 2.04).abs() < 1e-9, "{}", run(2, 4));
+        // Many views from both sides stay within the alternation's reach of the truth.
+        assert!((run(20, 24) - 2.0).abs() < 0.03, "{}", run(20, 24));
+    }
+
     /// A "chair" that is a person walking at 1.4 m/s beside the robot: tracked from keyframe to
     /// keyframe (each step within c_max = 1.5 m), confirmed at its third sighting (2.8 m gone),
     /// found moving at its fourth (4.2 m > 3 m + 0.3 m) and no longer confirmed; a real chair
@@ -660,7 +728,8 @@ mod tests {
                 .collect();
             (graph, tracker, updates)
         };
-        let config = TrackerConfig::default();
+        // The latest view alone: averaging sightings has its own test.
+        let config = TrackerConfig { sighting_memory: 1, ..TrackerConfig::default() };
         let (graph, tracker, updates) = run(&config);
         assert_eq!(graph.object_count(), 2, "one post, one chair");
         let (post, chair) = (updates[0].objects[0], updates[0].objects[2]);
@@ -732,7 +801,8 @@ mod tests {
         let mut graph = SceneGraph::new();
         let mut tracker = ObjectTracker::default();
         keyframes(&mut graph, 5, |_| 0.0);
-        let config = TrackerConfig::default();
+        // The latest view alone, whose width reaches the first chair at once.
+        let config = TrackerConfig { sighting_memory: 1, ..TrackerConfig::default() };
         let seen = [
             vec![chair(5.0, 0.5)],
             vec![chair(6.2, 0.5)],

@@ -11,6 +11,8 @@ pub enum SceneGraphError {
     UnknownObject(ObjectId),
     #[error("objects {keep} and {gone} cannot be merged: one object, two labels, or a share outside [0, 1]")]
     NotOneObject { keep: ObjectId, gone: ObjectId },
+    #[error("a sighting's share {share} of object {id}'s estimate is outside [0, 1]")]
+    ShareOutOfRange { id: ObjectId, share: f64 },
     #[error("{what} is not finite")]
     NonFinite { what: &'static str },
     #[error("keyframe {id} has stamp {stamp} s, earlier than the latest keyframe's {latest} s")]

@@ -152,24 +152,37 @@ impl SceneGraph {
     }
 
     /// Records a new sighting of an existing object from `keyframe`. If `keyframe` is at least as
-    /// recent as the object's anchor, it becomes the anchor and the centroid and size are replaced
-    /// by the new estimate; an older sighting only adds the cross-layer link.
+    /// recent as the object's anchor, it becomes the anchor and the estimate moves toward the
+    /// new one by `share` ∈ [0, 1] (1: replaced, the paper's re-anchoring), both read in the
+    /// world through the current keyframe poses:
+    ///
+    /// ```text
+    /// c ← c_old + share · (c_new − c_old),   size ← size_old + share · (size_new − size_old)
+    /// ```
+    ///
+    /// An older sighting only adds the cross-layer link.
     pub fn observe_object(
         &mut self,
         id: ObjectId,
         centroid_in_world: Point3<f64>,
         size: Vector3<f64>,
         keyframe: KeyframeId,
+        share: f64,
     ) -> Result<(), SceneGraphError> {
         let world_from_body = self.checked_observation(keyframe, &centroid_in_world, &size)?;
+        if !(0.0..=1.0).contains(&share) {
+            return Err(SceneGraphError::ShareOutOfRange { id, share });
+        }
         let new_stamp = self.stamp_of(keyframe)?;
         let anchor = self.objects.get(&id).ok_or(SceneGraphError::UnknownObject(id))?.anchor;
         let anchor_stamp = self.stamp_of(anchor)?;
+        let old_in_world = self.centroid_in_world(id).ok_or(SceneGraphError::UnknownKeyframe(anchor))?;
         let object = self.objects.get_mut(&id).ok_or(SceneGraphError::UnknownObject(id))?;
         if (new_stamp, keyframe) >= (anchor_stamp, anchor) {
+            let fused = old_in_world + share * (centroid_in_world - old_in_world);
             object.anchor = keyframe;
-            object.centroid_in_anchor = world_from_body.inverse_transform_point(&centroid_in_world);
-            object.size = size;
+            object.centroid_in_anchor = world_from_body.inverse_transform_point(&fused);
+            object.size += share * (size - object.size);
         }
         object.observed_in.insert(keyframe);
         self.objects_by_keyframe.entry(keyframe).or_default().insert(id);
@@ -385,15 +398,39 @@ mod tests {
         g
     }
 
+    /// A sighting with share ½ moves the estimate (read in the world, through both anchors'
+    /// poses) halfway to the new one and re-anchors it; a share outside [0, 1] is refused and
+    /// changes nothing.
+    #[test]
+    fn a_sighting_moves_the_estimate_by_its_share() {
+        let mut g = SceneGraph::new();
+        for (k, x) in [(0, 0.0), (1, 4.0)] {
+            let world_from_body = Pose3::translation(x, 0.0, 0.0);
+            g.add_keyframe(Keyframe { id: KeyframeId(k), stamp: f64::from(k), world_from_body }).unwrap();
+        }
+        let id =
+            g.add_object(LabelId(6), Point3::new(6.0, 2.0, 0.5), Vector3::new(0.4, 0.4, 0.8), KeyframeId(0)).unwrap();
+        let before = g.clone();
+        let e = g.observe_object(id, Point3::new(6.0, 2.4, 0.5), Vector3::repeat(1.0), KeyframeId(1), 1.5);
+        assert_eq!(e, Err(SceneGraphError::ShareOutOfRange { id, share: 1.5 }));
+        assert_eq!(g, before);
+        g.observe_object(id, Point3::new(6.0, 2.4, 0.5), Vector3::new(0.6, 0.4, 0.8), KeyframeId(1), 0.5).unwrap();
+        let o = g.object(id).unwrap();
+        assert_eq!(o.anchor, KeyframeId(1));
+        assert!((g.centroid_in_world(id).unwrap() - Point3::new(6.0, 2.2, 0.5)).norm() < 1e-12);
+        assert!((o.centroid_in_anchor - Point3::new(2.0, 2.2, 0.5)).norm() < 1e-12);
+        assert!((o.size - Vector3::new(0.5, 0.4, 0.8)).norm() < 1e-12);
+    }
+
     #[test]
     fn objects_follow_their_latest_observing_keyframe_when_poses_change() {
         let mut g = graph_with_three_keyframes();
         let chair = LabelId(1);
         let id = g.add_object(chair, Point3::new(6.0, 2.0, 0.5), Vector3::new(0.5, 0.5, 1.0), KeyframeId(0)).unwrap();
-        g.observe_object(id, Point3::new(6.2, 2.0, 0.5), Vector3::new(0.5, 0.5, 1.0), KeyframeId(2)).unwrap();
+        g.observe_object(id, Point3::new(6.2, 2.0, 0.5), Vector3::new(0.5, 0.5, 1.0), KeyframeId(2), 1.0).unwrap();
         assert_eq!(g.object(id).unwrap().anchor, KeyframeId(2));
         // An older sighting adds the link but does not move the anchor.
-        g.observe_object(id, Point3::new(9.0, 9.0, 9.0), Vector3::new(1.0, 1.0, 1.0), KeyframeId(1)).unwrap();
+        g.observe_object(id, Point3::new(9.0, 9.0, 9.0), Vector3::new(1.0, 1.0, 1.0), KeyframeId(1), 1.0).unwrap();
         assert_eq!(g.object(id).unwrap().anchor, KeyframeId(2));
         assert_eq!(g.keyframes_observing(id).collect::<Vec<_>>(), vec![KeyframeId(0), KeyframeId(1), KeyframeId(2)]);
         assert!((g.centroid_in_world(id).unwrap() - Point3::new(6.2, 2.0, 0.5)).norm() < 1e-12);
@@ -416,7 +453,7 @@ mod tests {
         // The lower piece of a lamp post, 0–1.2 m, and its upper piece, 3.0–5.0 m, a little off.
         let a = g.add_object(post, Point3::new(7.0, 2.0, 0.6), Vector3::new(0.2, 0.2, 1.2), KeyframeId(0)).unwrap();
         let b = g.add_object(post, Point3::new(7.0, 2.0, 3.7), Vector3::new(0.5, 0.5, 0.5), KeyframeId(1)).unwrap();
-        g.observe_object(b, Point3::new(7.1, 2.0, 4.0), Vector3::new(0.4, 0.2, 2.0), KeyframeId(2)).unwrap();
+        g.observe_object(b, Point3::new(7.1, 2.0, 4.0), Vector3::new(0.4, 0.2, 2.0), KeyframeId(2), 1.0).unwrap();
         let chair = g.add_object(LabelId(1), Point3::new(9.0, 2.0, 0.5), Vector3::repeat(0.5), KeyframeId(2)).unwrap();
         let before = g.clone();
         for (keep, gone, share) in [
