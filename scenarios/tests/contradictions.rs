@@ -1,5 +1,5 @@
 //! Cycles of alignments flag a wrong one (`matcher.relay.contradiction_m`): in the indoor world
-//! of repeated rooms, seed 32 has alpha and bravo align each other 29–32 m off, turned by 180°
+//! of repeated rooms, seed 25 has alpha and bravo align each other 29–32 m off, turned by 180°
 //! (the 4 × 3 grid of rooms maps onto itself under a half turn), and the other four
 //! alignments, right, contradict them around the cycle; on seed 11, where every alignment is
 //! right, nothing is flagged. A cycle cannot say which of its alignments is wrong, so right ones
@@ -7,7 +7,9 @@
 //! this test's case until the matcher's crowd estimate refused that turn; then seed 13, where
 //! charlie aligned alpha 19 m and 90° off, and seed 1 the right one, until the object layer was
 //! kept clean and those seeds aligned fewer directions in the first 70–80 s; then seed 25 until
-//! the merges were done whole, after which alpha ↔ charlie no longer aligned there.)
+//! the merges were done whole, after which alpha ↔ charlie no longer aligned there; then seed
+//! 32 until objects were estimated from every view and their far side, after which seed 25
+//! aligned all six again, and 32 no longer wrongly.)
 
 use sgm_scenarios::report::{compute, AlignmentReport, Report};
 use sgm_scenarios::runner::run;
@@ -69,10 +71,10 @@ fn all_aligned(report: &Report) {
 #[test]
 fn a_wrong_alignment_among_repeated_rooms_is_flagged_around_its_cycle() {
     let logs = logs();
-    let report = indoor(32, 70.0);
+    let report = indoor(25, 70.0);
     all_aligned(&report);
     let wrong_ones: Vec<&AlignmentReport> = report.alignments.iter().filter(|a| wrong(a)).collect();
-    assert!(!wrong_ones.is_empty(), "seed 32 no longer aligns wrongly: choose another case for this test");
+    assert!(!wrong_ones.is_empty(), "seed 25 no longer aligns wrongly: choose another case for this test");
     // The wrong alignment is flagged, and so are right ones that meet it around the cycle.
     for a in &wrong_ones {
         assert!(!a.contradicted_by.is_empty(), "{} ← {} is wrong and not flagged", a.local, a.remote);
