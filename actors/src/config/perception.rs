@@ -30,7 +30,7 @@ pub struct FusionConfig {
     pub merge_stacked_objects: bool,
     /// A cluster's returns lie on its visible side; its centroid is moved away from the sensor
     /// by this times half its width across the line of sight, and its box made symmetric about
-    /// the moved centre (`model::perception::clustering`, "The far side"). 0: off (the mean of
+    /// the moved centre (`model::perception::clustering`, module doc, "The far side"). 0: off (the mean of
     /// the returns, the paper's centroid). Default 2/π (a round object's visible half).
     pub far_side_shift: f64,
     /// Each labelled return takes the most common class among its neighbours first: labels

@@ -28,6 +28,21 @@
 //! faced, the tracker and the object cloud read it along the map's axes, and a column stays a
 //! column on a tilted body. Clustering itself (the voxels) and the centroid are in the points'
 //! own frame.
+//!
+//! The far side (beyond the paper; issue 31). A cluster's returns lie on the side the sensor
+//! sees, so their mean c̄ is short of the object's centre: by 2r/π for a round object of radius
+//! r. The centroid is moved away from the sensor (the points' origin), horizontally, along the
+//! measuring axes:
+//!
+//! ```text
+//! c = c̄ + κ · ½ w⊥ · û,   û = c̄_xy / ‖c̄_xy‖,   w⊥ = extent of the returns across û
+//! ```
+//!
+//! (κ: `far_side_shift`, 2/π by default, which puts a round object's centre on its axis; a box
+//! seen corner-on wants ½, face-on 1, and an elongated one seen broadside is moved too far).
+//! The horizontal box is then made symmetric about the moved centre, reaching every return;
+//! the height is the returns' extent. The class's extent limit is checked on the returns'
+//! extent, before the box is made symmetric.
 
 use crate::scene_graph::LabelId;
 use nalgebra::{Point3, UnitQuaternion, Vector3};
@@ -65,8 +80,8 @@ pub struct ClusterConfig {
     pub min_height_m: f64,
     /// Join clusters of one class stacked in one column (module doc). Default true.
     pub merge_stacked: bool,
-    /// κ of the far-side shift (module doc): the centroid moves away from the sensor by κ times
-    /// half the cluster's width across the line of sight. 0: off. Default 2/π.
+    /// κ of the far-side shift (module doc, "The far side"): the centroid moves away from the
+    /// sensor by κ times half the cluster's width across the line of sight. 0: off. Default 2/π.
     pub far_side_shift: f64,
 }
 
@@ -88,7 +103,9 @@ impl Default for ClusterConfig {
 pub struct ObjectCandidate {
     pub label: LabelId,
     pub centroid: Point3<f64>,
-    /// Extent along the axes of `axes_from_points` (module doc): the odometry frame's, m.
+    /// Extent along the axes of `axes_from_points` (module doc), m: horizontally a box
+    /// symmetric about the (far-side) centroid that reaches every return, vertically the
+    /// returns' extent.
     pub size: Vector3<f64>,
     pub points: usize,
 }
@@ -443,39 +460,47 @@ mod tests {
         }
     }
 
-    /// The visible half of a vertical cylinder (a tree's crown, 2.5–5 m up) of radius `r` about
-    /// `axis`, as a sensor at the origin sees it: returns spread evenly over the arc that faces
-    /// it. Their mean lies 2r/π in front of the axis.
-    fn visible_half(axis: [f64; 2], r: f64, n: usize) -> Vec<Point3<f64>> {
+    /// The part of a vertical cylinder (a tree's crown, 2.5–5 m up) of radius `r` about `axis`
+    /// that a sensor at the origin sees: the arc between the tangent points, ±α about the
+    /// direction toward the sensor, cos α = r / d (d: the axis's distance), returns spread
+    /// evenly over it.
+    fn visible_arc(axis: [f64; 2], r: f64, n: usize) -> Vec<Point3<f64>> {
         let toward_sensor = (-axis[1]).atan2(-axis[0]);
+        let alpha = (r / axis[0].hypot(axis[1])).acos();
         (0..n)
             .map(|k| {
                 let t = (k as f64 + 0.5) / n as f64;
-                let angle = toward_sensor - std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * t;
+                let angle = toward_sensor - alpha + 2.0 * alpha * t;
                 let z = 2.5 + 2.5 * ((k * 7) % n) as f64 / n as f64;
                 Point3::new(axis[0] + r * angle.cos(), axis[1] + r * angle.sin(), z)
             })
             .collect()
     }
 
-    /// A crown of radius 1 m seen from one side: the mean of its returns is 2/π m short of the
-    /// axis; moved by the far-side shift (κ = 2/π of half its width, 2 m) it is on the axis, and
-    /// its box, symmetric about the axis, holds every return. A lamp post's pole (0.1 m) moves
-    /// by 6 cm at most.
+    /// How far in front of the axis the mean of `visible_arc` lies, and the far-side centroid
+    /// (κ = 2/π): the arc's mean is r sin α / α in front, its width across the line of sight
+    /// 2 r sin α, so the shift is (2/π) r sin α.
+    fn short_of_axis(r: f64, d: f64) -> (f64, f64) {
+        let alpha = (r / d).acos();
+        let mean = r * alpha.sin() / alpha;
+        (mean, mean - std::f64::consts::FRAC_2_PI * r * alpha.sin())
+    }
+
+    /// A crown of radius 1 m 10.4 m away (α = 84.5°): the mean of its returns is 0.675 m short
+    /// of the axis, the far-side centroid 0.041 m (the closed forms of `short_of_axis`), its z
+    /// unchanged, every return inside its box. A lamp post's pole (0.1 m) moves by 6 cm at most.
     #[test]
     fn the_far_side_of_a_round_object_is_found() {
-        let crown = visible_half([10.0, 3.0], 1.0, 2000);
+        let crown = visible_arc([10.0, 3.0], 1.0, 2000);
         let labels = vec![Some(LabelId(2)); crown.len()];
-        let [ref mean] =
-            cluster(&crown, &labels, &ClusterConfig { far_side_shift: 0.0, ..ClusterConfig::default() }, &level())[..]
-        else {
-            panic!("one crown");
-        };
-        assert!(
-            ((mean.centroid.xy() - nalgebra::Point2::new(10.0, 3.0)).norm() - 2.0 / std::f64::consts::PI).abs() < 0.01
-        );
+        let (mean_short, far_short) = short_of_axis(1.0, 10.0f64.hypot(3.0));
+        let axis = nalgebra::Point2::new(10.0, 3.0);
+        let off = ClusterConfig { far_side_shift: 0.0, ..ClusterConfig::default() };
+        let [ref mean] = cluster(&crown, &labels, &off, &level())[..] else { panic!("one crown") };
+        assert!(((mean.centroid.xy() - axis).norm() - mean_short).abs() < 0.005, "{mean:?}");
         let [ref far] = cluster(&crown, &labels, &ClusterConfig::default(), &level())[..] else { panic!("one crown") };
-        assert!((far.centroid.xy() - Point3::new(10.0, 3.0, 0.0).xy()).norm() < 0.01, "{far:?}");
+        assert!(((far.centroid.xy() - axis).norm() - far_short).abs() < 0.005, "{far:?}");
+        assert!(far_short < 0.05 && mean_short > 0.6);
         assert_eq!(far.centroid.z, mean.centroid.z, "the shift is horizontal");
         for p in &crown {
             let d = p - far.centroid;
@@ -484,31 +509,33 @@ mod tests {
                 "{p} outside {far:?}"
             );
         }
-        let pole = visible_half([4.0, -2.0], 0.1, 200);
+        let pole = visible_arc([4.0, -2.0], 0.1, 200);
         let [ref post] = cluster(&pole, &vec![Some(LabelId(3)); 200], &ClusterConfig::default(), &level())[..] else {
             panic!("one pole");
         };
-        assert!((post.centroid.xy() - Point3::new(4.0, -2.0, 0.0).xy()).norm() < 0.01, "{post:?}");
+        assert!((post.centroid.xy() - nalgebra::Point2::new(4.0, -2.0)).norm() < 0.01, "{post:?}");
     }
 
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
         /// Any round object (radius 0.1–2 m, 3–25 m away, any bearing), measured along axes
-        /// turned by any yaw: the far side is found within 2% of the radius of the axis, and
-        /// the answer does not depend on the axes' yaw.
+        /// turned by any yaw: the far-side centroid lies where the closed form of the visible
+        /// arc puts it (`short_of_axis`: 4 % of r short at d = 10 r, 41 % at d = 1.5 r), within
+        /// 1 % of the radius, whatever the axes' yaw.
         #[test]
         fn the_far_side_is_found_whatever_the_bearing_and_the_axes(
             bearing in -3.1f64..3.1, range in 3.0f64..25.0, r in 0.1f64..2.0, yaw in -3.1f64..3.1,
         ) {
             let axis = [range * bearing.cos(), range * bearing.sin()];
-            let crown = visible_half(axis, r, 1000);
+            let crown = visible_arc(axis, r, 1000);
             let labels = vec![Some(LabelId(2)); crown.len()];
             let turned = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
             let config = ClusterConfig { tolerance_m: 0.5, ..ClusterConfig::default() };
             let found = cluster(&crown, &labels, &config, &turned);
             proptest::prop_assert_eq!(found.len(), 1);
-            let error = (found[0].centroid.xy() - nalgebra::Point2::new(axis[0], axis[1])).norm();
-            proptest::prop_assert!(error < 0.02 * r, "{} m off for r = {}", error, r);
+            let short = (found[0].centroid.xy() - nalgebra::Point2::new(axis[0], axis[1])).norm();
+            let expected = short_of_axis(r, range).1;
+            proptest::prop_assert!((short - expected).abs() < 0.01 * r, "{} m short, {} expected, r = {}", short, expected, r);
             let level = cluster(&crown, &labels, &config, &level());
             proptest::prop_assert!((level[0].centroid - found[0].centroid).norm() < 1e-9);
         }

@@ -46,6 +46,18 @@
 //! false positives of its class within c_max attach to it until it is confirmed, and the
 //! matcher meets objects that no other robot has. A *tentative* object (fewer than
 //! `confirm_after` sightings) not seen for `tentative_expiry_s` is removed.
+//!
+//! Every view (beyond the paper; issue 31). The paper's object is its latest view, which moves
+//! with every partial view and every side seen. An associated object's estimate (centroid and
+//! size, read in the world through the current keyframe poses) moves toward the new view by
+//!
+//!   share = max(n / (W + n), 1 / `sighting_memory`)      (n: the view's returns, W: those so far)
+//!
+//! — the mean of all views weighted by their returns, each new one counting for at least
+//! 1 / `sighting_memory`, so old views fade (1: the paper's latest view). A moving object
+//! follows its latest view (share 1). A candidate's distance to an object is the nearer of the
+//! object's estimate and its latest sighting: an estimate averaged over views lags behind a
+//! thing that moves, and the latest sighting does not.
 
 use super::clustering::ObjectCandidate;
 use crate::scene_graph::{KeyframeId, ObjectId, SceneGraph, SceneGraphError};
@@ -170,7 +182,8 @@ impl ObjectTracker {
         self.sightings(id) >= config.confirm_after && !self.moving.contains(&id)
     }
 
-    /// The returns in `id`'s latest estimate (0 when unknown).
+    /// The returns behind `id`'s estimate, accumulated over its views and merges (0 when
+    /// unknown).
     fn points(&self, id: ObjectId) -> usize {
         self.points.get(&id).copied().unwrap_or(0)
     }
@@ -211,7 +224,12 @@ impl ObjectTracker {
         candidate: &ObjectCandidate,
         config: &TrackerConfig,
     ) {
-        if config.moving_m.is_nan() || config.moving_m <= 0.0 || self.moving.contains(&id) {
+        if self.moving.contains(&id) {
+            return;
+        }
+        if config.moving_m.is_nan() || config.moving_m <= 0.0 {
+            // No motion test, but association still reads the latest sighting.
+            self.recent.insert(id, VecDeque::from([(keyframe, candidate.centroid)]));
             return;
         }
         let Some(now) = graph.keyframe(keyframe) else { return };
@@ -354,7 +372,7 @@ impl ObjectTracker {
         let gone_share = if p_keep + p_gone == 0 { 0.5 } else { p_gone as f64 / (p_keep + p_gone) as f64 };
         graph.merge_objects(keep, gone, gone_share)?;
         self.points.remove(&gone);
-        self.points.insert(keep, p_keep + p_gone);
+        self.points.insert(keep, p_keep.saturating_add(p_gone));
         let gone_sightings = self.sightings.remove(&gone).unwrap_or(0);
         let seen_by = u32::try_from(graph.keyframes_observing(keep).count()).unwrap_or(u32::MAX);
         let sightings = self.sightings.entry(keep).or_insert(0);
@@ -648,15 +666,19 @@ mod tests {
         assert_eq!(confirmed_at, vec![2], "confirmed once, before it had gone far enough to tell");
         assert!(!tracker.is_moving(chair) && tracker.is_confirmed(chair, &config));
         assert_eq!(tracker.moving_count(), 1);
-        // With the guard off the walker is confirmed like any object.
+        // With the guard off the walker is tracked, and confirmed, like any object: association
+        // still reads its latest sighting, which its averaged estimate lags behind.
         let (mut graph, mut off) = (SceneGraph::new(), ObjectTracker::default());
         let config = TrackerConfig { moving_m: 0.0, ..config };
         keyframes(&mut graph, 4, |_| 0.0);
+        let mut walker = Vec::new();
         for k in 0..4 {
             let seen = [candidate(1, 3.0 + 1.4 * f64::from(k), 2.0)];
-            off.update(&mut graph, KeyframeId(k), &seen, &config).unwrap();
+            walker.extend(off.update(&mut graph, KeyframeId(k), &seen, &config).unwrap().objects);
         }
         assert_eq!(off.moving_count(), 0);
+        assert!(walker.iter().all(|id| *id == walker[0]), "one object: {walker:?}");
+        assert!(off.is_confirmed(walker[0], &config));
     }
 
     /// An 8 m tree seen whole, then less and less of its trunk as occluders rise in front of
