@@ -215,24 +215,36 @@ mod tests {
         assert_eq!((c.robot.id, c.robot.name.as_str()), (7, "husky"));
         assert_eq!(c.matcher.matching.edge_sharpness, 2.5);
         assert_eq!((c.comms.max_keyframes_in_flight, c.comms.request_window_s), (8, 1.5));
-        std::env::set_var("SGM_TEST_B__MATCHER__EDGE_SHARPNESS", "-1");
-        let e = RobotConfig::load_with_env(None, "SGM_TEST_B").unwrap_err();
-        assert_eq!(e.to_string(), "matcher.edge_sharpness = -1: allowed finite and > 0");
-        std::env::set_var("SGM_TEST_C__COMMS__MAX_KEYFRAMES_IN_FLIGHT", "0");
-        let e = RobotConfig::load_with_env(None, "SGM_TEST_C").unwrap_err();
-        assert_eq!(e.to_string(), "comms.max_keyframes_in_flight = 0: allowed ≥ 1");
-        std::env::set_var("SGM_TEST_E__MATCHER__SCAN_CONTEXT__MAX_PLACES", "1");
-        let e = RobotConfig::load_with_env(None, "SGM_TEST_E").unwrap_err();
-        assert_eq!(e.to_string(), "matcher.scan_context.max_places = 1: allowed ≥ 2");
-        std::env::set_var("SGM_TEST_F__TRACKER__TRACKING__MAX_STACK_GAP_M", "-1");
-        let e = RobotConfig::load_with_env(None, "SGM_TEST_F").unwrap_err();
-        assert_eq!(e.to_string(), "tracker.tracking.max_stack_gap_m = -1: allowed finite and ≥ 0");
-        std::env::set_var("SGM_TEST_G__TRACKER__TRACKING__SIGHTING_MEMORY", "0");
-        let e = RobotConfig::load_with_env(None, "SGM_TEST_G").unwrap_err();
-        assert_eq!(e.to_string(), "tracker.tracking.sighting_memory = 0: allowed ≥ 1 (1: the latest sighting alone)");
-        std::env::set_var("SGM_TEST_H__FUSION__FAR_SIDE_SHIFT", "1.5");
-        let e = RobotConfig::load_with_env(None, "SGM_TEST_H").unwrap_err();
-        assert_eq!(e.to_string(), "fusion.far_side_shift = 1.5: allowed in [0, 1] (0: off)");
+        // One environment variable of a prefix of its own, refused with this message.
+        let refused = |prefix: &str, key: &str, value: &str| {
+            std::env::set_var(format!("{prefix}__{key}"), value);
+            RobotConfig::load_with_env(None, prefix).unwrap_err().to_string()
+        };
+        for (prefix, key, value, message) in [
+            ("SGM_TEST_B", "MATCHER__EDGE_SHARPNESS", "-1", "matcher.edge_sharpness = -1: allowed finite and > 0"),
+            ("SGM_TEST_C", "COMMS__MAX_KEYFRAMES_IN_FLIGHT", "0", "comms.max_keyframes_in_flight = 0: allowed ≥ 1"),
+            (
+                "SGM_TEST_E",
+                "MATCHER__SCAN_CONTEXT__MAX_PLACES",
+                "1",
+                "matcher.scan_context.max_places = 1: allowed ≥ 2",
+            ),
+            (
+                "SGM_TEST_F",
+                "TRACKER__TRACKING__MAX_STACK_GAP_M",
+                "-1",
+                "tracker.tracking.max_stack_gap_m = -1: allowed finite and ≥ 0",
+            ),
+            (
+                "SGM_TEST_G",
+                "TRACKER__TRACKING__SIGHTING_MEMORY",
+                "0",
+                "tracker.tracking.sighting_memory = 0: allowed ≥ 1 (1: the latest sighting alone)",
+            ),
+            ("SGM_TEST_H", "FUSION__FAR_SIDE_SHIFT", "1.5", "fusion.far_side_shift = 1.5: allowed in [0, 1] (0: off)"),
+        ] {
+            assert_eq!(refused(prefix, key, value), message);
+        }
         writeln!(file, "[comms.limits]\nbogus = 1").unwrap();
         let e = RobotConfig::load_with_env(Some(file.path()), "SGM_TEST_D").unwrap_err();
         assert!(e.to_string().contains("bogus"), "{e}");
