@@ -253,6 +253,15 @@ pub struct InterRobotConstraints {
     pub factors: Vec<(KeyframeId, KeyframeId, Pose3, Matrix6<f64>)>,
 }
 
+/// Matcher → Optimiser: our alignment with `robot` was found wrong (a contradicted cycle
+/// settled against it, `matcher.relay.settle`): its anchor, keyframes and inter-robot factors
+/// leave the pose graph; a later alignment places it afresh.
+#[derive(Message, Clone, Copy, Debug)]
+#[rtype(result = "()")]
+pub struct NeighbourWithdrawn {
+    pub robot: RobotId,
+}
+
 /// Runner / bridge → supervisor → children: time moved on to `now` (the clock is already set).
 #[derive(Message, Clone, Copy, Debug)]
 #[rtype(result = "()")]

@@ -202,6 +202,17 @@ impl Handler<InterRobotConstraints> for Optimiser {
     }
 }
 
+impl Handler<NeighbourWithdrawn> for Optimiser {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourWithdrawn, ctx: &mut Context<Self>) {
+        contained(ctx, "optimiser", || {
+            let factors = self.graph.withdraw_neighbour(msg.robot);
+            tracing::info!(robot = %self.robot, neighbour = %msg.robot, factors, "neighbour withdrawn from the pose graph");
+            self.solve_and_publish();
+        });
+    }
+}
+
 impl Handler<NeighbourKeyframePoses> for Optimiser {
     type Result = ();
     fn handle(&mut self, msg: NeighbourKeyframePoses, ctx: &mut Context<Self>) {

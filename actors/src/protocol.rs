@@ -248,6 +248,13 @@ impl Neighbour<Aligned> {
         self
     }
 
+    /// The alignment was found wrong (a contradicted cycle settled against it): back to
+    /// waiting for a match, with the object data held (any closure round in progress ends).
+    pub fn withdrawn(self, now: Stamp) -> Neighbour<ObjectsReceived> {
+        let revision = self.state.revision;
+        self.to(now, ObjectsReceived { revision })
+    }
+
     /// The pose graph's estimate of the transform.
     pub fn reestimated(mut self, local_from_remote: Pose3) -> Self {
         self.state.local_from_remote = local_from_remote;
@@ -407,8 +414,11 @@ mod tests {
         // A thaw drops a round in flight and keeps the alignment.
         let p: Protocol = asked.into();
         let Protocol::Aligned(settled) = p.settled(7.0) else { panic!("still aligned") };
-        assert_eq!((settled.state.closure, settled.state.local_from_remote), (None, moved));
+        assert_eq!((settled.state.closure.clone(), settled.state.local_from_remote), (None, moved));
         assert_eq!(settled.since, 1.0);
+        // Only a withdrawal leaves it, round and all, back to waiting with the objects held.
+        let withdrawn = settled.objects_received(4).closure_started(vec![], 8.0, &retry).withdrawn(9.0);
+        assert_eq!(withdrawn, Neighbour { robot: RobotId(2), since: 9.0, state: ObjectsReceived { revision: 4 } });
     }
 
     #[test]

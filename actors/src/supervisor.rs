@@ -232,6 +232,7 @@ pub fn start_robot_restored(
         share_descriptors: comms.clone().recipient(),
         share_alignments: comms.clone().recipient(),
         optimiser: optimiser.clone().recipient(),
+        withdraw: optimiser.clone().recipient(),
     }));
     optimiser.do_send(Connect(OptimiserLinks {
         tracker: tracker.clone().recipient(),
@@ -382,6 +383,8 @@ mod tests {
                 refuted: Vec::new(),
                 closures: Default::default(),
                 aligned_via: None,
+                withdrawn: Vec::new(),
+                withdrawals: 0,
             }],
         };
         let mut comms = CommsState::default();

@@ -104,6 +104,7 @@ mod tests {
             closures: Default::default(),
             aligned_via: None,
             contradicted_by: Vec::new(),
+            withdrawals: 0,
             keyframes_held: 0,
             objects_revision: None,
             match_attempts: Default::default(),

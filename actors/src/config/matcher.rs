@@ -111,6 +111,15 @@ pub struct RelaySection {
     /// ... or turns it by this much (the angle of the rotation between the two), degrees.
     /// Default 5.0. Without relaying nothing is heard, so nothing is flagged.
     pub contradiction_deg: f64,
+    /// Whether a contradicted cycle is settled by object evidence
+    /// (`model::matching::settle`): every alignment on it is scored by the object pairs it
+    /// explains against those the product of the others does, and ours that the evidence
+    /// names wrong is withdrawn — out of the pose graph, barred for the rest of the mission —
+    /// to be aligned again through the others. Off: the cycle is only flagged. Default true.
+    pub settle: bool,
+    /// The pairs by which the wrong alignment's loss must be below every other alignment's on
+    /// the cycle; within it the cycle stays flagged, unsettled. Default 3.
+    pub settle_margin_pairs: usize,
 }
 
 impl Default for RelaySection {
@@ -122,6 +131,8 @@ impl Default for RelaySection {
             min_relayed_pairs: 1,
             contradiction_m: 2.0,
             contradiction_deg: 5.0,
+            settle: true,
+            settle_margin_pairs: 3,
         }
     }
 }
@@ -134,7 +145,9 @@ impl RelaySection {
         check(self.min_relayed_pairs >= 1, "matcher.relay.min_relayed_pairs", self.min_relayed_pairs, "≥ 1")?;
         let (m, deg) = (self.contradiction_m, self.contradiction_deg);
         check(m.is_finite() && m > 0.0, "matcher.relay.contradiction_m", m, "finite and > 0 m")?;
-        check(deg.is_finite() && deg > 0.0 && deg <= 180.0, "matcher.relay.contradiction_deg", deg, "0 < x ≤ 180°")
+        check(deg.is_finite() && deg > 0.0 && deg <= 180.0, "matcher.relay.contradiction_deg", deg, "0 < x ≤ 180°")?;
+        let margin = self.settle_margin_pairs;
+        check(margin >= 1, "matcher.relay.settle_margin_pairs", margin, "≥ 1 (0 would settle a tie by edge order)")
     }
 }
 
@@ -369,6 +382,7 @@ mod tests {
         refused(|m| m.relay.contradiction_m = f64::NAN, "matcher.relay.contradiction_m = NaN");
         refused(|m| m.relay.contradiction_m = 0.0, "matcher.relay.contradiction_m = 0");
         refused(|m| m.relay.contradiction_deg = 181.0, "matcher.relay.contradiction_deg = 181");
+        refused(|m| m.relay.settle_margin_pairs = 0, "matcher.relay.settle_margin_pairs = 0");
         refused(|m| m.factor_sigma_floor_deg = -0.1, "matcher.factor_sigma_floor_deg = -0.1");
         refused(|m| m.factor_sigma_floor_m = f64::INFINITY, "matcher.factor_sigma_floor_m = inf");
         let plan = MatcherSection::default().closures.plan();

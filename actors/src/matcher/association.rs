@@ -53,7 +53,7 @@ impl Matcher {
         ) else {
             return;
         };
-        let refuted = entry.refuted.clone();
+        let (refuted, withdrawn) = (entry.refuted.clone(), entry.withdrawn.clone());
         let (local_objects, remote_revision) = (self.local_objects_revision, data.revision);
         let reused = entry
             .last_match
@@ -83,6 +83,9 @@ impl Matcher {
             MatchOutcome::Aligned(alignment) if alignment.matches.len() < min_matched => {
                 let n = alignment.matches.len();
                 (None, Some(format!("{n} objects matched, fewer than matcher.min_matched_objects ({min_matched})")))
+            }
+            MatchOutcome::Aligned(alignment) if barred(&withdrawn, &alignment.local_from_remote) => {
+                (None, Some("the match lands on an alignment withdrawn by a contradicted cycle".to_string()))
             }
             MatchOutcome::Aligned(alignment) if refuted_recently(&refuted, &alignment.local_from_remote, now) => (
                 None,

@@ -167,7 +167,7 @@ impl Handler<NeighbourTransforms> for Matcher {
                 };
             }
             self.share_alignments();
-            self.log_contradictions();
+            self.review_contradictions();
         });
     }
 }

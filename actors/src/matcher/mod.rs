@@ -20,6 +20,7 @@ mod closures;
 mod neighbour;
 mod relay;
 mod rounds;
+mod settle;
 
 pub use neighbour::{
     ClosureCounts, ClosureMemory, GetNeighbours, MatchAttempts, MatcherState, NeighbourMemory, NeighbourStatus,
@@ -35,7 +36,7 @@ use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervis
 use nalgebra::Point3;
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::alignment::{
-    coarse_to_fine, evenly, judge_round, neighbourhood, refuted_recently, register_round, yaw_turn, LocalView,
+    barred, coarse_to_fine, evenly, judge_round, neighbourhood, refuted_recently, register_round, yaw_turn, LocalView,
     RemoteView, RoundConfig, RoundVerdict, REFUTED_FOR_S,
 };
 use sgm_model::matching::place_candidates::{EvenPlaces, PlaceCandidate, PlaceCandidates};
@@ -62,6 +63,7 @@ pub struct MatcherLinks {
     pub share_descriptors: Recipient<ShareDescriptor>,
     pub share_alignments: Recipient<ShareAlignments>,
     pub optimiser: Recipient<InterRobotConstraints>,
+    pub withdraw: Recipient<NeighbourWithdrawn>,
 }
 
 pub struct Matcher {
@@ -133,6 +135,8 @@ impl Matcher {
                 refuted: e.refuted.clone(),
                 closures: e.closures.clone(),
                 aligned_via: e.aligned_via,
+                withdrawn: e.withdrawn.clone(),
+                withdrawals: e.withdrawals,
             })
             .collect();
         MatcherState { neighbours }
@@ -150,6 +154,8 @@ impl Matcher {
             entry.refuted = memory.refuted;
             entry.closures = memory.closures;
             entry.aligned_via = memory.aligned_via;
+            entry.withdrawn = memory.withdrawn;
+            entry.withdrawals = memory.withdrawals;
             entry.match_again = true;
         }
         self
@@ -177,6 +183,8 @@ impl Matcher {
             refuted_hints: Vec::new(),
             refuted_few: Vec::new(),
             attempts: MatchAttempts::default(),
+            withdrawn: Vec::new(),
+            withdrawals: 0,
             last_match: None,
         })
     }
@@ -430,6 +438,7 @@ impl Handler<GetNeighbours> for Matcher {
                     keyframes_held: e.keyframes.len(),
                     objects_revision: e.objects.as_ref().map(|d| d.revision),
                     match_attempts: e.attempts.clone(),
+                    withdrawals: e.withdrawals,
                 })
                 .collect(),
         )

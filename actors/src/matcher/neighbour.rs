@@ -18,7 +18,8 @@ pub struct NeighbourStatus {
     pub first_aligned: Option<f64>,
     /// Closure rounds since: how many, what they gave.
     pub closures: ClosureCounts,
-    /// When the first alignment came from a relayed one (`[matcher.relay]`): whose.
+    /// When the alignment (the first, or the one after a withdrawal) came from a relayed one
+    /// (`[matcher.relay]`): whose.
     pub aligned_via: Option<RobotId>,
     pub keyframes_held: usize,
     /// Revision of the neighbour's object data held (`None`: none received).
@@ -27,6 +28,9 @@ pub struct NeighbourStatus {
     /// cycle of alignments, beyond `matcher.relay.contradiction_m` / `_deg`): one of the cycle's
     /// alignments is wrong (`model::matching::relay::contradicting`).
     pub contradicted_by: Vec<RobotId>,
+    /// Times our alignment of it was withdrawn: a contradicted cycle settled against it by
+    /// object evidence (`matcher.relay.settle`).
+    pub withdrawals: u32,
     /// What object-graph matching with this neighbour has concluded so far: why a pair that
     /// holds each other's object graphs is not aligned.
     pub match_attempts: MatchAttempts,
@@ -112,7 +116,7 @@ pub(super) struct NeighbourEntry {
     pub(super) closures: ClosureMemory,
     /// The current alignment round started from a neighbour's alignment: whose.
     pub(super) round_via: Option<RobotId>,
-    /// The first alignment came from a neighbour's: whose.
+    /// The current alignment came from a neighbour's: whose.
     pub(super) aligned_via: Option<RobotId>,
     /// Hints whose rounds (with as many pairs as a graph match) were refuted, and when: not
     /// tried again within `REFUTED_FOR_S`; those of rounds from fewer are in `refuted_few`. (A
@@ -124,6 +128,11 @@ pub(super) struct NeighbourEntry {
     pub(super) refuted_few: Vec<(Pose3, Stamp)>,
     /// What graph matching has concluded (status only).
     pub(super) attempts: MatchAttempts,
+    /// Our alignments of it withdrawn (a contradicted cycle settled against them), at most
+    /// [`MAX_WITHDRAWN`], oldest first: barred for good, as a match and as a hint.
+    pub(super) withdrawn: Vec<Pose3>,
+    /// Times an alignment of it was withdrawn.
+    pub(super) withdrawals: u32,
     /// The last graph match and what it was made from: the same local objects against the same
     /// object data give the same outcome (`match_graphs` is a pure function), so it is reused.
     pub(super) last_match: Option<LastMatch>,
@@ -179,7 +188,17 @@ pub struct NeighbourMemory {
     pub refuted: Vec<(Pose3, Stamp)>,
     pub closures: ClosureMemory,
     pub aligned_via: Option<RobotId>,
+    /// Alignments withdrawn and barred, and how many times one was (absent in snapshots from
+    /// before settling: none).
+    #[serde(default)]
+    pub withdrawn: Vec<Pose3>,
+    #[serde(default)]
+    pub withdrawals: u32,
 }
+
+/// Withdrawn alignments barred per neighbour, at most (the oldest is forgotten beyond it). A
+/// pair is withdrawn only when a cycle names it wrong, once per wrong transform.
+pub(super) const MAX_WITHDRAWN: usize = 8;
 
 /// Drops held neighbour keyframes outside `round`, lowest ids first, until at most `cap` are
 /// held; the ids dropped.

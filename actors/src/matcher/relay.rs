@@ -7,7 +7,7 @@
 use super::*;
 use sgm_model::geometry::Brief;
 use sgm_model::matching::closure::{pairs_through, ClosurePlan};
-use sgm_model::matching::relay::{contradicting, hinted_round, hints_for, Reach};
+use sgm_model::matching::relay::{contradicting, hinted_round, hints_for, Hint, Reach};
 
 /// Least time between two log lines about the robots contradicting one alignment, s.
 const CONTRADICTION_LOG_INTERVAL_S: f64 = 60.0;
@@ -27,7 +27,7 @@ pub(super) struct RoundStart {
 }
 
 impl Matcher {
-    fn relaying(&self) -> bool {
+    pub(super) fn relaying(&self) -> bool {
         self.config.relay.enabled && self.config.association == Association::Objects
     }
 
@@ -90,7 +90,7 @@ impl Matcher {
         }
     }
 
-    fn aligned(&self) -> Vec<(RobotId, Pose3)> {
+    pub(super) fn aligned(&self) -> Vec<(RobotId, Pose3)> {
         self.neighbours
             .iter()
             .filter_map(|(robot, e)| match &e.protocol {
@@ -144,30 +144,35 @@ impl Matcher {
         // which only say where the keyframes to register are.
         let few = ClosurePlan { min_pairs: self.config.relay.min_relayed_pairs, ..plan.clone() };
         let hints = hints_for(self.robot, robot, &ours, &self.hints);
-        let start =
-            hints.iter().filter(|hint| !refuted_recently(refuted, &hint.local_from_remote, now)).find_map(|hint| {
-                let round = if hint.via == robot {
-                    hinted_round(local, remote, hint, &self.labels, &plan, Reach::Patch)
-                } else {
-                    // As many pairs as a graph match, on a patch or over the whole map; else few.
-                    hinted_round(local, remote, hint, &self.labels, &plan, Reach::WholeMap).or_else(|| {
-                        if refuted_recently(refuted_few, &hint.local_from_remote, now) {
-                            None
-                        } else {
-                            hinted_round(local, remote, hint, &self.labels, &few, Reach::Patch)
-                        }
-                    })
-                }?;
-                let pairs = round.iter().map(|p| (p.local, p.remote)).collect();
-                Some(RoundStart { local_from_remote: hint.local_from_remote, pairs, via: Some(hint.via) })
-            });
+        let open = |hint: &&Hint| {
+            !refuted_recently(refuted, &hint.local_from_remote, now)
+                && !barred(&entry.withdrawn, &hint.local_from_remote)
+        };
+        let start = hints.iter().filter(open).find_map(|hint| {
+            let round = if hint.via == robot {
+                hinted_round(local, remote, hint, &self.labels, &plan, Reach::Patch)
+            } else {
+                // As many pairs as a graph match, on a patch or over the whole map; else few.
+                hinted_round(local, remote, hint, &self.labels, &plan, Reach::WholeMap).or_else(|| {
+                    if refuted_recently(refuted_few, &hint.local_from_remote, now) {
+                        None
+                    } else {
+                        hinted_round(local, remote, hint, &self.labels, &few, Reach::Patch)
+                    }
+                })
+            }?;
+            let pairs = round.iter().map(|p| (p.local, p.remote)).collect();
+            Some(RoundStart { local_from_remote: hint.local_from_remote, pairs, via: Some(hint.via) })
+        });
         if start.is_none() && !hints.is_empty() && tracing::enabled!(tracing::Level::DEBUG) {
             // Per hint: through whom, whether refuted recently, and how many objects pair through it.
             let tried: Vec<String> = hints
                 .iter()
                 .map(|hint| {
                     let pairs = pairs_through(local, remote, &hint.local_from_remote, &self.labels, plan.gate_m).len();
-                    let barred = if refuted_recently(refuted, &hint.local_from_remote, now) {
+                    let barred = if barred(&entry.withdrawn, &hint.local_from_remote) {
+                        " withdrawn"
+                    } else if refuted_recently(refuted, &hint.local_from_remote, now) {
                         " refuted"
                     } else if refuted_recently(refuted_few, &hint.local_from_remote, now) {
                         " refuted from few pairs"
@@ -195,7 +200,7 @@ impl Handler<NeighbourAlignments> for Matcher {
             // The latest per neighbour: what it holds now replaces what it held (bounded by the
             // envelope's `limits.max_ids`).
             self.hints.insert(msg.robot, msg.alignments);
-            self.log_contradictions();
+            self.review_contradictions();
             let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
             for robot in robots {
                 self.try_match(robot);

@@ -222,8 +222,9 @@ impl Matcher {
                     entry.protocol = Some(n.aligned(local_from_remote, now).into());
                     if entry.first_aligned.is_none() {
                         entry.first_aligned = Some(now);
-                        entry.aligned_via = entry.round_via;
                     }
+                    // Aligned once, or again after a withdrawal: whose alignment this one came from.
+                    entry.aligned_via = entry.round_via;
                 }
                 // The first round's ground counts as covered for closure rounds.
                 let at: Vec<Point3<f64>> = n
@@ -251,7 +252,7 @@ impl Matcher {
                     });
                 }
                 self.share_alignments();
-                self.log_contradictions();
+                self.review_contradictions();
             }
         }
     }

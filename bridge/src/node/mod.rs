@@ -343,6 +343,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                     "first_aligned": n.first_aligned,
                     "aligned_via": n.aligned_via.map(|r| r.0),
                     "contradicted_by": n.contradicted_by.iter().map(|r| r.0).collect::<Vec<_>>(),
+                    "withdrawals": n.withdrawals,
                     "closures": n.closures,
                     "match_attempts": n.match_attempts,
                     "local_from_remote": n.local_from_remote.map(|p| {

@@ -21,6 +21,7 @@ pub mod paper_baseline;
 pub mod place_candidates;
 pub mod relay;
 pub mod scan_context;
+pub mod settle;
 pub mod significance;
 mod spectral;
 mod symmetry;

@@ -171,6 +171,11 @@ fn key_of(r: &KeyframeRef) -> u64 {
     }
 }
 
+/// The entries of `values` whose flag in `gone` is false, in order.
+fn kept<T>(gone: &[bool], values: Vec<T>) -> Vec<T> {
+    values.into_iter().zip(gone).filter(|(_, g)| !**g).map(|(x, _)| x).collect()
+}
+
 /// The anchor's key: above every keyframe id of its robot (ids are u32).
 fn anchor_key(robot: RobotId) -> u64 {
     ((u64::from(robot.0) + 1) << 40) | ((1 << 40) - 1)
@@ -411,6 +416,72 @@ impl KeyframeGraph {
             *self.refreshed.entry(robot).or_default() += out.moved as u64;
         }
         out
+    }
+
+    /// Takes `robot` out of the graph as if it had never been aligned: its anchor, its keyframe
+    /// variables, their ties and every inter-robot factor to them, and the pose updates held
+    /// for its keyframes. The rest keeps its order (variables, factors and the last solve's
+    /// decisions are renumbered), so the next solve is the one of a graph that never held it.
+    /// What the Matcher does when its alignment with the neighbour was found wrong (a
+    /// contradicted cycle settled against it): a later alignment places a fresh anchor. The
+    /// counts of realignments and refreshed priors stay, as history. How many factors went.
+    pub fn withdraw_neighbour(&mut self, robot: RobotId) -> usize {
+        let Some(anchor) = self.anchors.remove(&robot) else { return 0 };
+        self.deferred.remove(&robot);
+        self.inconsistent.remove(&robot);
+        let mut gone = vec![false; self.graph.values.len()];
+        gone[anchor] = true;
+        self.index.retain(|r, i| {
+            let theirs = matches!(r, KeyframeRef::Remote { robot: owner, .. } if *owner == robot);
+            gone[*i] |= theirs;
+            !theirs
+        });
+        // Old variable → new, for those that stay.
+        let mut new_of = vec![None; gone.len()];
+        let mut next = 0;
+        for (i, g) in gone.iter().enumerate() {
+            if !g {
+                new_of[i] = Some(next);
+                next += 1;
+            }
+        }
+        self.graph.keys = kept(&gone, std::mem::take(&mut self.graph.keys));
+        self.graph.values = kept(&gone, std::mem::take(&mut self.graph.values));
+        self.graph.fixed = kept(&gone, std::mem::take(&mut self.graph.fixed));
+        self.graph.priors.retain_mut(|p| match new_of[p.variable] {
+            Some(v) => {
+                p.variable = v;
+                true
+            }
+            None => false,
+        });
+        // Old factor → new, for those whose ends both stay.
+        let mut factor_of = vec![None; self.graph.betweens.len()];
+        let mut removed = 0;
+        let (betweens, candidates) = (std::mem::take(&mut self.graph.betweens), std::mem::take(&mut self.candidates));
+        for (k, (mut b, candidate)) in betweens.into_iter().zip(candidates).enumerate() {
+            match (new_of[b.from], new_of[b.to]) {
+                (Some(from), Some(to)) => {
+                    (b.from, b.to) = (from, to);
+                    factor_of[k] = Some(self.graph.betweens.len());
+                    self.graph.betweens.push(b);
+                    self.candidates.push(candidate);
+                }
+                _ => removed += usize::from(candidate),
+            }
+        }
+        self.rejected = self.rejected.iter().filter_map(|k| factor_of.get(*k).copied().flatten()).collect();
+        for outliers in self.inconsistent.values_mut() {
+            *outliers = outliers.iter().filter_map(|k| factor_of.get(*k).copied().flatten()).collect();
+        }
+        for a in self.anchors.values_mut() {
+            *a = new_of[*a].unwrap_or(*a);
+        }
+        for i in self.index.values_mut() {
+            *i = new_of[*i].unwrap_or(*i);
+        }
+        self.updated = self.updated.iter().filter_map(|i| new_of[*i]).collect();
+        removed
     }
 
     /// Ties a neighbour keyframe to its robot's anchor: the neighbour's estimate of it, with its
@@ -998,6 +1069,72 @@ mod tests {
         for (k, pose) in &solved.poses {
             assert!((pose.translation.vector - truth[k.0 as usize].translation.vector).norm() < 1e-3);
         }
+    }
+
+    /// A neighbour withdrawn (its alignment found wrong) leaves the graph that never held it:
+    /// with a second neighbour aligned after it and local keyframes added after both (so every
+    /// index behind it moves), the solve is the one of the graph built without it, to the bit;
+    /// a later alignment places a fresh anchor where its round says.
+    #[test]
+    fn a_withdrawn_neighbour_leaves_the_graph_that_never_held_it() {
+        let step = pose_from_yaw_translation(0.0, Vector3::new(2.0, 0.0, 0.0));
+        let cov = Matrix6::identity() * 0.01;
+        let measured = pose_from_yaw_translation(0.0, Vector3::new(0.0, 2.0, 0.0));
+        let right = pose_from_yaw_translation(0.3, Vector3::new(20.0, 4.0, 0.0));
+        let wrong = pose_from_yaw_translation(0.3 + std::f64::consts::PI, Vector3::new(-9.0, 30.0, 0.0));
+        let round = |robot: u16, l: &Pose3, ks: &[u32], truth: &[Pose3]| {
+            let keyframes: Vec<_> =
+                ks.iter().map(|&k| (KeyframeId(100 + k), l.inverse() * truth[k as usize] * measured, cov)).collect();
+            let factors: Vec<_> =
+                ks.iter().map(|&k| (KeyframeId(k), KeyframeId(100 + k), measured, information())).collect();
+            (RobotId(robot), keyframes, factors)
+        };
+        let build = |with_wrong: bool| {
+            let (mut graph, truth) = straight_chain(6);
+            if with_wrong {
+                let (robot, keyframes, factors) = round(2, &wrong, &[1, 3, 5], &truth);
+                graph.add_neighbour(robot, &wrong, &keyframes, &factors);
+                graph.solve(true, 0).expect("solves");
+            }
+            let (robot, keyframes, factors) = round(3, &right, &[0, 2, 4], &truth);
+            graph.add_neighbour(robot, &right, &keyframes, &factors);
+            for k in 6..9 {
+                let pose = truth[5] * (5..k).fold(Pose3::identity(), |p, _| p * step);
+                let keyframe = Keyframe { id: KeyframeId(k), stamp: f64::from(k), world_from_body: pose };
+                graph.add_keyframe(&keyframe, &[odometry(k - 1, k, &step)], 100);
+            }
+            (graph, truth)
+        };
+        let (mut withdrawn, truth) = build(true);
+        withdrawn.refresh_neighbour(RobotId(2), &[(KeyframeId(500), Pose3::identity())]);
+        assert_eq!(withdrawn.withdraw_neighbour(RobotId(2)), 3, "its three inter-robot factors");
+        assert_eq!(withdrawn.withdraw_neighbour(RobotId(2)), 0, "gone already");
+        let (mut never, _) = build(false);
+        // The same variables and factors; the values differ by what the solve with the
+        // withdrawn neighbour moved them (it agreed with itself: ~1e-23 m).
+        let (w, n) = (&withdrawn.graph, &never.graph);
+        assert_eq!((&w.keys, &w.fixed, &w.betweens, &w.priors), (&n.keys, &n.fixed, &n.betweens, &n.priors));
+        assert_eq!(withdrawn.freeze().index, never.freeze().index);
+        assert_eq!(withdrawn.candidates, never.candidates);
+        let (a, b) = (withdrawn.solve(true, 2).expect("solves"), never.solve(true, 2).expect("solves"));
+        let near = |x: &Pose3, y: &Pose3| {
+            let e = crate::geometry::pose_error(x, y);
+            e.translation_m < 1e-9 && e.max_axis_rotation_deg() < 1e-9
+        };
+        assert_eq!(a.poses.len(), b.poses.len());
+        assert!(a.poses.iter().zip(&b.poses).all(|(x, y)| x.0 == y.0 && near(&x.1, &y.1)));
+        assert!(a.anchors.len() == 1 && a.anchors[0].0 == RobotId(3) && near(&a.anchors[0].1, &b.anchors[0].1));
+        assert_eq!(a.covariances.len(), 2);
+        assert!(a.covariances.iter().zip(&b.covariances).all(|(x, y)| (x.1 - y.1).norm() < 1e-12));
+        assert_eq!(withdrawn.status().inter_robot.iter().map(|c| c.robot).collect::<Vec<_>>(), [RobotId(3)]);
+        assert!(withdrawn.freeze().deferred.is_empty(), "its held pose updates went with it");
+        // Aligned again, rightly this time: a fresh anchor where the round puts it.
+        let (robot, keyframes, factors) = round(2, &right, &[1, 3, 5], &truth);
+        withdrawn.add_neighbour(robot, &right, &keyframes, &factors);
+        let solved = withdrawn.solve(true, 0).expect("solves");
+        let anchor = solved.anchors.iter().find(|(r, _)| *r == RobotId(2)).expect("anchored again").1;
+        let e = crate::geometry::pose_error(&anchor, &right);
+        assert!(e.translation_m < 1e-6 && e.max_axis_rotation_deg() < 1e-6, "{e:?}");
     }
 
     #[test]

@@ -61,8 +61,8 @@ pub struct AlignmentReport {
     /// Protocol state at the end.
     pub state: String,
     pub first_aligned_s: Option<f64>,
-    /// The first alignment started from this robot's alignment (`matcher.relay`), not from
-    /// object-graph matching.
+    /// The alignment (the first, or the one after a withdrawal) started from this robot's
+    /// alignment (`matcher.relay`), not from object-graph matching.
     pub aligned_via: Option<String>,
     pub translation_error_m: Option<f64>,
     /// estimate − truth of local_from_remote's translation, local world axes, m.
@@ -89,6 +89,9 @@ pub struct AlignmentReport {
     /// local robot's status, `matcher.relay.contradiction_m`): one alignment of the cycle is
     /// wrong.
     pub contradicted_by: Vec<String>,
+    /// Times the local robot withdrew its alignment of the remote: a contradicted cycle
+    /// settled against it by object evidence (`matcher.relay.settle`).
+    pub withdrawals: u32,
     /// The object-graph matches made against the remote and why the latest started no round
     /// (the local robot's status): why a pair is not aligned.
     pub match_attempts: sgm_actors::matcher::MatchAttempts,
@@ -100,12 +103,19 @@ impl AlignmentReport {
         self.aligned_via.as_ref().map_or(String::new(), |v| format!(" (relayed by {v})"))
     }
 
-    /// ", contradicted through NAME, NAME" when robots' relayed alignments contradict it, else "".
+    /// ", contradicted through NAME, NAME" when robots' relayed alignments contradict it, and
+    /// ", N alignment(s) withdrawn" when contradicted cycles were settled against it; else "".
     pub fn contradiction_note(&self) -> String {
-        if self.contradicted_by.is_empty() {
-            return String::new();
+        let mut note = String::new();
+        if !self.contradicted_by.is_empty() {
+            note += &format!(", contradicted through {}", self.contradicted_by.join(", "));
         }
-        format!(", contradicted through {}", self.contradicted_by.join(", "))
+        match self.withdrawals {
+            0 => {}
+            1 => note += ", 1 wrong alignment withdrawn",
+            n => note += &format!(", {n} wrong alignments withdrawn"),
+        }
+        note
     }
 }
 
@@ -396,6 +406,7 @@ pub fn compute(record: &RunRecord) -> Report {
                     .iter()
                     .filter_map(|v| Some(record.robots.get(v.index()?)?.name.clone()))
                     .collect(),
+                withdrawals: n.withdrawals,
                 match_attempts: n.match_attempts.clone(),
             });
         }

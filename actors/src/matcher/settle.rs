@@ -1,0 +1,123 @@
+//! Contradicted cycles settled by evidence (`matcher.relay.settle`, `model::matching::settle`):
+//! every cycle that contradicts one of our alignments is scored by the object graphs we hold —
+//! ours and both neighbours' on it — and when the evidence names one of *our* alignments wrong,
+//! it is withdrawn: the protocol goes back to waiting for a match, the transform is barred for
+//! good (as a match and as a hint), the pose graph drops the neighbour
+//! (`KeyframeGraph::withdraw_neighbour`), and the team hears our alignments without it. The
+//! other alignments of the cycle then place the neighbour again through the relay
+//! (`relay.rs`), with a round of our own registrations as for any hint. An alignment of
+//! another robot named wrong is left to that robot, which holds the same evidence.
+
+use super::association::graph_objects;
+use super::neighbour::MAX_WITHDRAWN;
+use super::*;
+use sgm_model::geometry::Brief;
+use sgm_model::matching::settle::{settle_cycle, CycleEdge, SettleConfig, Settlement};
+
+/// One of our alignments that a cycle's evidence names wrong.
+struct Withdrawal {
+    robot: RobotId,
+    /// The cycle's robots, from us.
+    cycle: Vec<RobotId>,
+    settlement: Settlement,
+}
+
+impl Matcher {
+    /// Settles the contradicted cycles the evidence decides (with `relay.settle`), one
+    /// withdrawal at a time (each changes the cycles), then logs the contradictions left.
+    pub(super) fn review_contradictions(&mut self) {
+        if self.config.relay.settle {
+            // Each withdrawal leaves one alignment fewer: at most one per neighbour.
+            for _ in 0..self.neighbours.len() {
+                let Some(w) = self.next_withdrawal() else { break };
+                self.withdraw(w);
+            }
+        }
+        self.log_contradictions();
+    }
+
+    /// The first of our alignments (in neighbour order, then the contradicting robots' order)
+    /// that a contradicted cycle's evidence names wrong.
+    fn next_withdrawal(&self) -> Option<Withdrawal> {
+        let ours: BTreeMap<RobotId, Pose3> = self.aligned().into_iter().collect();
+        let remote: BTreeMap<RobotId, Vec<GraphObject>> = self
+            .neighbours
+            .iter()
+            .filter_map(|(robot, e)| Some((*robot, graph_objects(e.objects.as_ref()?))))
+            .collect();
+        let mut objects: BTreeMap<RobotId, &[GraphObject]> = remote.iter().map(|(r, o)| (*r, &o[..])).collect();
+        objects.insert(self.robot, &self.map.objects.objects[..]);
+        let config = SettleConfig {
+            labels: &self.labels,
+            gate_m: self.config.relay.gate_m,
+            margin_pairs: self.config.relay.settle_margin_pairs,
+        };
+        for (&robot, own) in &ours {
+            for through in self.contradicted_by(robot) {
+                let Some((robots, edges)) = self.cycle(robot, own, through, &ours) else { continue };
+                let Some(settlement) = settle_cycle(&robots, &edges, &objects, &config) else { continue };
+                let Some(wrong) = settlement.wrong.map(|k| edges[k]) else { continue };
+                if wrong.placer == self.robot && ours.contains_key(&wrong.placed) {
+                    return Some(Withdrawal { robot: wrong.placed, cycle: robots, settlement });
+                }
+            }
+        }
+        None
+    }
+
+    /// The cycle that `through`'s alignments close with ours of `robot` (`own`): on a cycle of
+    /// two (`through` = `robot`), its alignment of us; else its alignment of `robot` and the
+    /// link between it and us — ours of it, or else its own of us.
+    fn cycle(
+        &self,
+        robot: RobotId,
+        own: &Pose3,
+        through: RobotId,
+        ours: &BTreeMap<RobotId, Pose3>,
+    ) -> Option<(Vec<RobotId>, Vec<CycleEdge>)> {
+        let placed_by = |placer: RobotId, placed: RobotId| {
+            let t = self.hints.get(&placer)?.iter().find(|(r, _)| *r == placed)?.1;
+            Some(CycleEdge { placer, placed, placer_from_placed: t })
+        };
+        let me = self.robot;
+        let ours_of = |placed: RobotId, t: Pose3| CycleEdge { placer: me, placed, placer_from_placed: t };
+        if through == robot {
+            return Some((vec![me, robot], vec![ours_of(robot, *own), placed_by(robot, me)?]));
+        }
+        let link = ours.get(&through).map(|t| ours_of(through, *t)).or_else(|| placed_by(through, me))?;
+        Some((vec![me, robot, through], vec![ours_of(robot, *own), placed_by(through, robot)?, link]))
+    }
+
+    /// Withdraws our alignment of `w.robot`: back to waiting for a match with its objects held,
+    /// the transform barred, any round's keyframes let go, the pose graph told, the team told.
+    fn withdraw(&mut self, w: Withdrawal) {
+        let now = self.clock.now();
+        let Some(entry) = self.neighbours.get_mut(&w.robot) else { return };
+        let Some(Protocol::Aligned(aligned)) = entry.protocol.take() else { return };
+        let transform = aligned.state.local_from_remote;
+        entry.protocol = Some(aligned.withdrawn(now).into());
+        entry.withdrawn.push(transform);
+        if entry.withdrawn.len() > MAX_WITHDRAWN {
+            entry.withdrawn.remove(0);
+        }
+        entry.withdrawals += 1;
+        entry.aligned_via = None;
+        // Closure rounds of a wrong alignment covered nothing; a new one starts afresh.
+        entry.closures.seeds.clear();
+        entry.round.clear();
+        let released: Vec<KeyframeId> = std::mem::take(&mut entry.keyframes).into_keys().collect();
+        // Matched again at once: the other alignments of the cycle place it through the relay.
+        entry.last_attempt = None;
+        entry.match_again = true;
+        let (support, losses) = (&w.settlement.support, w.settlement.losses());
+        let cycle = w.cycle.iter().map(ToString::to_string).collect::<Vec<_>>().join(" → ");
+        tracing::warn!(robot = %self.robot, neighbour = %w.robot, %cycle,
+            local_from_remote = %Brief(&transform), ?support, ?losses,
+            "our alignment of the neighbour withdrawn: the contradicted cycle's object evidence names it wrong");
+        self.release(w.robot, released);
+        if let Some(links) = &self.links {
+            links.withdraw.do_send(NeighbourWithdrawn { robot: w.robot });
+        }
+        self.share_alignments();
+    }
+}
