@@ -36,7 +36,7 @@ use actix::{Actor, Context, Handler, Message, MessageResult, Recipient, Supervis
 use nalgebra::Point3;
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::alignment::{
-    barred, coarse_to_fine, evenly, judge_round, neighbourhood, refuted_recently, register_round, yaw_turn, LocalView,
+    coarse_to_fine, evenly, judge_round, neighbourhood, refuted_recently, register_round, yaw_turn, LocalView,
     RemoteView, RoundConfig, RoundVerdict, REFUTED_FOR_S,
 };
 use sgm_model::matching::place_candidates::{EvenPlaces, PlaceCandidate, PlaceCandidates};

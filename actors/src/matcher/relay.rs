@@ -7,7 +7,7 @@
 use super::*;
 use sgm_model::geometry::Brief;
 use sgm_model::matching::closure::{pairs_through, ClosurePlan};
-use sgm_model::matching::relay::{contradicting, hinted_round, hints_for, Hint, Reach};
+use sgm_model::matching::relay::{barred, contradicting, hinted_round, hints_for, Hint, Reach};
 
 /// Least time between two log lines about the robots contradicting one alignment, s.
 const CONTRADICTION_LOG_INTERVAL_S: f64 = 60.0;
@@ -144,9 +144,10 @@ impl Matcher {
         // which only say where the keyframes to register are.
         let few = ClosurePlan { min_pairs: self.config.relay.min_relayed_pairs, ..plan.clone() };
         let hints = hints_for(self.robot, robot, &ours, &self.hints);
+        let (tol_m, tol_deg) = (self.config.relay.contradiction_m, self.config.relay.contradiction_deg);
+        let withdrawn = |t: &Pose3| barred(&entry.withdrawn, t, tol_m, tol_deg);
         let open = |hint: &&Hint| {
-            !refuted_recently(refuted, &hint.local_from_remote, now)
-                && !barred(&entry.withdrawn, &hint.local_from_remote)
+            !refuted_recently(refuted, &hint.local_from_remote, now) && !withdrawn(&hint.local_from_remote)
         };
         let start = hints.iter().filter(open).find_map(|hint| {
             let round = if hint.via == robot {
@@ -170,7 +171,7 @@ impl Matcher {
                 .iter()
                 .map(|hint| {
                     let pairs = pairs_through(local, remote, &hint.local_from_remote, &self.labels, plan.gate_m).len();
-                    let barred = if barred(&entry.withdrawn, &hint.local_from_remote) {
+                    let barred = if withdrawn(&hint.local_from_remote) {
                         " withdrawn"
                     } else if refuted_recently(refuted, &hint.local_from_remote, now) {
                         " refuted"

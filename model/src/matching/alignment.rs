@@ -30,19 +30,10 @@ pub const REFUTED_FOR_S: f64 = 120.0;
 
 /// Whether `transform` lands within 2 m and 5° of one refuted less than [`REFUTED_FOR_S`] ago.
 pub fn refuted_recently(refuted: &[(Pose3, Stamp)], transform: &Pose3, now: Stamp) -> bool {
-    refuted.iter().any(|(t, when)| now - when < REFUTED_FOR_S && same_transform(transform, t))
-}
-
-/// Whether `transform` lands within 2 m and 5° of any of `barred` (transforms withdrawn for
-/// good: a contradicted cycle settled against them).
-pub fn barred(barred: &[Pose3], transform: &Pose3) -> bool {
-    barred.iter().any(|t| same_transform(transform, t))
-}
-
-/// Within 2 m and 5° of each other: the same transform, for a match or a hint.
-fn same_transform(a: &Pose3, b: &Pose3) -> bool {
-    let e = pose_error(a, b);
-    e.translation_m < 2.0 && e.max_axis_rotation_deg() < 5.0
+    refuted.iter().any(|(t, when)| {
+        let e = pose_error(transform, t);
+        now - when < REFUTED_FOR_S && e.translation_m < 2.0 && e.max_axis_rotation_deg() < 5.0
+    })
 }
 
 /// At most `n` of `ids`, spread evenly over them (deterministic).
@@ -269,11 +260,6 @@ mod tests {
         assert!(!refuted_recently(&refuted, &pose(13.0, 0.0, 0.0), 150.0), "3 m away");
         assert!(!refuted_recently(&refuted, &pose(10.0, 0.0, 0.2), 150.0), "11° turned");
         assert!(!refuted_recently(&refuted, &pose(10.0, 0.0, 0.0), 100.0 + REFUTED_FOR_S), "forgotten");
-        // A withdrawn transform is barred for good, as nearby.
-        let withdrawn = [pose(10.0, 0.0, 0.0)];
-        assert!(barred(&withdrawn, &pose(11.0, 0.5, 0.05)));
-        assert!(!barred(&withdrawn, &pose(13.0, 0.0, 0.0)) && !barred(&withdrawn, &pose(10.0, 0.0, 0.2)));
-        assert!(!barred(&[], &pose(10.0, 0.0, 0.0)));
     }
 
     #[test]

@@ -89,14 +89,25 @@ pub fn contradicting(
 ) -> Vec<RobotId> {
     hints_for(me, remote, ours, theirs)
         .into_iter()
-        .filter(|hint| {
-            // The whole rotation between them (a turn about a diagonal axis counts in full).
-            let e = pose_error(&hint.local_from_remote, own);
-            let turn_deg = hint.local_from_remote.rotation.angle_to(&own.rotation).to_degrees();
-            !(e.translation_m <= tolerance_m && turn_deg <= tolerance_deg)
-        })
+        .filter(|hint| !agree(&hint.local_from_remote, own, tolerance_m, tolerance_deg))
         .map(|hint| hint.via)
         .collect()
+}
+
+/// Whether two estimates of one transform agree: the remote origin within `tolerance_m` and
+/// the whole rotation between them (a turn about a diagonal axis counts in full) within
+/// `tolerance_deg` (NaN never agrees).
+pub fn agree(a: &Pose3, b: &Pose3, tolerance_m: f64, tolerance_deg: f64) -> bool {
+    let e = pose_error(a, b);
+    let turn_deg = a.rotation.angle_to(&b.rotation).to_degrees();
+    e.translation_m <= tolerance_m && turn_deg <= tolerance_deg
+}
+
+/// Whether `transform` agrees with any of `barred` (our alignments of the same robot withdrawn
+/// for good, a contradicted cycle settled against them) within the contradiction tolerance:
+/// the alignment that contradicted a withdrawn one, by definition beyond it, is never barred.
+pub fn barred(barred: &[Pose3], transform: &Pose3, tolerance_m: f64, tolerance_deg: f64) -> bool {
+    barred.iter().any(|t| agree(t, transform, tolerance_m, tolerance_deg))
 }
 
 /// Where a hint's first round may take its pairs from.
@@ -200,6 +211,26 @@ mod tests {
         // A NaN alignment is never taken for agreement.
         let nan = Pose3::from_parts(nalgebra::Translation3::new(f64::NAN, 0.0, 0.0), right[&two].rotation);
         assert_eq!(contradicting(me, two, &nan, &right, &theirs, 2.0, 5.0), vec![two]);
+    }
+
+    /// A withdrawn alignment bars what agrees with it as a contradiction measures agreement —
+    /// the whole rotation, so a tilt of 6° about a diagonal (4.2° about each axis, under 5°) is
+    /// not barred — and never the alignment that contradicted it.
+    #[test]
+    fn a_withdrawn_alignment_bars_only_what_agrees_with_it() {
+        let withdrawn = pose(-1.5, 2.0, 9.6);
+        let near = withdrawn * pose(0.05, 0.5, 1.0);
+        assert!(barred(&[withdrawn], &near, 2.0, 5.0));
+        assert!(!barred(&[withdrawn], &(withdrawn * pose(0.0, 2.5, 0.0)), 2.0, 5.0), "2.5 m away");
+        let diagonal =
+            nalgebra::UnitQuaternion::from_scaled_axis(Vector3::new(1.0, 1.0, 0.0).normalize() * 6f64.to_radians());
+        let tilted = withdrawn * Pose3::from_parts(nalgebra::Translation3::identity(), diagonal);
+        assert!(!barred(&[withdrawn], &tilted, 2.0, 5.0), "6° about a diagonal");
+        assert!(!barred(&[], &withdrawn, 2.0, 5.0));
+        // Whatever contradicts it is beyond it.
+        let (ours, theirs) = (BTreeMap::new(), [(RobotId(2), vec![(RobotId(1), tilted.inverse())])].into());
+        assert_eq!(contradicting(RobotId(1), RobotId(2), &withdrawn, &ours, &theirs, 2.0, 5.0), vec![RobotId(2)]);
+        assert!(barred(&[withdrawn], &tilted, 2.0, 7.0), "within a wider tolerance");
     }
 
     /// Three worlds placed in a common frame W: each transform is W_a⁻¹ · W_b, so any chain of
