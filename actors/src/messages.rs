@@ -139,10 +139,12 @@ pub struct NeighbourKeyframePoses {
 }
 
 /// Optimiser → Matcher: each aligned neighbour's local_from_remote as the last solve of the
-/// pose graph estimates it (its anchor), from every inter-robot factor so far.
+/// pose graph estimates it (its anchor), from every inter-robot factor so far, and the
+/// withdrawals of that neighbour the graph had handled ([`NeighbourWithdrawn`]): an estimate
+/// made before the last withdrawal reached the graph is of the withdrawn alignment.
 #[derive(Message, Clone, Debug, PartialEq)]
 #[rtype(result = "()")]
-pub struct NeighbourTransforms(pub Vec<(RobotId, Pose3)>);
+pub struct NeighbourTransforms(pub Vec<(RobotId, Pose3, u32)>);
 
 /// Comms → Matcher: requested keyframes that will not come (unknown to the neighbour, or given
 /// up after every retry).

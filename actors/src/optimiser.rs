@@ -158,7 +158,8 @@ impl Optimiser {
         if let Some(links) = &self.links {
             links.tracker.do_send(PosesOptimised { poses: solved.poses, covariances: solved.covariances, own_poses });
             if !solved.anchors.is_empty() {
-                links.matcher.do_send(NeighbourTransforms(solved.anchors));
+                let anchors = solved.anchors.into_iter().map(|(r, t)| (r, t, self.graph.withdrawals(r))).collect();
+                links.matcher.do_send(NeighbourTransforms(anchors));
             }
         }
     }
@@ -206,9 +207,11 @@ impl Handler<NeighbourWithdrawn> for Optimiser {
     type Result = ();
     fn handle(&mut self, msg: NeighbourWithdrawn, ctx: &mut Context<Self>) {
         contained(ctx, "optimiser", || {
-            let factors = self.graph.withdraw_neighbour(msg.robot);
-            tracing::info!(robot = %self.robot, neighbour = %msg.robot, factors, "neighbour withdrawn from the pose graph");
-            self.solve_and_publish();
+            // Not held (no factor ever reached the graph): nothing to solve again.
+            if let Some(factors) = self.graph.withdraw_neighbour(msg.robot) {
+                tracing::info!(robot = %self.robot, neighbour = %msg.robot, factors, "neighbour withdrawn from the pose graph");
+                self.solve_and_publish();
+            }
         });
     }
 }

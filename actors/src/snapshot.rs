@@ -221,6 +221,7 @@ mod tests {
                 refreshed: vec![(RobotId(2), 3)],
                 deferred: vec![(RobotId(2), KeyframeId(7), Pose3::translation(1.0, 2.0, 3.0))],
                 updated: Vec::new(),
+                withdrawals: vec![(RobotId(2), 1)],
             },
             comms: CommsState {
                 sequence: 99,

@@ -30,8 +30,9 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// tracker counts the objects it merged and the tentative ones it let expire, and the Tracker
 /// keeps each keyframe's pose from the robot's own measurements (what neighbours are told).
 /// Version 7: the object tracker keeps the returns of each object's latest estimate (the
-/// weights of a merge's centroid).
-pub const FORMAT_VERSION: u32 = 7;
+/// weights of a merge's centroid). Version 8: the Matcher keeps each neighbour's withdrawn
+/// alignments and the pose graph how many withdrawals of each neighbour it has handled.
+pub const FORMAT_VERSION: u32 = 8;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).

@@ -150,5 +150,6 @@ fn right_alignments_are_not_flagged() {
     for a in &report.alignments {
         assert!(!wrong(a), "{} ← {}: {:?} m", a.local, a.remote, a.translation_error_m);
         assert!(a.contradicted_by.is_empty(), "{} ← {} flagged by {:?}", a.local, a.remote, a.contradicted_by);
+        assert_eq!(a.withdrawals, 0, "{} ← {}: a right alignment withdrawn", a.local, a.remote);
     }
 }

@@ -118,7 +118,8 @@ pub struct RelaySection {
     /// to be aligned again through the others. Off: the cycle is only flagged. Default true.
     pub settle: bool,
     /// The pairs by which the wrong alignment's loss must be below every other alignment's on
-    /// the cycle; within it the cycle stays flagged, unsettled. Default 3.
+    /// the cycle (on a cycle of two: by which it explains fewer pairs than the other's); within
+    /// it the cycle stays flagged, unsettled. Default 3.
     pub settle_margin_pairs: usize,
 }
 

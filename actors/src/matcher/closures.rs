@@ -159,8 +159,12 @@ impl Handler<NeighbourTransforms> for Matcher {
     type Result = ();
     fn handle(&mut self, msg: NeighbourTransforms, ctx: &mut Context<Self>) {
         contained(ctx, "matcher", || {
-            for (robot, local_from_remote) in msg.0 {
+            for (robot, local_from_remote, withdrawals) in msg.0 {
                 let Some(entry) = self.neighbours.get_mut(&robot) else { continue };
+                // Solved before the graph heard of our last withdrawal: the withdrawn alignment's.
+                if withdrawals != entry.withdrawals {
+                    continue;
+                }
                 entry.protocol = match entry.protocol.take() {
                     Some(Protocol::Aligned(n)) => Some(n.reestimated(local_from_remote).into()),
                     other => other,

@@ -161,7 +161,8 @@ pub struct ClosureCounts {
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ClosureMemory {
     pub counts: ClosureCounts,
-    /// Every neighbour keyframe ever asked for: never asked for twice.
+    /// Every neighbour keyframe ever asked for: never asked for twice (until an alignment is
+    /// withdrawn: its factors went with it, and the next alignment's rounds may ask again).
     pub requested: BTreeSet<KeyframeId>,
     /// Each round's seed (local world): later rounds keep `spacing_m` from them.
     pub seeds: Vec<Point3<f64>>,
@@ -188,11 +189,8 @@ pub struct NeighbourMemory {
     pub refuted: Vec<(Pose3, Stamp)>,
     pub closures: ClosureMemory,
     pub aligned_via: Option<RobotId>,
-    /// Alignments withdrawn and barred, and how many times one was (absent in snapshots from
-    /// before settling: none).
-    #[serde(default)]
+    /// Alignments withdrawn and barred, and how many times one was.
     pub withdrawn: Vec<Pose3>,
-    #[serde(default)]
     pub withdrawals: u32,
 }
 

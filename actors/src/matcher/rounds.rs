@@ -100,6 +100,14 @@ impl Matcher {
             Some(Protocol::Aligned(aligned)) => return self.on_closure_clouds(msg, aligned),
             _ => return,
         };
+        // Clouds of objects this round did not ask for answer an earlier request (a closure
+        // round of an alignment withdrawn since): not this round's; it asks again on time-out.
+        let asked: BTreeSet<ObjectId> = matched.state.pairs.iter().map(|(_, r)| *r).collect();
+        if let Some(other) = msg.clouds.iter().find(|c| !asked.contains(&c.id)) {
+            tracing::debug!(robot = %self.robot, neighbour = %msg.robot, object = other.id.0,
+                "object clouds not of this round's request, not used");
+            return;
+        }
         let (local_from_remote, observed_in) =
             self.object_cloud_icp(&matched.state.pairs, &msg.clouds, &matched.state.local_from_remote);
         // Neighbour keyframes that observed the matched objects, ± the neighbourhood; a round

@@ -40,6 +40,14 @@ impl Matcher {
     /// that a contradicted cycle's evidence names wrong.
     fn next_withdrawal(&self) -> Option<Withdrawal> {
         let ours: BTreeMap<RobotId, Pose3> = self.aligned().into_iter().collect();
+        let contradicted: Vec<(RobotId, RobotId)> = ours
+            .keys()
+            .flat_map(|robot| self.contradicted_by(*robot).into_iter().map(|through| (*robot, through)))
+            .collect();
+        // Nothing contradicted (almost always): the object graphs are not looked at.
+        if contradicted.is_empty() {
+            return None;
+        }
         let remote: BTreeMap<RobotId, Vec<GraphObject>> = self
             .neighbours
             .iter()
@@ -52,14 +60,14 @@ impl Matcher {
             gate_m: self.config.relay.gate_m,
             margin_pairs: self.config.relay.settle_margin_pairs,
         };
-        for (&robot, own) in &ours {
-            for through in self.contradicted_by(robot) {
-                let Some((robots, edges)) = self.cycle(robot, own, through, &ours) else { continue };
-                let Some(settlement) = settle_cycle(&robots, &edges, &objects, &config) else { continue };
-                let Some(wrong) = settlement.wrong.map(|k| edges[k]) else { continue };
-                if wrong.placer == self.robot && ours.contains_key(&wrong.placed) {
-                    return Some(Withdrawal { robot: wrong.placed, cycle: robots, settlement });
-                }
+        for (robot, through) in contradicted {
+            let Some((robots, edges)) = ours.get(&robot).and_then(|own| self.cycle(robot, own, through, &ours)) else {
+                continue;
+            };
+            let Some(settlement) = settle_cycle(&robots, &edges, &objects, &config) else { continue };
+            let Some(wrong) = settlement.wrong.and_then(|k| edges.get(k).copied()) else { continue };
+            if wrong.placer == self.robot && ours.contains_key(&wrong.placed) {
+                return Some(Withdrawal { robot: wrong.placed, cycle: robots, settlement });
             }
         }
         None
@@ -93,6 +101,9 @@ impl Matcher {
     fn withdraw(&mut self, w: Withdrawal) {
         let now = self.clock.now();
         let Some(entry) = self.neighbours.get_mut(&w.robot) else { return };
+        if !matches!(entry.protocol, Some(Protocol::Aligned(_))) {
+            return;
+        }
         let Some(Protocol::Aligned(aligned)) = entry.protocol.take() else { return };
         let transform = aligned.state.local_from_remote;
         entry.protocol = Some(aligned.withdrawn(now).into());
@@ -102,8 +113,11 @@ impl Matcher {
         }
         entry.withdrawals += 1;
         entry.aligned_via = None;
-        // Closure rounds of a wrong alignment covered nothing; a new one starts afresh.
+        // Closure rounds of a wrong alignment covered nothing, and its factors are gone: the new
+        // alignment's rounds start afresh and may ask for those keyframes again (the bytes they
+        // cost stay counted, against `closures.max_bytes_per_neighbour` too).
         entry.closures.seeds.clear();
+        entry.closures.requested.clear();
         entry.round.clear();
         let released: Vec<KeyframeId> = std::mem::take(&mut entry.keyframes).into_keys().collect();
         // Matched again at once: the other alignments of the cycle place it through the relay.

@@ -16,10 +16,13 @@
 //! costs little or nothing (a half turn of a symmetric room explains about as many pairs as the
 //! truth: 10–14 against 8–10).
 //! The edge whose loss is below every other edge's by at least `margin` pairs is the wrong one;
-//! otherwise the cycle stays unsettled (it is still flagged). A robot on a cycle of three holds
-//! the object data of both its neighbours, so it scores all three edges, and each robot on the
-//! cycle reaches the same verdict from (nearly) the same data: the two at the wrong edge's ends
-//! withdraw it, the third keeps its own.
+//! otherwise the cycle stays unsettled (it is still flagged). On a cycle of two (two robots'
+//! alignments of each other) the losses are opposite, ±(support difference), and the wrong one
+//! is the one whose transform explains fewer pairs than the other's by the margin. A robot on a
+//! cycle of three holds the object data of both its neighbours, so it scores all three edges,
+//! and each robot on the cycle reaches the same verdict from (nearly) the same data: only the
+//! robot that made the wrong alignment withdraws it (the other end withdraws its own alignment
+//! back only where that is wrong too, on a cycle of its own); the others keep theirs.
 
 use super::closure::pairs_through;
 use super::{GraphObject, LabelSimilarity};
@@ -101,7 +104,8 @@ pub fn settle_cycle(
         support.push((pairs(&e.placer_from_placed), pairs(&alternative)));
     }
     let losses: Vec<i64> = support.iter().map(|(own, alt)| *own as i64 - *alt as i64).collect();
-    let margin = config.margin_pairs as i64;
+    // Two edges: the losses are ±d for a support difference d; the margin is on d.
+    let margin = config.margin_pairs as i64 * if n == 2 { 2 } else { 1 };
     let wrong = (0..n).find(|&k| (0..n).all(|m| m == k || losses[k] + margin <= losses[m]));
     Some(Settlement { support, wrong })
 }
@@ -218,10 +222,14 @@ mod tests {
         let s = settle_cycle(&robots, &[edge(1, 2, truth), edge(2, 1, wrong.inverse())], &objects, &config)
             .expect("scored");
         assert_eq!(s.wrong, Some(1));
-        let strict = SettleConfig { margin_pairs: 33, ..config };
+        let exact = SettleConfig { margin_pairs: 16, ..config };
+        let s =
+            settle_cycle(&robots, &[edge(1, 2, truth), edge(2, 1, wrong.inverse())], &objects, &exact).expect("scored");
+        assert_eq!(s.wrong, Some(1), "16 pairs fewer meets a margin of 16");
+        let strict = SettleConfig { margin_pairs: 17, ..config };
         let s = settle_cycle(&robots, &[edge(1, 2, truth), edge(2, 1, wrong.inverse())], &objects, &strict)
             .expect("scored");
-        assert_eq!(s.wrong, None, "losses 16 and −16 are 32 apart, within a margin of 33");
+        assert_eq!(s.wrong, None, "16 pairs fewer is within a margin of 17");
     }
 
     #[test]

@@ -65,6 +65,8 @@ pub struct KeyframeGraphState {
     pub deferred: Vec<(RobotId, KeyframeId, Pose3)>,
     /// Neighbour keyframe variables whose tie holds a pose update's mean.
     pub updated: Vec<usize>,
+    /// Per neighbour, the withdrawals handled ([`KeyframeGraph::withdraw_neighbour`]).
+    pub withdrawals: Vec<(RobotId, u32)>,
 }
 
 /// What a solve gives: every local keyframe's pose, the newest ones' marginal covariances, and
@@ -131,6 +133,9 @@ pub struct KeyframeGraph {
     updated: BTreeSet<usize>,
     /// Gravity-aligned worlds: anchors held level ([`KeyframeGraph::set_level_anchors`]).
     level: bool,
+    /// Per neighbour, the withdrawals handled: which alignment an anchor's estimate belongs to
+    /// ([`KeyframeGraph::withdrawals`]).
+    withdrawals: BTreeMap<RobotId, u32>,
 }
 
 /// Pose updates held per neighbour for keyframes not yet in the graph, at most. A keyframe
@@ -198,6 +203,7 @@ impl KeyframeGraph {
                 .flat_map(|(r, poses)| poses.iter().map(move |(k, p)| (*r, *k, *p)))
                 .collect(),
             updated: self.updated.iter().copied().collect(),
+            withdrawals: self.withdrawals.iter().map(|(r, n)| (*r, *n)).collect(),
         }
     }
 
@@ -229,6 +235,7 @@ impl KeyframeGraph {
             }),
             updated: state.updated.into_iter().collect(),
             level: false,
+            withdrawals: state.withdrawals.into_iter().collect(),
         })
     }
 
@@ -418,15 +425,18 @@ impl KeyframeGraph {
         out
     }
 
-    /// Takes `robot` out of the graph as if it had never been aligned: its anchor, its keyframe
-    /// variables, their ties and every inter-robot factor to them, and the pose updates held
-    /// for its keyframes. The rest keeps its order (variables, factors and the last solve's
-    /// decisions are renumbered), so the next solve is the one of a graph that never held it.
-    /// What the Matcher does when its alignment with the neighbour was found wrong (a
-    /// contradicted cycle settled against it): a later alignment places a fresh anchor. The
-    /// counts of realignments and refreshed priors stay, as history. How many factors went.
-    pub fn withdraw_neighbour(&mut self, robot: RobotId) -> usize {
-        let Some(anchor) = self.anchors.remove(&robot) else { return 0 };
+    /// Takes `robot` out of the graph: its anchor, its keyframe variables, their ties and every
+    /// inter-robot factor to them, and the pose updates held for its keyframes (also those
+    /// held from before it was first aligned). The rest keeps its order (variables, factors and
+    /// the last solve's rejections are renumbered), so the graph is the one that never held it,
+    /// but for the values the solves with it left. What the Matcher does when its alignment
+    /// with the neighbour was found wrong (a contradicted cycle settled against it): a later
+    /// alignment places a fresh anchor. The counts of realignments and refreshed priors stay,
+    /// as history, and the withdrawal is counted ([`Self::withdrawals`]) whether or not the
+    /// neighbour was held. How many inter-robot factors went, `None` when it was not held.
+    pub fn withdraw_neighbour(&mut self, robot: RobotId) -> Option<usize> {
+        *self.withdrawals.entry(robot).or_default() += 1;
+        let anchor = self.anchors.remove(&robot)?;
         self.deferred.remove(&robot);
         self.inconsistent.remove(&robot);
         let mut gone = vec![false; self.graph.values.len()];
@@ -481,7 +491,13 @@ impl KeyframeGraph {
             *i = new_of[*i].unwrap_or(*i);
         }
         self.updated = self.updated.iter().filter_map(|i| new_of[*i]).collect();
-        removed
+        Some(removed)
+    }
+
+    /// The withdrawals of `robot` handled so far: an anchor's estimate is of the alignment
+    /// that followed the last of them, which the Matcher tells apart from an earlier one.
+    pub fn withdrawals(&self, robot: RobotId) -> u32 {
+        self.withdrawals.get(&robot).copied().unwrap_or(0)
     }
 
     /// Ties a neighbour keyframe to its robot's anchor: the neighbour's estimate of it, with its
@@ -1103,19 +1119,35 @@ mod tests {
                 let keyframe = Keyframe { id: KeyframeId(k), stamp: f64::from(k), world_from_body: pose };
                 graph.add_keyframe(&keyframe, &[odometry(k - 1, k, &step)], 100);
             }
+            // Held behind the withdrawn neighbour's variables and factors, so that the
+            // withdrawal renumbers them: a false loop closure (keyframe 8 said to be at 2, 12 m
+            // away) that the solve rejects, and a pose update of one of robot 3's keyframes.
+            let mut false_loop = odometry(2, 8, &Pose3::identity());
+            false_loop.kind = KeyframeEdgeKind::Loop;
+            let pose = truth[5] * (5..9).fold(Pose3::identity(), |p, _| p * step);
+            let edges = [odometry(8, 9, &step), false_loop];
+            graph.add_keyframe(&Keyframe { id: KeyframeId(9), stamp: 9.0, world_from_body: pose }, &edges, 100);
+            graph.refresh_neighbour(RobotId(3), &[(KeyframeId(102), right.inverse() * truth[2] * measured)]);
+            graph.solve(true, 0).expect("solves");
             (graph, truth)
         };
         let (mut withdrawn, truth) = build(true);
         withdrawn.refresh_neighbour(RobotId(2), &[(KeyframeId(500), Pose3::identity())]);
-        assert_eq!(withdrawn.withdraw_neighbour(RobotId(2)), 3, "its three inter-robot factors");
-        assert_eq!(withdrawn.withdraw_neighbour(RobotId(2)), 0, "gone already");
+        assert_eq!(withdrawn.withdraw_neighbour(RobotId(2)), Some(3), "its three inter-robot factors");
+        assert_eq!(withdrawn.withdraw_neighbour(RobotId(2)), None, "gone already");
+        assert_eq!((withdrawn.withdrawals(RobotId(2)), withdrawn.withdrawals(RobotId(3))), (2, 0), "both counted");
         let (mut never, _) = build(false);
         // The same variables and factors; the values differ by what the solve with the
         // withdrawn neighbour moved them (it agreed with itself: ~1e-23 m).
         let (w, n) = (&withdrawn.graph, &never.graph);
         assert_eq!((&w.keys, &w.fixed, &w.betweens, &w.priors), (&n.keys, &n.fixed, &n.betweens, &n.priors));
-        assert_eq!(withdrawn.freeze().index, never.freeze().index);
-        assert_eq!(withdrawn.candidates, never.candidates);
+        let (fw, fn_) = (withdrawn.freeze(), never.freeze());
+        assert_eq!(
+            (&fw.index, &fw.candidates, &fw.rejected, &fw.updated),
+            (&fn_.index, &fn_.candidates, &fn_.rejected, &fn_.updated)
+        );
+        assert_eq!((fw.rejected.len(), fw.updated.len()), (1, 1), "the false loop rejected, the update held");
+        assert_eq!(withdrawn.inconsistent, never.inconsistent);
         let (a, b) = (withdrawn.solve(true, 2).expect("solves"), never.solve(true, 2).expect("solves"));
         let near = |x: &Pose3, y: &Pose3| {
             let e = crate::geometry::pose_error(x, y);
