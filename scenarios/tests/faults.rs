@@ -76,8 +76,11 @@ fn false_inter_robot_factors_are_rejected_and_team_ate_holds() {
     let clean = run_fault("clean");
     let load = || Scenario::load_with_env("faults/false_factors", "SGM_FAULTS_TEST").unwrap();
     let attacked = compute(&actix_rt::System::new().block_on(run(&load(), None)).unwrap().record);
+    // The back end alone: without outlier rejection, and without the Matchers settling the
+    // contradicted cycles that the false factors' pull on the anchors opens (see below).
     let mut plain = load();
     plain.optimiser.reject_outliers = false;
+    plain.matcher.relay.settle = false;
     let plain = compute(&actix_rt::System::new().block_on(run(&plain, None)).unwrap().record);
 
     assert_eq!(clean.back_end.rejected_factors, 0, "a correct factor was rejected: {:?}", clean.back_end);
@@ -90,6 +93,18 @@ fn false_inter_robot_factors_are_rejected_and_team_ate_holds() {
     // The factors are harmful: least squares without outlier rejection is far off.
     assert!(plain_ate > 5.0 * clean_ate, "least squares reached {plain_ate} m against {clean_ate} m clean");
     assert_eq!(plain.back_end.false_factors_rejected, 0);
+    assert!(plain.alignments.iter().all(|a| a.withdrawals == 0));
+    // Defence in depth: with settling on, least squares still keeps every false factor, but the
+    // anchors they pull away (bravo's, 24–44 m) contradict the cycles through charlie, the
+    // object evidence names them, and bravo withdraws them — the false factors go with them
+    // — and aligns again through the relay: within 2× of the clean run (1.73 m without).
+    let mut settled = load();
+    settled.optimiser.reject_outliers = false;
+    let settled = compute(&actix_rt::System::new().block_on(run(&settled, None)).unwrap().record);
+    let settled_ate = settled.team_ate_rmse_m.unwrap();
+    assert!(settled_ate < 2.0 * clean_ate, "settled least squares {settled_ate} m against {clean_ate} m clean");
+    assert!(settled.alignments.iter().any(|a| a.withdrawals > 0), "{:?}", settled.alignments);
+    assert!(settled.alignments.iter().all(|a| a.state == "Aligned"));
 
     // Early on, as `sgm bench outliers` injects them: two per direction 5 s after it first
     // aligned, when the pair holds only its first round's factors. Rejected, they leave the

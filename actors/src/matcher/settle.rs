@@ -1,8 +1,8 @@
 //! Contradicted cycles settled by evidence (`matcher.relay.settle`, `model::matching::settle`):
 //! every cycle that contradicts one of our alignments is scored by the object graphs we hold —
 //! ours and both neighbours' on it — and when the evidence names one of *our* alignments wrong,
-//! it is withdrawn: the protocol goes back to waiting for a match, the transform is barred for
-//! good (as a match and as a hint), the pose graph drops the neighbour
+//! it is withdrawn: the protocol goes back to waiting for a match, the transform is barred (as a
+//! match and as a hint; the latest `MAX_WITHDRAWN` per neighbour), the pose graph drops the neighbour
 //! (`KeyframeGraph::withdraw_neighbour`), and the team hears our alignments without it. The
 //! other alignments of the cycle then place the neighbour again through the relay
 //! (`relay.rs`), with a round of our own registrations as for any hint. An alignment of
