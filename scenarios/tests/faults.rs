@@ -95,7 +95,7 @@ fn false_inter_robot_factors_are_rejected_and_team_ate_holds() {
     assert_eq!(plain.back_end.false_factors_rejected, 0);
     assert!(plain.alignments.iter().all(|a| a.withdrawals == 0));
     // Defence in depth: with settling on, least squares still keeps every false factor, but the
-    // anchors they pull away (bravo's, 24–44 m) contradict the cycles through charlie, the
+    // anchors they pull away (bravo's) contradict the cycles through charlie, the
     // object evidence names them, and bravo withdraws them — the false factors go with them
     // — and aligns again through the relay: within 2× of the clean run (1.73 m without).
     let mut settled = load();
