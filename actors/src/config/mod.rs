@@ -15,7 +15,7 @@ pub use comms::{
     CommsConfig, PoseUpdatesConfig, PublicTeamKey, Secret, DEFAULT_TEAM_SALT, DEVELOPMENT_TEAM_KEY, PUBLIC_TEAM_KEYS,
 };
 pub use error::ConfigError;
-pub use matcher::{Association, MatcherSection};
+pub use matcher::{Association, MatcherSection, RelaySection};
 pub use odometry::{OdometrySection, OdometrySource};
 pub use optimiser::OptimiserConfig;
 pub use perception::{default_classes, FusionConfig, TrackerSection};

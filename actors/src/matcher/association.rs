@@ -6,7 +6,6 @@
 use super::relay::RoundStart;
 use super::*;
 use sgm_model::geometry::Brief;
-use sgm_model::matching::relay::barred;
 
 /// A neighbour's object data as graph objects (its world).
 pub(super) fn graph_objects(data: &ObjectData) -> Vec<GraphObject> {
@@ -54,8 +53,7 @@ impl Matcher {
         ) else {
             return;
         };
-        let (refuted, withdrawn) = (entry.refuted.clone(), entry.withdrawn.clone());
-        let (tol_m, tol_deg) = (self.config.relay.contradiction_m, self.config.relay.contradiction_deg);
+        let refuted = entry.refuted.clone();
         let (local_objects, remote_revision) = (self.local_objects_revision, data.revision);
         let reused = entry
             .last_match
@@ -86,7 +84,7 @@ impl Matcher {
                 let n = alignment.matches.len();
                 (None, Some(format!("{n} objects matched, fewer than matcher.min_matched_objects ({min_matched})")))
             }
-            MatchOutcome::Aligned(alignment) if barred(&withdrawn, &alignment.local_from_remote, tol_m, tol_deg) => {
+            MatchOutcome::Aligned(alignment) if self.withdrawn_near(robot, &alignment.local_from_remote) => {
                 (None, Some("the match lands on an alignment withdrawn by a contradicted cycle".to_string()))
             }
             MatchOutcome::Aligned(alignment) if refuted_recently(&refuted, &alignment.local_from_remote, now) => (

@@ -138,6 +138,14 @@ pub(super) struct NeighbourEntry {
     pub(super) last_match: Option<LastMatch>,
 }
 
+impl NeighbourEntry {
+    /// Whether `transform` agrees with one of our alignments withdrawn (within the
+    /// contradiction tolerance of `relay`): barred as a match and as a hint.
+    pub(super) fn withdrawn_near(&self, transform: &Pose3, relay: &crate::config::RelaySection) -> bool {
+        sgm_model::matching::relay::barred(&self.withdrawn, transform, relay.contradiction_m, relay.contradiction_deg)
+    }
+}
+
 /// A graph match's outcome, and its inputs: the revision of the Matcher's local objects
 /// (`Matcher::local_objects_revision`) and the neighbour's object-data revision.
 pub(super) struct LastMatch {

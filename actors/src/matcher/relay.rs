@@ -7,7 +7,7 @@
 use super::*;
 use sgm_model::geometry::Brief;
 use sgm_model::matching::closure::{pairs_through, ClosurePlan};
-use sgm_model::matching::relay::{barred, contradicting, hinted_round, hints_for, Hint, Reach};
+use sgm_model::matching::relay::{contradicting, hinted_round, hints_for, Hint, Reach};
 
 /// Least time between two log lines about the robots contradicting one alignment, s.
 const CONTRADICTION_LOG_INTERVAL_S: f64 = 60.0;
@@ -54,15 +54,29 @@ impl Matcher {
         contradicting(self.robot, robot, &own, &ours, &self.hints, relay.contradiction_m, relay.contradiction_deg)
     }
 
+    /// Whether `transform` agrees with one of our withdrawn alignments of `robot`.
+    pub(super) fn withdrawn_near(&self, robot: RobotId, transform: &Pose3) -> bool {
+        self.neighbours.get(&robot).is_some_and(|e| e.withdrawn_near(transform, &self.config.relay))
+    }
+
+    /// Each aligned neighbour whose alignment is contradicted, and by whom (neighbour order).
+    pub(super) fn contradicted_now(&self) -> BTreeMap<RobotId, Vec<RobotId>> {
+        self.neighbours
+            .keys()
+            .map(|robot| (*robot, self.contradicted_by(*robot)))
+            .filter(|(_, by)| !by.is_empty())
+            .collect()
+    }
+
     /// Logs where the robots contradicting our alignment of a neighbour changed: a warning
     /// naming them when the set grows or moves, a note when it empties. The status and the
     /// report hold the set at all times; the log says when it changed, at most once per
     /// neighbour every `CONTRADICTION_LOG_INTERVAL_S` (a hint near the tolerance may flip the
     /// set at every solve): a change within it is logged at the first event after it, if it
     /// still holds. A neighbour no longer aligned is forgotten without a line (its alignment
-    /// went, nothing was settled). One of the alignments on such a cycle is wrong, and which
-    /// one is not settled here.
-    pub(super) fn log_contradictions(&mut self) {
+    /// went, nothing was settled). `contradicted`: [`Self::contradicted_now`]. Which alignment
+    /// of such a cycle is wrong is settled in `settle.rs`, before this.
+    pub(super) fn log_contradictions(&mut self, contradicted: &BTreeMap<RobotId, Vec<RobotId>>) {
         let now_s = self.clock.now();
         let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
         for robot in robots {
@@ -72,7 +86,7 @@ impl Matcher {
                 self.contradictions.remove(&robot);
                 continue;
             }
-            let now = self.contradicted_by(robot);
+            let now = contradicted.get(&robot).cloned().unwrap_or_default();
             let logged = self.contradictions.get(&robot);
             if logged.map_or(now.is_empty(), |l| l.robots == now) {
                 continue;
@@ -144,8 +158,7 @@ impl Matcher {
         // which only say where the keyframes to register are.
         let few = ClosurePlan { min_pairs: self.config.relay.min_relayed_pairs, ..plan.clone() };
         let hints = hints_for(self.robot, robot, &ours, &self.hints);
-        let (tol_m, tol_deg) = (self.config.relay.contradiction_m, self.config.relay.contradiction_deg);
-        let withdrawn = |t: &Pose3| barred(&entry.withdrawn, t, tol_m, tol_deg);
+        let withdrawn = |t: &Pose3| entry.withdrawn_near(t, &self.config.relay);
         let open = |hint: &&Hint| {
             !refuted_recently(refuted, &hint.local_from_remote, now) && !withdrawn(&hint.local_from_remote)
         };

@@ -12,6 +12,7 @@ use super::association::graph_objects;
 use super::neighbour::MAX_WITHDRAWN;
 use super::*;
 use sgm_model::geometry::Brief;
+use sgm_model::matching::relay::placed_by;
 use sgm_model::matching::settle::{settle_cycle, CycleEdge, SettleConfig, Settlement};
 
 /// One of our alignments that a cycle's evidence names wrong.
@@ -26,28 +27,27 @@ impl Matcher {
     /// Settles the contradicted cycles the evidence decides (with `relay.settle`), one
     /// withdrawal at a time (each changes the cycles), then logs the contradictions left.
     pub(super) fn review_contradictions(&mut self) {
+        let mut contradicted = self.contradicted_now();
         if self.config.relay.settle {
             // Each withdrawal leaves one alignment fewer: at most one per neighbour.
             for _ in 0..self.neighbours.len() {
-                let Some(w) = self.next_withdrawal() else { break };
+                let Some(w) = self.next_withdrawal(&contradicted) else { break };
                 self.withdraw(w);
+                contradicted = self.contradicted_now();
             }
         }
-        self.log_contradictions();
+        self.log_contradictions(&contradicted);
     }
 
-    /// The first of our alignments (in neighbour order, then the contradicting robots' order)
-    /// that a contradicted cycle's evidence names wrong.
-    fn next_withdrawal(&self) -> Option<Withdrawal> {
-        let ours: BTreeMap<RobotId, Pose3> = self.aligned().into_iter().collect();
-        let contradicted: Vec<(RobotId, RobotId)> = ours
-            .keys()
-            .flat_map(|robot| self.contradicted_by(*robot).into_iter().map(|through| (*robot, through)))
-            .collect();
+    /// The first of our alignments (in neighbour order, then the contradicting robots' order;
+    /// `contradicted`: [`Self::contradicted_now`]) that a contradicted cycle's evidence names
+    /// wrong.
+    fn next_withdrawal(&self, contradicted: &BTreeMap<RobotId, Vec<RobotId>>) -> Option<Withdrawal> {
         // Nothing contradicted (almost always): the object graphs are not looked at.
         if contradicted.is_empty() {
             return None;
         }
+        let ours: BTreeMap<RobotId, Pose3> = self.aligned().into_iter().collect();
         let remote: BTreeMap<RobotId, Vec<GraphObject>> = self
             .neighbours
             .iter()
@@ -60,7 +60,7 @@ impl Matcher {
             gate_m: self.config.relay.gate_m,
             margin_pairs: self.config.relay.settle_margin_pairs,
         };
-        for (robot, through) in contradicted {
+        for (&robot, &through) in contradicted.iter().flat_map(|(r, by)| by.iter().map(move |t| (r, t))) {
             let Some((robots, edges)) = ours.get(&robot).and_then(|own| self.cycle(robot, own, through, &ours)) else {
                 continue;
             };
@@ -84,7 +84,7 @@ impl Matcher {
         ours: &BTreeMap<RobotId, Pose3>,
     ) -> Option<(Vec<RobotId>, Vec<CycleEdge>)> {
         let placed_by = |placer: RobotId, placed: RobotId| {
-            let t = self.hints.get(&placer)?.iter().find(|(r, _)| *r == placed)?.1;
+            let t = placed_by(&self.hints, placer, placed)?;
             Some(CycleEdge { placer, placed, placer_from_placed: t })
         };
         let me = self.robot;

@@ -49,7 +49,7 @@ pub fn hints_for(
     if remote == me {
         return Vec::new();
     }
-    let placed_by = |s: RobotId, j: RobotId| theirs.get(&s)?.iter().find(|(r, _)| *r == j).map(|(_, t)| *t);
+    let placed_by = |s: RobotId, j: RobotId| placed_by(theirs, s, j);
     let mut hints: Vec<Hint> = placed_by(remote, me)
         .map(|remote_from_me| Hint { via: remote, local_from_remote: remote_from_me.inverse() })
         .into_iter()
@@ -62,6 +62,11 @@ pub fn hints_for(
         }
     }
     hints
+}
+
+/// `placer`'s latest alignment of `placed` (its world in the placer's), from `theirs`.
+pub fn placed_by(theirs: &BTreeMap<RobotId, Vec<(RobotId, Pose3)>>, placer: RobotId, placed: RobotId) -> Option<Pose3> {
+    theirs.get(&placer)?.iter().find(|(r, _)| *r == placed).map(|(_, t)| *t)
 }
 
 /// The robots whose alignments contradict ours of `remote` (`own`: its world in ours): every
