@@ -2,7 +2,7 @@
 //! payloads that cross the radio are `sgm_model::wire` types inside `Comms` only.
 
 use actix::Message;
-use nalgebra::{Matrix6, Point3};
+use nalgebra::{Matrix6, Point3, UnitQuaternion};
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::scan_context::ScanContext;
 use sgm_model::perception::clustering::ObjectCandidate;
@@ -80,6 +80,9 @@ pub struct LabelledScan {
 pub struct NewKeyframe {
     pub keyframe: Keyframe,
     pub edges: Vec<KeyframeEdge>,
+    /// The body's attitude as its odometry measured it (odom_from_body's rotation): in a
+    /// gravity-aligned odometry frame its tilt is the keyframe's against gravity.
+    pub attitude: UnitQuaternion<f64>,
 }
 
 /// Tracker → Matcher and Comms: the map changed (a keyframe added, scans compacted or evicted,

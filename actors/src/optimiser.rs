@@ -104,7 +104,9 @@ impl Optimiser {
     }
 
     /// Gravity-aligned worlds (`matcher.max_tilt_deg = 0`: an IMU's): every neighbour's anchor is
-    /// held level at each solve ([`KeyframeGraph::set_level_anchors`]; a thawed graph takes it too).
+    /// held level at each solve ([`KeyframeGraph::set_level_anchors`]; a thawed graph takes it
+    /// too), and each own keyframe to the tilt its odometry measured, σ =
+    /// `optimiser.gravity_sigma_deg` ([`KeyframeGraph::set_gravity_priors`]).
     pub fn with_level_anchors(mut self, level: bool) -> Self {
         self.level_anchors = level;
         self
@@ -126,10 +128,26 @@ impl Optimiser {
         self
     }
 
+    /// Adds the keyframe and its edges, and in gravity-aligned worlds its measured tilt; whether
+    /// to solve now.
+    fn add_keyframe(&mut self, msg: &NewKeyframe) -> bool {
+        let due = self.graph.add_keyframe(&msg.keyframe, &msg.edges, self.config.every_keyframes);
+        if self.gravity_sigma_rad().is_some() {
+            self.graph.record_tilt(msg.keyframe.id, &msg.attitude);
+        }
+        due
+    }
+
+    /// σ of the gravity priors: in gravity-aligned worlds and unless `gravity_sigma_deg` is 0.
+    fn gravity_sigma_rad(&self) -> Option<f64> {
+        (self.level_anchors && self.config.gravity_sigma_deg > 0.0).then(|| self.config.gravity_sigma_deg.to_radians())
+    }
+
     /// Solves, then publishes the poses and the newest keyframes' marginal covariances.
     fn solve_and_publish(&mut self) {
         self.refreshed_since_solve = false;
         self.graph.set_level_anchors(self.level_anchors);
+        self.graph.set_gravity_priors(self.gravity_sigma_rad());
         let solved = match self.graph.solve(self.config.reject_outliers, MARGINALS) {
             Ok(solved) => solved,
             Err(e) => {
@@ -186,7 +204,7 @@ impl Handler<NewKeyframe> for Optimiser {
     type Result = ();
     fn handle(&mut self, msg: NewKeyframe, ctx: &mut Context<Self>) {
         contained(ctx, "optimiser", || {
-            if self.graph.add_keyframe(&msg.keyframe, &msg.edges, self.config.every_keyframes) {
+            if self.add_keyframe(&msg) {
                 self.solve_and_publish();
             }
         });
@@ -271,7 +289,14 @@ mod tests {
     #[actix_rt::test]
     async fn a_failed_solve_is_counted_in_the_status() {
         let optimiser = Optimiser::new(RobotId(0), OptimiserConfig::default()).start();
-        optimiser.send(NewKeyframe { keyframe: keyframe(0, 0.0), edges: Vec::new() }).await.unwrap();
+        optimiser
+            .send(NewKeyframe {
+                keyframe: keyframe(0, 0.0),
+                edges: Vec::new(),
+                attitude: nalgebra::UnitQuaternion::identity(),
+            })
+            .await
+            .unwrap();
         let status = optimiser.send(GetOptimiserStatus).await.unwrap();
         assert_eq!(status.failures, SolveFailures::default(), "{status:?}");
         let edge = KeyframeEdge {
@@ -281,10 +306,41 @@ mod tests {
             from_from_to: Pose3::translation(1.0, 0.0, 0.0),
             information: Matrix6::identity() * 1e300,
         };
-        optimiser.send(NewKeyframe { keyframe: keyframe(1, 5.0), edges: vec![edge] }).await.unwrap();
+        optimiser
+            .send(NewKeyframe {
+                keyframe: keyframe(1, 5.0),
+                edges: vec![edge],
+                attitude: nalgebra::UnitQuaternion::identity(),
+            })
+            .await
+            .unwrap();
         let status = optimiser.send(GetOptimiserStatus).await.unwrap();
         assert_eq!(status.failures.failed_solves, 1, "{status:?}");
         assert!(status.failures.last_failure.as_deref().is_some_and(|r| r.starts_with("pose graph not optimised")));
         assert_eq!(status.graph.variables, 2);
+    }
+
+    /// Tilts are recorded in gravity-aligned worlds only, and not with `gravity_sigma_deg = 0`.
+    #[test]
+    fn keyframe_tilts_are_recorded_in_gravity_aligned_worlds() {
+        let tilted = nalgebra::UnitQuaternion::from_euler_angles(0.02, -0.01, 1.0);
+        let recorded = |level: bool, sigma_deg: f64| {
+            let config = OptimiserConfig { gravity_sigma_deg: sigma_deg, ..OptimiserConfig::default() };
+            let mut optimiser = Optimiser::new(RobotId(0), config).with_level_anchors(level);
+            for k in 0..3 {
+                optimiser.add_keyframe(&NewKeyframe {
+                    keyframe: keyframe(k, f64::from(k)),
+                    edges: Vec::new(),
+                    attitude: tilted,
+                });
+            }
+            optimiser.freeze().tilts
+        };
+        let tilts = recorded(true, 0.2);
+        assert_eq!(tilts.iter().map(|(k, _)| k.0).collect::<Vec<_>>(), vec![0, 1, 2]);
+        let (roll, pitch, yaw) = tilts[0].1.euler_angles();
+        assert!((roll - 0.02).abs() < 1e-12 && (pitch + 0.01).abs() < 1e-12 && yaw.abs() < 1e-12);
+        assert!(recorded(false, 0.2).is_empty());
+        assert!(recorded(true, 0.0).is_empty());
     }
 }

@@ -208,7 +208,8 @@ impl Tracker {
             tracing::warn!(robot = %self.robot, keyframe = id.0, "loop closure not added: {e}");
         }
         if let Some(links) = &self.links {
-            links.optimiser.do_send(NewKeyframe { keyframe: added.keyframe, edges: added.edges });
+            let attitude = scan.odom_from_body.rotation;
+            links.optimiser.do_send(NewKeyframe { keyframe: added.keyframe, edges: added.edges, attitude });
         }
         if !added.scans_changed.is_empty() {
             let stats = self.map.graph.cloud_stats();

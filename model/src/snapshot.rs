@@ -32,7 +32,8 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// Version 7: the object tracker keeps the returns of each object's latest estimate (the
 /// weights of a merge's centroid). Version 8: the Matcher keeps each neighbour's withdrawn
 /// alignments and the pose graph how many withdrawals of each neighbour it has handled.
-pub const FORMAT_VERSION: u32 = 8;
+/// Version 9: the pose graph keeps each own keyframe's measured tilt (its gravity prior).
+pub const FORMAT_VERSION: u32 = 9;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).

@@ -242,6 +242,18 @@ mod tests {
                 "tracker.tracking.sighting_memory = 0: allowed ≥ 1 (1: the latest sighting alone)",
             ),
             ("SGM_TEST_H", "FUSION__FAR_SIDE_SHIFT", "1.5", "fusion.far_side_shift = 1.5: allowed in [0, 1] (0: off)"),
+            (
+                "SGM_TEST_I",
+                "OPTIMISER__GRAVITY_SIGMA_DEG",
+                "-0.1",
+                "optimiser.gravity_sigma_deg = -0.1: allowed 0 (off) ≤ x ≤ 10°",
+            ),
+            (
+                "SGM_TEST_J",
+                "OPTIMISER__GRAVITY_SIGMA_DEG",
+                "11",
+                "optimiser.gravity_sigma_deg = 11: allowed 0 (off) ≤ x ≤ 10°",
+            ),
         ] {
             assert_eq!(refused(prefix, key, value), message);
         }

@@ -16,11 +16,20 @@ pub struct OptimiserConfig {
     /// truncated least squares over them (odometry and priors are trusted), decided again at
     /// every solve. false: plain least squares. Default true.
     pub reject_outliers: bool,
+    /// In gravity-aligned worlds (`matcher.max_tilt_deg = 0`: an IMU's), each own keyframe is held
+    /// to the tilt its odometry measured, σ per horizontal axis, degrees; 0: not held (the pose
+    /// graph's between factors alone decide the tilt). Default 0.2 (an IMU's gravity estimate).
+    pub gravity_sigma_deg: f64,
 }
 
 impl Default for OptimiserConfig {
     fn default() -> Self {
-        Self { odometry_sigmas: [0.01, 0.01, 0.01, 0.05, 0.05, 0.05], every_keyframes: 10, reject_outliers: true }
+        Self {
+            odometry_sigmas: [0.01, 0.01, 0.01, 0.05, 0.05, 0.05],
+            every_keyframes: 10,
+            reject_outliers: true,
+            gravity_sigma_deg: 0.2,
+        }
     }
 }
 
@@ -35,6 +44,12 @@ impl OptimiserConfig {
             "six values > 0",
         )?;
         check(o.every_keyframes >= 1, "optimiser.every_keyframes", o.every_keyframes, "≥ 1")?;
+        check(
+            o.gravity_sigma_deg.is_finite() && (0.0..=10.0).contains(&o.gravity_sigma_deg),
+            "optimiser.gravity_sigma_deg",
+            o.gravity_sigma_deg,
+            "0 (off) ≤ x ≤ 10°",
+        )?;
         Ok(())
     }
 }

@@ -5,6 +5,7 @@ pub mod consistency;
 pub mod factors;
 pub mod g2o;
 pub mod graph;
+pub mod gravity;
 pub mod keyframe_graph;
 pub mod manifold;
 pub mod marginals;
