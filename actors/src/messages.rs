@@ -82,7 +82,7 @@ pub struct NewKeyframe {
     pub edges: Vec<KeyframeEdge>,
     /// The body's attitude as its odometry measured it (odom_from_body's rotation): in a
     /// gravity-aligned odometry frame its tilt is the keyframe's against gravity.
-    pub attitude: UnitQuaternion<f64>,
+    pub odom_from_body_rotation: UnitQuaternion<f64>,
 }
 
 /// Tracker → Matcher and Comms: the map changed (a keyframe added, scans compacted or evicted,

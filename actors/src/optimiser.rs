@@ -128,12 +128,14 @@ impl Optimiser {
         self
     }
 
-    /// Adds the keyframe and its edges, and in gravity-aligned worlds its measured tilt; whether
-    /// to solve now.
+    /// Adds the keyframe and its edges, and in gravity-aligned worlds its measured tilt (held by
+    /// a prior unless `gravity_sigma_deg` is 0); whether to solve now.
     fn add_keyframe(&mut self, msg: &NewKeyframe) -> bool {
         let due = self.graph.add_keyframe(&msg.keyframe, &msg.edges, self.config.every_keyframes);
-        if self.gravity_sigma_rad().is_some() {
-            self.graph.record_tilt(msg.keyframe.id, &msg.attitude);
+        // Recorded whenever the frames are level, so that σ can be changed on a resumed graph.
+        if self.level_anchors && !self.graph.record_tilt(msg.keyframe.id, &msg.odom_from_body_rotation) {
+            tracing::warn!(robot = %self.robot, keyframe = msg.keyframe.id.0,
+                "keyframe's odometry attitude is not a rotation: no gravity prior for it");
         }
         due
     }
@@ -293,7 +295,7 @@ mod tests {
             .send(NewKeyframe {
                 keyframe: keyframe(0, 0.0),
                 edges: Vec::new(),
-                attitude: nalgebra::UnitQuaternion::identity(),
+                odom_from_body_rotation: nalgebra::UnitQuaternion::identity(),
             })
             .await
             .unwrap();
@@ -310,7 +312,7 @@ mod tests {
             .send(NewKeyframe {
                 keyframe: keyframe(1, 5.0),
                 edges: vec![edge],
-                attitude: nalgebra::UnitQuaternion::identity(),
+                odom_from_body_rotation: nalgebra::UnitQuaternion::identity(),
             })
             .await
             .unwrap();
@@ -320,7 +322,8 @@ mod tests {
         assert_eq!(status.graph.variables, 2);
     }
 
-    /// Tilts are recorded in gravity-aligned worlds only, and not with `gravity_sigma_deg = 0`.
+    /// Tilts are recorded in gravity-aligned worlds only (whatever σ: 0 only turns the priors
+    /// off), as the world's up in each body.
     #[test]
     fn keyframe_tilts_are_recorded_in_gravity_aligned_worlds() {
         let tilted = nalgebra::UnitQuaternion::from_euler_angles(0.02, -0.01, 1.0);
@@ -328,19 +331,15 @@ mod tests {
             let config = OptimiserConfig { gravity_sigma_deg: sigma_deg, ..OptimiserConfig::default() };
             let mut optimiser = Optimiser::new(RobotId(0), config).with_level_anchors(level);
             for k in 0..3 {
-                optimiser.add_keyframe(&NewKeyframe {
-                    keyframe: keyframe(k, f64::from(k)),
-                    edges: Vec::new(),
-                    attitude: tilted,
-                });
+                let keyframe = keyframe(k, f64::from(k));
+                optimiser.add_keyframe(&NewKeyframe { keyframe, edges: Vec::new(), odom_from_body_rotation: tilted });
             }
             optimiser.freeze().tilts
         };
         let tilts = recorded(true, 0.2);
         assert_eq!(tilts.iter().map(|(k, _)| k.0).collect::<Vec<_>>(), vec![0, 1, 2]);
-        let (roll, pitch, yaw) = tilts[0].1.euler_angles();
-        assert!((roll - 0.02).abs() < 1e-12 && (pitch + 0.01).abs() < 1e-12 && yaw.abs() < 1e-12);
+        assert!((tilts[0].1 - tilted.inverse() * nalgebra::Vector3::z()).norm() < 1e-15);
         assert!(recorded(false, 0.2).is_empty());
-        assert!(recorded(true, 0.0).is_empty());
+        assert_eq!(recorded(true, 0.0), tilts);
     }
 }

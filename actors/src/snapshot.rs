@@ -222,7 +222,7 @@ mod tests {
                 deferred: vec![(RobotId(2), KeyframeId(7), Pose3::translation(1.0, 2.0, 3.0))],
                 updated: Vec::new(),
                 withdrawals: vec![(RobotId(2), 1)],
-                tilts: vec![(KeyframeId(0), nalgebra::UnitQuaternion::from_euler_angles(0.01, -0.02, 0.0))],
+                tilts: vec![(KeyframeId(0), nalgebra::Vector3::new(0.01, -0.02, 1.0).normalize())],
             },
             comms: CommsState {
                 sequence: 99,

@@ -208,8 +208,12 @@ impl Tracker {
             tracing::warn!(robot = %self.robot, keyframe = id.0, "loop closure not added: {e}");
         }
         if let Some(links) = &self.links {
-            let attitude = scan.odom_from_body.rotation;
-            links.optimiser.do_send(NewKeyframe { keyframe: added.keyframe, edges: added.edges, attitude });
+            let odom_from_body_rotation = scan.odom_from_body.rotation;
+            links.optimiser.do_send(NewKeyframe {
+                keyframe: added.keyframe,
+                edges: added.edges,
+                odom_from_body_rotation,
+            });
         }
         if !added.scans_changed.is_empty() {
             let stats = self.map.graph.cloud_stats();

@@ -7,47 +7,68 @@
 //! the matcher's 4-DoF transform and the level anchors assume. VINS-Mono's loop closure
 //! optimises only x, y, z and yaw for the same reason.
 //!
-//! Each local keyframe X = (R, t) whose attitude was measured, R_m (odometry's
-//! odom_from_body rotation: gravity-aligned, its yaw free), gets a prior on its tilt alone:
+//! A keyframe's measured tilt is the world's up seen in its body, u_m = R_mᵀ ẑ (R_m the
+//! odometry's odom_from_body rotation: gravity-aligned, its yaw free). A keyframe X = (R, t)
+//! gets a prior on that alone:
 //!
 //! ```text
-//! M = (R_z(ψ(X₀)) · T(R_m), t(X₀))        T(R) = R_z(ψ(R))⁻¹ · R = R_y(pitch) R_x(roll)
-//! e = P · Log(M⁻¹ · X)[ω],   P = I − u uᵀ,   u = R_M⁻¹ · ẑ,   Ω = P / σ²
+//! M = (R₀ · S, t₀),   S = the least rotation taking u_m to u₀ = R₀ᵀ ẑ   (so R_Mᵀ ẑ = u_m)
+//! e = P · Log(M⁻¹ · X)[ω],   P = I − u_m u_mᵀ,   Ω = P / σ²
 //! ```
 //!
-//! (X₀ the keyframe before the solve: the mean takes its yaw and translation again before each
-//! solve, as the level anchors' do, so the residual is the tilt however far the yaw has moved;
-//! u is the world's up in the mean's body frame, so a right perturbation δ = θu — a turn about
-//! the vertical — costs nothing, exactly, to first order. The translation and the yaw are left to
-//! the other factors.)
+//! (X₀ = (R₀, t₀) the keyframe before the solve). M is the pose nearest X₀ that holds the
+//! measured tilt, so at X₀ the residual is a pure swing of angle ∠(u_m, u₀) about an axis
+//! normal to u_m — the tilt error, with no twist. A right perturbation δ = θ u_m, a turn about
+//! the vertical, costs nothing; the translation rows are zero. The mean is made again before each
+//! solve: a yaw that moves by β within one solve changes the tilt's cost by a factor
+//! ((β/2)/sin(β/2))², 0.2 % at 0.2 rad. No Euler angles, so no heading is ever extracted.
 
 use super::factors::Prior;
-use crate::geometry::{yaw_of, Pose3};
-use nalgebra::{Isometry3, Matrix3, Matrix6, Translation3, UnitQuaternion, Vector3};
+use crate::geometry::Pose3;
+use crate::scene_graph::KeyframeId;
+use nalgebra::{Isometry3, Matrix3, Matrix6, UnitQuaternion, Vector3};
+use std::collections::BTreeMap;
 
-/// The tilt part of an attitude: R_z(ψ)⁻¹ · R = R_y(pitch) R_x(roll), ψ its yaw about the vertical.
-pub fn tilt_of(attitude: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
-    let yaw = attitude.euler_angles().2;
-    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -yaw) * attitude
+/// The world's up seen in a body at `attitude` (world_from_body rotation), or `None` unless the
+/// attitude is a finite unit quaternion.
+pub fn up_in_body(attitude: &UnitQuaternion<f64>) -> Option<Vector3<f64>> {
+    let q = attitude.quaternion();
+    let rotation = q.coords.iter().all(|v| v.is_finite()) && (q.norm() - 1.0).abs() < 1e-6;
+    rotation.then(|| attitude.inverse() * Vector3::z())
 }
 
-/// The gravity prior of a keyframe now at `current` whose measured tilt is `tilt` (from
-/// [`tilt_of`]), σ = `sigma_rad` on each horizontal axis.
-pub fn gravity_prior(variable: usize, current: &Pose3, tilt: &UnitQuaternion<f64>, sigma_rad: f64) -> Prior<Pose3, 6> {
-    let rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw_of(current)) * tilt;
-    let mean = Isometry3::from_parts(Translation3::from(current.translation.vector), rotation);
-    let up = rotation.inverse() * Vector3::z();
+/// The gravity prior of a keyframe now at `current` whose measured up is `up` (from
+/// [`up_in_body`]), σ = `sigma_rad` on each horizontal axis; `None` when the two ups are opposite
+/// (a body measured upside down against one the right way up: no least rotation).
+pub fn gravity_prior(variable: usize, current: &Pose3, up: &Vector3<f64>, sigma_rad: f64) -> Option<Prior<Pose3, 6>> {
+    let now = current.rotation.inverse() * Vector3::z();
+    let swing = UnitQuaternion::rotation_between(up, &now)?;
+    let mean = Isometry3::from_parts(current.translation, current.rotation * swing);
     let projection = Matrix3::identity() - up * up.transpose();
     let mut sqrt_information = Matrix6::zeros();
     sqrt_information.fixed_view_mut::<3, 3>(0, 0).copy_from(&(projection / sigma_rad));
-    Prior { variable, mean, sqrt_information }
+    Some(Prior { variable, mean, sqrt_information })
 }
 
-/// How far `pose`'s tilt is from `tilt`: the angle between the vertical each puts in the body, rad.
-pub fn tilt_error(pose: &Pose3, tilt: &UnitQuaternion<f64>) -> f64 {
-    let measured = tilt.inverse() * Vector3::z();
-    let now = pose.rotation.inverse() * Vector3::z();
-    measured.angle(&now)
+/// The gravity priors of the keyframes in `ups` that have a variable (`variable_of`), at their
+/// values in `values`.
+pub fn gravity_priors(
+    ups: &BTreeMap<KeyframeId, Vector3<f64>>,
+    variable_of: impl Fn(KeyframeId) -> Option<usize>,
+    values: &[Pose3],
+    sigma_rad: f64,
+) -> Vec<Prior<Pose3, 6>> {
+    ups.iter()
+        .filter_map(|(k, up)| {
+            let i = variable_of(*k)?;
+            gravity_prior(i, values.get(i)?, up, sigma_rad)
+        })
+        .collect()
+}
+
+/// How far `pose`'s tilt is from the measured `up`: the angle between the two ups, rad.
+pub fn tilt_error(pose: &Pose3, up: &Vector3<f64>) -> f64 {
+    (pose.rotation.inverse() * Vector3::z()).angle(up)
 }
 
 #[cfg(test)]
@@ -56,55 +77,74 @@ mod tests {
     use crate::optim::factors::Between;
     use crate::optim::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
     use crate::optim::solver::{least_squares, optimize_with, LmParams, Structure};
+    use nalgebra::Translation3;
     use proptest::prelude::*;
 
-    fn attitude(roll: f64, pitch: f64, yaw: f64) -> UnitQuaternion<f64> {
-        UnitQuaternion::from_euler_angles(roll, pitch, yaw)
+    fn pose(roll: f64, pitch: f64, yaw: f64, t: [f64; 3]) -> Pose3 {
+        Isometry3::from_parts(Translation3::new(t[0], t[1], t[2]), UnitQuaternion::from_euler_angles(roll, pitch, yaw))
     }
 
-    fn pose(roll: f64, pitch: f64, yaw: f64, t: [f64; 3]) -> Pose3 {
-        Isometry3::from_parts(Translation3::new(t[0], t[1], t[2]), attitude(roll, pitch, yaw))
+    fn up(roll: f64, pitch: f64, yaw: f64) -> Vector3<f64> {
+        up_in_body(&UnitQuaternion::from_euler_angles(roll, pitch, yaw)).unwrap()
     }
 
     proptest! {
-        /// The residual is zero at the measured tilt whatever the yaw and translation, and a turn
-        /// about the vertical (a right perturbation along the world's up) changes it by nothing.
+        /// At the measured tilt the residual is zero whatever the yaw; a turn about the vertical
+        /// and any move of the translation change it by nothing, and its linearisation has no
+        /// translation columns.
         #[test]
         fn yaw_and_translation_are_free(
             roll in -0.3f64..0.3, pitch in -0.3f64..0.3, yaw in -3.1f64..3.1, other_yaw in -3.1f64..3.1,
-            x in -50.0f64..50.0, turn in -0.5f64..0.5,
+            x in -50.0f64..50.0, turn in -3.0f64..3.0, shift in -5.0f64..5.0,
         ) {
-            let tilt = tilt_of(&attitude(roll, pitch, other_yaw));
             let current = pose(roll, pitch, yaw, [x, -x, 0.3 * x]);
-            let prior = gravity_prior(0, &current, &tilt, 0.01);
+            let prior = gravity_prior(0, &current, &up(roll, pitch, other_yaw), 0.01).unwrap();
             prop_assert!(prior.whitened_error(&current).norm() < 1e-9);
-            let turned = Isometry3::from_parts(
-                current.translation,
+            let moved = Isometry3::from_parts(
+                Translation3::from(current.translation.vector + Vector3::new(shift, 2.0 * shift, -shift)),
                 UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn) * current.rotation,
             );
-            prop_assert!(prior.whitened_error(&turned).norm() < 1e-9, "{}", prior.whitened_error(&turned).norm());
+            prop_assert!(prior.whitened_error(&moved).norm() < 1e-9, "{}", prior.whitened_error(&moved).norm());
+            let (_, jacobian) = prior.linearize(&moved);
+            prop_assert!(jacobian.fixed_view::<6, 3>(0, 3).norm() < 1e-12);
         }
 
         /// Tilted by a small angle about a horizontal axis, the whitened residual is that angle
-        /// over σ, and the angle is what [`tilt_error`] reports.
+        /// over σ, and the angle is what [`tilt_error`] reports; the prior made at the tilted
+        /// pose says the same (the residual there is the swing back to the measured up).
         #[test]
         fn a_tilt_costs_its_angle_over_sigma(
             roll in -0.2f64..0.2, pitch in -0.2f64..0.2, yaw in -3.1f64..3.1,
             axis in 0.0f64..std::f64::consts::TAU, angle in 1e-4f64..0.02,
         ) {
             let current = pose(roll, pitch, yaw, [1.0, 2.0, 3.0]);
-            let tilt = tilt_of(&current.rotation);
+            let measured = up(roll, pitch, yaw);
             let sigma = 0.003;
-            let prior = gravity_prior(0, &current, &tilt, sigma);
             let horizontal = nalgebra::Unit::new_normalize(Vector3::new(axis.cos(), axis.sin(), 0.0));
             let tilted = Isometry3::from_parts(
                 current.translation,
                 UnitQuaternion::from_axis_angle(&horizontal, angle) * current.rotation,
             );
-            let whitened = prior.whitened_error(&tilted).norm();
-            prop_assert!((whitened - angle / sigma).abs() < 1e-3 * angle / sigma, "{whitened} vs {}", angle / sigma);
-            prop_assert!((tilt_error(&tilted, &tilt) - angle).abs() < 1e-9);
+            for at in [current, tilted] {
+                let prior = gravity_prior(0, &at, &measured, sigma).unwrap();
+                let whitened = prior.whitened_error(&tilted).norm();
+                prop_assert!((whitened - angle / sigma).abs() < 1e-3 * angle / sigma, "{whitened} vs {}", angle / sigma);
+            }
+            prop_assert!((tilt_error(&tilted, &measured) - angle).abs() < 1e-9);
         }
+    }
+
+    #[test]
+    fn attitudes_that_are_not_rotations_give_no_up_and_opposite_ups_no_prior() {
+        let nan = UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(f64::NAN, 0.0, 0.0, 0.0));
+        assert_eq!(up_in_body(&nan), None);
+        let unnormalised = UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(2.0, 0.0, 0.0, 0.0));
+        assert_eq!(up_in_body(&unnormalised), None);
+        let upside_down = pose(std::f64::consts::PI, 0.0, 0.0, [0.0; 3]);
+        assert!(gravity_prior(0, &upside_down, &Vector3::z(), 0.01).is_none());
+        let ups = BTreeMap::from([(KeyframeId(0), Vector3::z()), (KeyframeId(1), Vector3::z())]);
+        let priors = gravity_priors(&ups, |k| (k.0 == 1).then_some(0), &[Pose3::identity()], 0.01);
+        assert_eq!(priors.len(), 1, "a keyframe without a variable has no prior");
     }
 
     /// Closed form: one keyframe held by a relative measurement that tilts it by θ about x
@@ -130,18 +170,19 @@ mod tests {
             100.0,
         ));
         graph.betweens.push(Between { from: 0, to: 1, measured, sqrt_information });
-        graph.priors.push(gravity_prior(1, &Pose3::identity(), &UnitQuaternion::identity(), sigma_g));
-        // The prior's mean took yaw 0 from the start value; refit it at the yaw the solve finds.
+        let level = Vector3::z();
+        graph.priors.push(gravity_prior(1, &Pose3::identity(), &level, sigma_g).unwrap());
+        // The prior's mean was made at the start value; made again where each solve ends.
         for _ in 0..3 {
             let structure = Structure::new(&graph).unwrap();
             optimize_with(&mut graph, &LmParams::default(), &structure, &least_squares).unwrap();
             let current = graph.values[1];
-            *graph.priors.last_mut().unwrap() = gravity_prior(1, &current, &UnitQuaternion::identity(), sigma_g);
+            *graph.priors.last_mut().unwrap() = gravity_prior(1, &current, &level, sigma_g).unwrap();
         }
         let x = graph.values[1];
         let expected = theta * sigma_g.powi(2) / (sigma_g.powi(2) + sigma_b.powi(2));
-        let roll = tilt_error(&x, &UnitQuaternion::identity());
-        assert!((roll - expected).abs() < 1e-4, "tilt {roll} vs {expected}");
-        assert!((yaw_of(&x) - yaw).abs() < 1e-4, "yaw {}", yaw_of(&x));
+        let tilt = tilt_error(&x, &level);
+        assert!((tilt - expected).abs() < 1e-4, "tilt {tilt} vs {expected}");
+        assert!((crate::geometry::yaw_of(&x) - yaw).abs() < 1e-4, "yaw {}", crate::geometry::yaw_of(&x));
     }
 }

@@ -39,13 +39,13 @@
 use super::consistency::{largest_consistent_set, Consistency, ImpliedClosure};
 use super::factors::{Between, Prior};
 use super::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
-use super::gravity::{gravity_prior, tilt_of};
+use super::gravity::{gravity_priors, up_in_body};
 use super::marginals::marginal_covariances_with;
 use super::robust::{optimize_gnc_incremental_with, rejection_weights, weighted};
 use super::solver::{least_squares, optimize_with, LmParams, SolveError, Structure};
 use crate::geometry::{levelled, medoid, pose_error, Pose3};
 use crate::scene_graph::{Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, RobotId};
-use nalgebra::{Matrix6, UnitQuaternion};
+use nalgebra::{Matrix6, UnitQuaternion, Vector3};
 use std::collections::{BTreeMap, BTreeSet};
 
 /// The graph and its outlier decisions, as a snapshot keeps them.
@@ -68,8 +68,8 @@ pub struct KeyframeGraphState {
     pub updated: Vec<usize>,
     /// Per neighbour, the withdrawals handled ([`KeyframeGraph::withdraw_neighbour`]).
     pub withdrawals: Vec<(RobotId, u32)>,
-    /// Local keyframes' measured tilts ([`KeyframeGraph::record_tilt`]).
-    pub tilts: Vec<(KeyframeId, UnitQuaternion<f64>)>,
+    /// Local keyframes' measured tilts: the world's up in each body ([`KeyframeGraph::record_tilt`]).
+    pub tilts: Vec<(KeyframeId, Vector3<f64>)>,
 }
 
 /// What a solve gives: every local keyframe's pose, the newest ones' marginal covariances, and
@@ -139,11 +139,15 @@ pub struct KeyframeGraph {
     /// Per neighbour, the withdrawals handled: which alignment an anchor's estimate belongs to
     /// ([`KeyframeGraph::withdrawals`]).
     withdrawals: BTreeMap<RobotId, u32>,
-    /// Local keyframes' tilts as their odometry measured them against gravity
-    /// ([`KeyframeGraph::record_tilt`]).
-    tilts: BTreeMap<KeyframeId, UnitQuaternion<f64>>,
+    /// Local keyframes' tilts as their odometry measured them against gravity: the world's up
+    /// in each body ([`KeyframeGraph::record_tilt`]).
+    tilts: BTreeMap<KeyframeId, Vector3<f64>>,
     /// σ of the gravity priors, rad; `None`: none ([`KeyframeGraph::set_gravity_priors`]).
     gravity_sigma_rad: Option<f64>,
+    /// While a solve holds its gravity priors: how many priors the graph has without them. Set
+    /// when they are added and cleared when they are taken away; still set only if a solve
+    /// was cut short by a panic, and then the next solve and any freeze take them away first.
+    transient_from: Option<usize>,
 }
 
 /// Pose updates held per neighbour for keyframes not yet in the graph, at most. A keyframe
@@ -196,8 +200,10 @@ fn anchor_key(robot: RobotId) -> u64 {
 
 impl KeyframeGraph {
     pub fn freeze(&self) -> KeyframeGraphState {
+        let mut graph = self.graph.clone();
+        Self::drop_transient_priors(&mut graph, self.transient_from);
         KeyframeGraphState {
-            graph: self.graph.clone(),
+            graph,
             index: self.index.iter().map(|(r, i)| (*r, *i)).collect(),
             pending: self.pending,
             candidates: self.candidates.clone(),
@@ -212,7 +218,14 @@ impl KeyframeGraph {
                 .collect(),
             updated: self.updated.iter().copied().collect(),
             withdrawals: self.withdrawals.iter().map(|(r, n)| (*r, *n)).collect(),
-            tilts: self.tilts.iter().map(|(k, q)| (*k, *q)).collect(),
+            tilts: self.tilts.iter().map(|(k, u)| (*k, *u)).collect(),
+        }
+    }
+
+    /// The graph without a cut-short solve's gravity priors (see `transient_from`).
+    fn drop_transient_priors(graph: &mut Graph3, transient_from: Option<usize>) {
+        if let Some(held) = transient_from {
+            graph.priors.truncate(held);
         }
     }
 
@@ -230,7 +243,11 @@ impl KeyframeGraph {
             && state.updated.iter().all(|i| *i < n)
             && {
                 let local: BTreeSet<KeyframeRef> = state.index.iter().map(|(r, _)| *r).collect();
-                state.tilts.iter().all(|(k, _)| local.contains(&KeyframeRef::Local(*k)))
+                state.tilts.iter().all(|(k, u)| {
+                    local.contains(&KeyframeRef::Local(*k))
+                        && u.iter().all(|v| v.is_finite())
+                        && (u.norm() - 1.0).abs() < 1e-6
+                })
             };
         consistent.then(|| Self {
             graph: state.graph,
@@ -251,6 +268,7 @@ impl KeyframeGraph {
             withdrawals: state.withdrawals.into_iter().collect(),
             tilts: state.tilts.into_iter().collect(),
             gravity_sigma_rad: None,
+            transient_from: None,
         })
     }
 
@@ -531,23 +549,23 @@ impl KeyframeGraph {
     }
 
     /// Records the attitude local keyframe `keyframe` was measured at against gravity (its
-    /// odometry's odom_from_body rotation, yaw ignored). A keyframe not in the graph is ignored.
-    pub fn record_tilt(&mut self, keyframe: KeyframeId, attitude: &UnitQuaternion<f64>) {
-        if self.index.contains_key(&KeyframeRef::Local(keyframe)) {
-            self.tilts.insert(keyframe, tilt_of(attitude));
+    /// odometry's odom_from_body rotation; only the world's up in the body is kept). Whether it
+    /// was recorded: not for a keyframe the graph does not hold, nor for an attitude that is not
+    /// a finite rotation (what came from outside is checked once, here).
+    pub fn record_tilt(&mut self, keyframe: KeyframeId, odom_from_body: &UnitQuaternion<f64>) -> bool {
+        let Some(up) = up_in_body(odom_from_body) else { return false };
+        if !self.index.contains_key(&KeyframeRef::Local(keyframe)) {
+            return false;
         }
+        self.tilts.insert(keyframe, up);
+        true
     }
 
     /// The gravity priors for the next solve, at the current values (none unless set).
-    fn gravity_priors(&self) -> Vec<super::factors::Prior<Pose3, 6>> {
+    fn gravity_priors(&self) -> Vec<Prior<Pose3, 6>> {
         let Some(sigma) = self.gravity_sigma_rad else { return Vec::new() };
-        self.tilts
-            .iter()
-            .filter_map(|(k, tilt)| {
-                let i = *self.index.get(&KeyframeRef::Local(*k))?;
-                Some(gravity_prior(i, &self.graph.values[i], tilt, sigma))
-            })
-            .collect()
+        let variable_of = |k| self.index.get(&KeyframeRef::Local(k)).copied();
+        gravity_priors(&self.tilts, variable_of, &self.graph.values, sigma)
     }
 
     /// Gravity-aligned worlds (`level`): every solve holds every anchor level
@@ -596,11 +614,13 @@ impl KeyframeGraph {
     pub fn solve(&mut self, reject_outliers: bool, marginals: usize) -> Result<Solved, SolveError> {
         // The gravity priors hold for this solve and its marginals, then go: their means follow
         // the yaw, so they are made again each time.
+        Self::drop_transient_priors(&mut self.graph, self.transient_from.take());
         let held = self.graph.priors.len();
         let gravity = self.gravity_priors();
         self.graph.priors.extend(gravity);
+        self.transient_from = Some(held);
         let solved = self.solve_held(reject_outliers, marginals);
-        self.graph.priors.truncate(held);
+        Self::drop_transient_priors(&mut self.graph, self.transient_from.take());
         solved
     }
 
@@ -1028,8 +1048,11 @@ mod tests {
     /// without gravity priors the drop is mostly taken as pitch (1.3° at the worst keyframe).
     /// With each keyframe's level tilt recorded, σ = 0.2° holds them within 0.3° and σ = 0.02°
     /// within 0.05°: the drop goes to the translations. The yaw and the horizontal positions do
-    /// not move either way. Own poses hold the same priors; freezing keeps the tilts, and a
-    /// tilt recorded for a keyframe the graph does not hold is ignored.
+    /// not move either way. A neighbour, loosely held, is beside keyframe 5, so that own poses
+    /// are solved apart (without it they are the joint poses): they hold the same priors.
+    /// The priors live for one solve: frozen, the graph holds its one first-keyframe prior and
+    /// the tilts (not the one recorded for a keyframe it does not hold, nor a non-rotation), and
+    /// priors a cut-short solve left are taken away by the next solve and by a freeze.
     #[test]
     fn gravity_priors_keep_a_bent_chain_level() {
         let solve = |sigma_deg: Option<f64>| {
@@ -1041,27 +1064,37 @@ mod tests {
                 &[odometry(9, 10, &truth[1]), loop_edge],
                 100,
             );
+            let beside = Pose3::translation(0.0, 3.0, 0.0);
+            graph.add_neighbour(
+                RobotId(2),
+                &Pose3::identity(),
+                &[(KeyframeId(50), truth[5] * beside, Matrix6::identity())],
+                &[(KeyframeId(5), KeyframeId(50), beside, information())],
+            );
             // Measured level; the yaw of the measured attitude is ignored.
             for k in 0..=10u32 {
-                graph.record_tilt(
-                    KeyframeId(k),
-                    &UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.3 * f64::from(k)),
-                );
+                let attitude = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.3 * f64::from(k));
+                assert!(graph.record_tilt(KeyframeId(k), &attitude));
             }
-            graph.record_tilt(KeyframeId(99), &UnitQuaternion::identity());
+            assert!(!graph.record_tilt(KeyframeId(99), &UnitQuaternion::identity()), "not the graph's");
+            let not_a_rotation = UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(f64::NAN, 0.0, 0.0, 0.0));
+            assert!(!graph.record_tilt(KeyframeId(3), &not_a_rotation));
             graph.set_gravity_priors(sigma_deg.map(f64::to_radians));
             let solved = graph.solve(false, 0).expect("solves");
-            (graph, solved.poses)
+            let own = graph.own_poses().expect("solves");
+            (graph, solved.poses, own)
         };
         let max_tilt = |poses: &[(KeyframeId, Pose3)]| {
             poses.iter().map(|(_, p)| (p.rotation * Vector3::z()).angle(&Vector3::z()).to_degrees()).fold(0.0, f64::max)
         };
-        let (_, free) = solve(None);
-        let (graph, held) = solve(Some(0.2));
-        let (_, tight) = solve(Some(0.02));
+        let (_, free, own_free) = solve(None);
+        let (mut graph, held, own_held) = solve(Some(0.2));
+        let (_, tight, _) = solve(Some(0.02));
         assert!(max_tilt(&free) > 1.0, "free: {}°", max_tilt(&free));
         assert!(max_tilt(&held) < 0.3, "held: {}°", max_tilt(&held));
         assert!(max_tilt(&tight) < 0.05, "tight: {}°", max_tilt(&tight));
+        assert!(max_tilt(&own_free) > 1.0, "own, free: {}°", max_tilt(&own_free));
+        assert!(max_tilt(&own_held) < 0.3, "own, held: {}°", max_tilt(&own_held));
         for ((_, f), (_, h)) in free.iter().zip(&tight) {
             assert!((f.translation.vector.xy() - h.translation.vector.xy()).norm() < 0.01);
             assert!(crate::geometry::yaw_of(h).abs() < 1e-6 && crate::geometry::yaw_of(f).abs() < 1e-6);
@@ -1069,13 +1102,23 @@ mod tests {
         // Held level, the chain meets the loop by height: keyframe 9 is well below the odometry's.
         let z9 = tight[9].1.translation.z;
         assert!(z9 < -0.1, "keyframe 9 at z {z9}");
-        let own = graph.own_poses().expect("solves");
-        assert!((max_tilt(&own) - max_tilt(&held)).abs() < 1e-6, "own: {}°", max_tilt(&own));
         let state = graph.freeze();
-        assert_eq!(state.tilts.len(), 11, "keyframe 99 is not the graph's");
-        let mut thawed = KeyframeGraph::thaw(state).expect("fits");
+        let priors = state.graph.priors.len();
+        assert_eq!(priors, 2, "the first keyframe's and the anchor's");
+        assert_eq!(state.tilts.len(), 11);
+        let mut thawed = KeyframeGraph::thaw(state.clone()).expect("fits");
         thawed.set_gravity_priors(Some(0.2f64.to_radians()));
         assert_eq!(thawed, graph);
+        // A solve cut short with its priors in the graph.
+        let gravity = graph.gravity_priors();
+        graph.transient_from = Some(priors);
+        graph.graph.priors.extend(gravity);
+        assert_eq!(graph.freeze(), state);
+        graph.solve(false, 0).expect("solves");
+        assert_eq!((graph.graph.priors.len(), graph.transient_from), (priors, None));
+        let mut broken = state;
+        broken.tilts.push((KeyframeId(4), Vector3::new(0.0, 0.0, 2.0)));
+        assert_eq!(KeyframeGraph::thaw(broken), None, "an up that is not a unit vector");
     }
 
     #[test]
