@@ -18,11 +18,11 @@
 
 pub use crate::geometry::medoid;
 use crate::geometry::{pose_error, Pose3};
-use crate::perception::icp::{register, register_to, IcpConfig, IcpTarget};
+use crate::perception::icp::{register, register_to_with, Freedom, IcpConfig, IcpTarget};
 use crate::perception::structure_check::{StructureCheck, StructureTarget};
 use crate::scene_graph::{KeyframeId, Stamp};
 use crate::workers::Workers;
-use nalgebra::{Matrix6, Point3};
+use nalgebra::{Matrix6, Point3, Vector3};
 use std::collections::{BTreeMap, BTreeSet};
 
 /// How long a refuted transform is remembered, s.
@@ -81,6 +81,9 @@ pub struct RoundConfig<'a> {
     pub sigma_floor: (f64, f64),
     /// Threads each registration may split its correspondence search over (same answer).
     pub workers: &'a Workers,
+    /// Gravity-aligned worlds: each registration keeps the relative tilt its initial guess
+    /// holds and estimates x, y, z and yaw ([`crate::perception::level_icp`]).
+    pub level: bool,
 }
 
 /// What a round's registrations gave.
@@ -121,7 +124,14 @@ pub fn register_round<'a>(
         });
         let Some((icp_target, structure_target)) = target else { continue };
         let initial = local.world_from_body.inverse() * in_local;
-        let Ok(result) = register_to(remote.points_in_body, icp_target, &initial, config.icp, config.workers) else {
+        let freedom = if config.level {
+            Freedom::Level(local.world_from_body.rotation.inverse() * Vector3::z())
+        } else {
+            Freedom::Full
+        };
+        let Ok(result) =
+            register_to_with(remote.points_in_body, icp_target, &initial, config.icp, config.workers, freedom)
+        else {
             continue;
         };
         if !result.converged {
@@ -312,13 +322,23 @@ mod tests {
             min_structure_agreement: 0.5,
             sigma_floor: (0.0, 0.0),
             workers: &workers,
+            level: false,
         };
-        let registered = register_round(&targets, round, &estimate, &config);
+        let registered = register_round(&targets, round.clone(), &estimate, &config);
         assert_eq!(registered.factors.len(), 2, "{registered:?}");
         assert_eq!(registered.factors[0].0, KeyframeId(4));
         for implied in &registered.implied {
             let e = pose_error(implied, &local_from_remote);
             assert!(e.translation_m < 0.02 && e.max_axis_rotation_deg() < 0.2, "{e:?}");
+        }
+        // Level (gravity-aligned worlds, a level estimate): as good, and level to the last bit
+        // of the tilt the estimate holds.
+        let level = register_round(&targets, round, &estimate, &RoundConfig { level: true, ..config });
+        assert_eq!(level.factors.len(), 2, "{level:?}");
+        for implied in &level.implied {
+            let e = pose_error(implied, &local_from_remote);
+            assert!(e.translation_m < 0.02 && e.max_axis_rotation_deg() < 0.2, "{e:?}");
+            assert!((implied.rotation * Vector3::z()).angle(&Vector3::z()) < 1e-9);
         }
         let RoundVerdict::Aligned(aligned) = judge_round(&registered, 2, false, &estimate) else { panic!("aligned") };
         assert!(pose_error(&aligned, &local_from_remote).translation_m < 0.02);

@@ -19,6 +19,7 @@
 //! [`Workers`]; the sums are still taken one point at a time in source order, so the answer is
 //! the same, bit for bit, for any number of threads (`split_passes_answer_as_one_thread`).
 
+use super::level_icp;
 use super::normals;
 use crate::geometry::lie::{se3_adjoint, se3_exp, Matrix6, Tangent3};
 use crate::geometry::point_to_plane::{self, NormalEquations};
@@ -88,6 +89,16 @@ pub struct IcpResult {
     pub iterations: usize,
     /// Information of `target_from_source` over (ω, v), right perturbation.
     pub information: Matrix6,
+}
+
+/// What a registration estimates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Freedom {
+    /// The whole relative pose.
+    Full,
+    /// x, y, z and yaw about the world's up seen in the target body (unit): the relative tilt
+    /// stays the initial guess's ([`super::level_icp`]).
+    Level(Vector3<f64>),
 }
 
 /// Inputs ICP cannot use.
@@ -188,7 +199,7 @@ pub fn register(
         return Err(IcpError::TooFewPoints("source"));
     }
     let mut target = IcpTarget::from_prepared(prepared(target, config), config)?;
-    register_prepared(&source, &mut target, initial, config, &Workers::sequential())
+    register_prepared(&source, &mut target, initial, config, &Workers::sequential(), Freedom::Full)
 }
 
 /// [`register`] onto a target made ready by [`IcpTarget::new`] with the same voxel size,
@@ -201,6 +212,18 @@ pub fn register_to(
     config: &IcpConfig,
     workers: &Workers,
 ) -> Result<IcpResult, IcpError> {
+    register_to_with(source, target, initial, config, workers, Freedom::Full)
+}
+
+/// [`register_to`], estimating what `freedom` allows.
+pub fn register_to_with(
+    source: &[Point3<f64>],
+    target: &mut IcpTarget,
+    initial: &Pose3,
+    config: &IcpConfig,
+    workers: &Workers,
+    freedom: Freedom,
+) -> Result<IcpResult, IcpError> {
     checked(config)?;
     if target.made_with != made_with(config) {
         return Err(IcpError::Parameter(
@@ -211,7 +234,7 @@ pub fn register_to(
     if source.len() < 3 {
         return Err(IcpError::TooFewPoints("source"));
     }
-    register_prepared(&source, target, initial, config, workers)
+    register_prepared(&source, target, initial, config, workers, freedom)
 }
 
 fn register_prepared(
@@ -220,6 +243,7 @@ fn register_prepared(
     initial: &Pose3,
     config: &IcpConfig,
     workers: &Workers,
+    freedom: Freedom,
 ) -> Result<IcpResult, IcpError> {
     let mut last_match: Vec<Option<usize>> = vec![None; source.len()];
     let mut pose = *initial;
@@ -233,7 +257,11 @@ fn register_prepared(
         if sums.pairs < 6 {
             break;
         }
-        let Some(delta) = sums.equations.step() else { break };
+        let step = match &freedom {
+            Freedom::Full => sums.equations.step(),
+            Freedom::Level(up) => level_icp::step(&sums.equations.hessian, &sums.equations.gradient, up),
+        };
+        let Some(delta) = step else { break };
         pose = se3_exp(&delta) * pose;
         let (w, v) = (delta.fixed_rows::<3>(0).norm(), delta.fixed_rows::<3>(3).norm());
         if w < config.convergence_rotation_rad && v < config.convergence_translation_m {
@@ -245,8 +273,12 @@ fn register_prepared(
     let fitness = sums.inliers as f64 / source.len() as f64;
     let rmse_m = if sums.inliers > 0 { (sums.sum2 / sums.inliers as f64).sqrt() } else { f64::INFINITY };
     let noise2 = rmse_m.max(1e-4).powi(2);
+    let left = match &freedom {
+        Freedom::Full => h / noise2,
+        Freedom::Level(up) => level_icp::information(&(h / noise2), up),
+    };
     let ad = se3_adjoint(&pose);
-    let information = ad.transpose() * (h / noise2) * ad;
+    let information = ad.transpose() * left * ad;
     Ok(IcpResult {
         target_from_source: pose,
         converged: step_converged && fitness >= config.min_fitness,

@@ -13,6 +13,7 @@ pub mod imu;
 pub mod keyframes;
 pub mod label_map;
 pub mod label_vote;
+pub mod level_icp;
 pub mod loop_closure;
 pub mod mapper;
 pub mod motion;
