@@ -67,6 +67,12 @@ pub struct MatcherSection {
     pub factor_sigma_floor_deg: f64,
     /// ... and of its translation, m. Default 0.05.
     pub factor_sigma_floor_m: f64,
+    /// In gravity-aligned worlds (`max_tilt_deg = 0`), register keyframes in x, y, z and yaw,
+    /// keeping the relative tilt the two robots' gravity gives
+    /// (`model::perception::level_icp`). Default false: on `handheld_indoor` it fixes the tilt
+    /// of the handheld rig's factors but leaves their heights free to pull maps (book:
+    /// Optimiser, gravity priors).
+    pub level_registration: bool,
     /// Registrations that must count before an alignment is accepted; fewer refute the object
     /// match (the neighbour goes back to waiting for object data). Default 2.
     pub min_keyframe_factors: usize,
@@ -244,6 +250,7 @@ impl Default for MatcherSection {
             min_structure_agreement: 0.3,
             factor_sigma_floor_deg: 0.5,
             factor_sigma_floor_m: 0.05,
+            level_registration: false,
             min_keyframe_factors: 2,
             max_held_keyframes: 16,
             closures: ClosureSection::default(),

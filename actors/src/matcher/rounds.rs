@@ -40,8 +40,8 @@ impl Matcher {
             min_structure_agreement: self.config.min_structure_agreement,
             sigma_floor: self.config.factor_sigma_floor(),
             workers: &self.workers,
-            // Gravity-aligned worlds (as the Optimiser's level anchors).
-            level: self.config.matching.max_tilt_deg == 0.0,
+            // Gravity-aligned worlds (as the Optimiser's level anchors), when asked for.
+            level: self.config.level_registration && self.config.matching.max_tilt_deg == 0.0,
         }
     }
 
