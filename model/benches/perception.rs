@@ -9,7 +9,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sgm_model::geometry::Pose3;
 use sgm_model::perception::clustering::{cluster, ClusterConfig};
-use sgm_model::perception::icp::{register, register_to, IcpConfig, IcpMethod, IcpTarget};
+use sgm_model::perception::icp::{register, register_to, Freedom, IcpConfig, IcpMethod, IcpTarget};
 use sgm_model::perception::label_vote::{vote, LabelVote};
 use sgm_model::perception::projection::{label_points, CameraModel, LabelImage};
 use sgm_model::perception::synthetic_room::box_room as room;
@@ -125,7 +125,9 @@ fn icp_split(c: &mut Criterion) {
         c.bench_function(&format!("icp_room_20k_registration_{name}_threads"), |b| {
             b.iter_batched(
                 || IcpTarget::new(&target, &config).expect("a room"),
-                |mut ready| register_to(black_box(&source), &mut ready, &Pose3::identity(), &config, &workers),
+                |mut ready| {
+                    register_to(black_box(&source), &mut ready, &Pose3::identity(), &config, &workers, Freedom::Full)
+                },
                 criterion::BatchSize::LargeInput,
             )
         });

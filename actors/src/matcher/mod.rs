@@ -42,7 +42,7 @@ use sgm_model::matching::alignment::{
 use sgm_model::matching::place_candidates::{EvenPlaces, PlaceCandidate, PlaceCandidates};
 use sgm_model::matching::scan_context::{Place, ScanContext};
 use sgm_model::matching::{match_graphs, GraphObject, LabelSimilarity, MatchOutcome, ObjectGraph};
-use sgm_model::perception::icp::{register_to, IcpConfig, IcpTarget};
+use sgm_model::perception::icp::{register_to, Freedom, IcpConfig, IcpTarget};
 use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS};
 use sgm_model::scene_graph::{KeyframeId, ObjectId, RobotId, Stamp};
 use sgm_model::wire::cloud_codec;

@@ -86,8 +86,8 @@ impl Matcher {
             return (*initial, observed_in);
         }
         let icp = &self.config.icp;
-        let registered =
-            IcpTarget::new(&target, icp).and_then(|mut t| register_to(&source, &mut t, initial, icp, &self.workers));
+        let registered = IcpTarget::new(&target, icp)
+            .and_then(|mut t| register_to(&source, &mut t, initial, icp, &self.workers, Freedom::Full));
         let refined = match registered {
             Ok(result) if result.converged => result.target_from_source,
             _ => *initial,

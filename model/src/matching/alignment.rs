@@ -18,7 +18,7 @@
 
 pub use crate::geometry::medoid;
 use crate::geometry::{pose_error, Pose3};
-use crate::perception::icp::{register, register_to_with, Freedom, IcpConfig, IcpTarget};
+use crate::perception::icp::{register, register_to, Freedom, IcpConfig, IcpTarget};
 use crate::perception::structure_check::{StructureCheck, StructureTarget};
 use crate::scene_graph::{KeyframeId, Stamp};
 use crate::workers::Workers;
@@ -129,8 +129,7 @@ pub fn register_round<'a>(
         } else {
             Freedom::Full
         };
-        let Ok(result) =
-            register_to_with(remote.points_in_body, icp_target, &initial, config.icp, config.workers, freedom)
+        let Ok(result) = register_to(remote.points_in_body, icp_target, &initial, config.icp, config.workers, freedom)
         else {
             continue;
         };

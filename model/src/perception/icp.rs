@@ -204,19 +204,8 @@ pub fn register(
 
 /// [`register`] onto a target made ready by [`IcpTarget::new`] with the same voxel size,
 /// normal neighbours and correspondence distance as `config` (otherwise
-/// [`IcpError::Parameter`]).
+/// [`IcpError::Parameter`]), estimating what `freedom` allows.
 pub fn register_to(
-    source: &[Point3<f64>],
-    target: &mut IcpTarget,
-    initial: &Pose3,
-    config: &IcpConfig,
-    workers: &Workers,
-) -> Result<IcpResult, IcpError> {
-    register_to_with(source, target, initial, config, workers, Freedom::Full)
-}
-
-/// [`register_to`], estimating what `freedom` allows.
-pub fn register_to_with(
     source: &[Point3<f64>],
     target: &mut IcpTarget,
     initial: &Pose3,
@@ -538,12 +527,25 @@ mod tests {
                 let source: Vec<Point3<f64>> = room(2000, seed).iter().map(|q| truth.inverse() * q).collect();
                 let fresh = register(&source, &target, &Pose3::identity(), &config).unwrap();
                 let one = Workers::sequential();
-                assert_eq!(register_to(&source, &mut ready, &Pose3::identity(), &config, &one).unwrap(), fresh);
-                assert_eq!(register_to(&source, &mut gathered, &Pose3::identity(), &config, &one).unwrap(), fresh);
+                assert_eq!(
+                    register_to(&source, &mut ready, &Pose3::identity(), &config, &one, Freedom::Full).unwrap(),
+                    fresh
+                );
+                assert_eq!(
+                    register_to(&source, &mut gathered, &Pose3::identity(), &config, &one, Freedom::Full).unwrap(),
+                    fresh
+                );
             }
             let other = IcpConfig { max_correspondence_distance_m: 0.5, ..config.clone() };
             assert!(matches!(
-                register_to(&room(500, 9), &mut ready, &Pose3::identity(), &other, &Workers::sequential()),
+                register_to(
+                    &room(500, 9),
+                    &mut ready,
+                    &Pose3::identity(),
+                    &other,
+                    &Workers::sequential(),
+                    Freedom::Full
+                ),
                 Err(IcpError::Parameter(_))
             ));
         }
@@ -566,12 +568,18 @@ mod tests {
                 let source: Vec<Point3<f64>> = room(4000, seed).iter().map(|q| truth.inverse() * q).collect();
                 assert!(split.split(source.len(), MIN_SPLIT, |r| r).is_some_and(|pieces| pieces.len() > 2));
                 let mut fresh = IcpTarget::new(&target, &config).unwrap();
-                let alone = register_to(&source, &mut fresh, &Pose3::identity(), &config, &one).unwrap();
+                let alone = register_to(&source, &mut fresh, &Pose3::identity(), &config, &one, Freedom::Full).unwrap();
                 assert!(alone.fitness > 0.9, "{alone:?}");
                 let mut fresh = IcpTarget::new(&target, &config).unwrap();
-                assert_eq!(register_to(&source, &mut fresh, &Pose3::identity(), &config, &split).unwrap(), alone);
+                assert_eq!(
+                    register_to(&source, &mut fresh, &Pose3::identity(), &config, &split, Freedom::Full).unwrap(),
+                    alone
+                );
                 let workers = if seed % 2 == 0 { &split } else { &one };
-                assert_eq!(register_to(&source, &mut shared, &Pose3::identity(), &config, workers).unwrap(), alone);
+                assert_eq!(
+                    register_to(&source, &mut shared, &Pose3::identity(), &config, workers, Freedom::Full).unwrap(),
+                    alone
+                );
             }
         }
     }

@@ -8,7 +8,7 @@
 //!   z = x_candidate⁻¹ · (T_icp · x_current),
 //! with LIO-SAM's noise model: an isotropic σ equal to the RMSE on all six axes.
 
-use super::icp::{register_to, IcpConfig, IcpTarget};
+use super::icp::{register_to, Freedom, IcpConfig, IcpTarget};
 use crate::geometry::Pose3;
 use crate::scene_graph::{KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, SceneGraph};
 use crate::workers::Workers;
@@ -81,7 +81,7 @@ pub fn detect(
     let mut target =
         IcpTarget::gathered(submap().flat_map(|&k| scan_in_world(graph, k)), expected, &config.icp).ok()?;
     let source: Vec<Point3<f64>> = scan_in_world(graph, current).collect();
-    let result = register_to(&source, &mut target, &Pose3::identity(), &config.icp, workers).ok()?;
+    let result = register_to(&source, &mut target, &Pose3::identity(), &config.icp, workers, Freedom::Full).ok()?;
     if !result.converged || result.rmse_m > config.max_rmse_m {
         return None;
     }
