@@ -62,6 +62,8 @@ pub struct SolveFailures {
     pub failed_own_solves: u64,
     /// The latest failure's reason.
     pub last_failure: Option<String>,
+    /// Keyframes whose odometry attitude was not a rotation: held by no gravity prior.
+    pub refused_attitudes: u64,
 }
 
 /// What of the Optimiser a snapshot keeps: the whole pose graph and its outlier decisions.
@@ -134,6 +136,7 @@ impl Optimiser {
         let due = self.graph.add_keyframe(&msg.keyframe, &msg.edges, self.config.every_keyframes);
         // Recorded whenever the frames are level, so that σ can be changed on a resumed graph.
         if self.level_anchors && !self.graph.record_tilt(msg.keyframe.id, &msg.odom_from_body_rotation) {
+            self.failures.refused_attitudes += 1;
             tracing::warn!(robot = %self.robot, keyframe = msg.keyframe.id.0,
                 "keyframe's odometry attitude is not a rotation: no gravity prior for it");
         }
@@ -341,5 +344,13 @@ mod tests {
         assert!((tilts[0].1 - tilted.inverse() * nalgebra::Vector3::z()).norm() < 1e-15);
         assert!(recorded(false, 0.2).is_empty());
         assert_eq!(recorded(true, 0.0), tilts);
+        // An attitude that is not a rotation: no tilt, and the status counts it.
+        let mut optimiser = Optimiser::new(RobotId(0), OptimiserConfig::default()).with_level_anchors(true);
+        let not_a_rotation =
+            nalgebra::UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(f64::NAN, 0.0, 0.0, 0.0));
+        let keyframe = keyframe(0, 0.0);
+        optimiser.add_keyframe(&NewKeyframe { keyframe, edges: Vec::new(), odom_from_body_rotation: not_a_rotation });
+        assert!(optimiser.freeze().tilts.is_empty());
+        assert_eq!(optimiser.failures.refused_attitudes, 1);
     }
 }
