@@ -188,16 +188,8 @@ impl Tracker {
     /// Adds `scan` as a keyframe (`Mapper::add_keyframe`) and sends the keyframe and its edges
     /// to the Optimiser.
     fn add_keyframe(&mut self, scan: &LabelledScan) -> Result<KeyframeId, SceneGraphError> {
-        let input = ScanInput {
-            stamp: scan.stamp,
-            odom_from_body: &scan.odom_from_body,
-            points_in_body: &scan.points_in_body,
-            labels: &scan.labels,
-            candidates: &scan.candidates,
-            motion_covariance: scan.motion_covariance.as_ref(),
-        };
         let moving_before = self.map.objects.moving_count();
-        let added = self.map.add_keyframe(input, &self.classes, &self.config, &self.workers)?;
+        let added = self.map.add_keyframe(scan_input(scan), &self.classes, &self.config, &self.workers)?;
         let id = added.keyframe.id;
         let moving = self.map.objects.moving_count();
         if moving > moving_before {
@@ -221,6 +213,16 @@ impl Tracker {
                 bytes = stats.bytes, "cloud store fitted to its budget");
         }
         Ok(id)
+    }
+
+    /// Counts a scan between keyframes as a sighting of the objects it saw
+    /// (`tracker.tracking.glimpses`). Objects it confirms are shared with the next keyframe's map.
+    fn glimpse(&mut self, scan: &LabelledScan) {
+        let confirmed = self.map.glimpse(&scan_input(scan), &self.config);
+        if !confirmed.is_empty() {
+            tracing::debug!(robot = %self.robot, stamp = scan.stamp, confirmed = confirmed.len(),
+                "objects confirmed between keyframes");
+        }
     }
 
     /// What neighbours are told of keyframe `id`'s pose: our own measurements' estimate
@@ -312,6 +314,18 @@ fn told_pose(own: &BTreeMap<KeyframeId, Pose3>, graph: &SceneGraph, id: Keyframe
     Some(before.unwrap_or(map_pose))
 }
 
+/// The mapper's view of a scan.
+fn scan_input(scan: &LabelledScan) -> ScanInput<'_> {
+    ScanInput {
+        stamp: scan.stamp,
+        odom_from_body: &scan.odom_from_body,
+        points_in_body: &scan.points_in_body,
+        labels: &scan.labels,
+        candidates: &scan.candidates,
+        motion_covariance: scan.motion_covariance.as_ref(),
+    }
+}
+
 impl Actor for Tracker {
     type Context = Context<Self>;
 }
@@ -332,6 +346,8 @@ impl Handler<LabelledScan> for Tracker {
                     Ok(_) => self.publish_map(),
                     Err(e) => tracing::warn!(robot = %self.robot, stamp = scan.stamp, "keyframe not added: {e}"),
                 }
+            } else {
+                self.glimpse(&scan);
             }
             self.progress.handled(scan.stamp);
         });

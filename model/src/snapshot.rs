@@ -33,7 +33,9 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// weights of a merge's centroid). Version 8: the Matcher keeps each neighbour's withdrawn
 /// alignments and the pose graph how many withdrawals of each neighbour it has handled.
 /// Version 9: the pose graph keeps each own keyframe's measured tilt (its gravity prior).
-pub const FORMAT_VERSION: u32 = 9;
+/// Version 10: the object tracker keeps where each object's latest sighting was counted from
+/// (glimpses' spacing).
+pub const FORMAT_VERSION: u32 = 10;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).

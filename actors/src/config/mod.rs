@@ -254,6 +254,12 @@ mod tests {
                 "11",
                 "optimiser.gravity_sigma_deg = 11: allowed 0 (off) ≤ x ≤ 10°",
             ),
+            (
+                "SGM_TEST_K",
+                "TRACKER__TRACKING__GLIMPSE_SPACING_M",
+                "-0.5",
+                "tracker.tracking.glimpse_spacing_m = -0.5: allowed finite and ≥ 0 (0: only keyframes count)",
+            ),
         ] {
             assert_eq!(refused(prefix, key, value), message);
         }

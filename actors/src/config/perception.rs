@@ -151,6 +151,12 @@ impl TrackerSection {
             "≥ 1 (1: the latest sighting alone)",
         )?;
         check(
+            non_negative(t.glimpse_spacing_m),
+            "tracker.tracking.glimpse_spacing_m",
+            t.glimpse_spacing_m,
+            "finite and ≥ 0 (0: only keyframes count)",
+        )?;
+        check(
             non_negative(t.tentative_expiry_s),
             "tracker.tracking.tentative_expiry_s",
             t.tentative_expiry_s,

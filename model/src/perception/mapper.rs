@@ -29,7 +29,7 @@ use crate::geometry::lie::se3_adjoint;
 use crate::geometry::Pose3;
 use crate::scene_graph::cloud_store::{CloudChange, CloudStoreConfig};
 use crate::scene_graph::{
-    Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, LabelId, SceneGraph, SceneGraphError,
+    Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, LabelId, ObjectId, SceneGraph, SceneGraphError,
     SemanticScan, Stamp,
 };
 use crate::workers::Workers;
@@ -189,6 +189,16 @@ impl Mapper {
         Ok(KeyframeAdded { keyframe, edges, refused_loop, scans_changed })
     }
 
+    /// Counts a scan that is not a keyframe as a sighting of the objects its candidates
+    /// associate with (`tracking.glimpses`; tracker module doc), seen from the pose the scan
+    /// would take as a keyframe, `world_from_body(p) · Δ`. Returns the objects this confirmed
+    /// (none before the first keyframe, or with `glimpse_spacing_m` 0).
+    pub fn glimpse(&mut self, scan: &ScanInput<'_>, config: &MapperConfig) -> Vec<ObjectId> {
+        let Some((previous, odometry)) = self.last_odometry else { return Vec::new() };
+        let keyframe_from_body = odometry.inverse() * scan.odom_from_body;
+        self.objects.glimpse(&self.graph, previous, &keyframe_from_body, scan.candidates, &config.tracking)
+    }
+
     /// Moves the keyframes the map knows to their optimised poses (others are ignored: they may
     /// have been made after the solve started, or belong to a neighbour).
     pub fn apply_poses(&mut self, poses: &[(KeyframeId, Pose3)]) -> Result<(), SceneGraphError> {
@@ -291,6 +301,48 @@ mod tests {
         assert!((edge.from_from_to.translation.vector - Vector3::new(2.0, 0.0, 0.0)).norm() < 1e-12);
         assert_eq!(edge.information, config.odometry_information);
         assert_eq!(mapper.last_odometry, Some((KeyframeId(1), odom1)), "increments are taken between odometry poses");
+    }
+
+    /// A scan between keyframes sees from the pose it would take as a keyframe: the odometry
+    /// increment chained onto the latest keyframe's *optimised* pose. A chair at (6, 3) in the
+    /// world, keyframe 0 at odometry (1, 2) seeing it, then the optimiser moving keyframe 0 by
+    /// 1.5 m: a scan 1 m on sees the chair where it is only through the optimised pose (through
+    /// the odometry alone it would be 1.5 m off, beyond c_max). With `glimpse_spacing_m` 0
+    /// nothing counts.
+    #[test]
+    fn glimpses_see_from_the_optimised_pose() {
+        let (mut config, classes) = (config(), ClassTable::default());
+        let chair = |pose: &Pose3| ObjectCandidate {
+            label: LabelId(6),
+            centroid: pose.inverse() * Point3::new(6.0, 3.0, 0.5),
+            size: Vector3::repeat(0.5),
+            points: 50,
+        };
+        let odom0 = pose_from_yaw_translation(0.0, Vector3::new(1.0, 2.0, 0.0));
+        let mut mapper = Mapper::default();
+        let seen = [chair(&odom0)];
+        config.tracking.glimpse_spacing_m = 0.5;
+        assert!(mapper.glimpse(&ScanInput { candidates: &seen, ..scan_at(0.0, &odom0, &[]) }, &config).is_empty());
+        let first = ScanInput { candidates: &seen, ..scan_at(0.0, &odom0, &[]) };
+        mapper.add_keyframe(first, &classes, &config, &Workers::sequential()).expect("first");
+        let object = ObjectId(0);
+        // The map says keyframe 0 stood 1.5 m further along y: the world (and the chair) with it.
+        let corrected = pose_from_yaw_translation(0.0, Vector3::new(1.0, 3.5, 0.0));
+        mapper.apply_poses(&[(KeyframeId(0), corrected)]).expect("poses");
+        let at = |x: f64| odom0 * Pose3::translation(x, 0.0, 0.0);
+        let (odom1, odom2) = (at(0.6), at(1.2));
+        let (in_1, in_2) = ([chair(&odom1)], [chair(&odom2)]);
+        let scan1 = ScanInput { candidates: &in_1, ..scan_at(0.5, &odom1, &[]) };
+        let scan2 = ScanInput { candidates: &in_2, ..scan_at(0.6, &odom2, &[]) };
+        config.tracking.glimpse_spacing_m = 0.0;
+        assert!(mapper.glimpse(&scan1, &config).is_empty());
+        assert_eq!(mapper.objects.sightings(object), 1, "spacing 0: not counted");
+        config.tracking.glimpse_spacing_m = 0.5;
+        assert!(mapper.glimpse(&scan1, &config).is_empty());
+        assert_eq!(mapper.objects.sightings(object), 2, "seen through the optimised pose");
+        assert_eq!(mapper.glimpse(&scan2, &config), vec![object]);
+        assert!(mapper.is_confirmed(object, &config));
+        assert_eq!(mapper.graph.object_count(), 1);
     }
 
     #[test]
