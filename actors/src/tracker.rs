@@ -216,7 +216,7 @@ impl Tracker {
     }
 
     /// Counts a scan between keyframes as a sighting of the objects it saw
-    /// (`tracker.tracking.glimpses`). Objects it confirms are shared with the next keyframe's map.
+    /// (`tracker.tracking.glimpse_spacing_m`). Objects it confirms are shared with the next keyframe's map.
     fn glimpse(&mut self, scan: &LabelledScan) {
         let confirmed = self.map.glimpse(&scan_input(scan), &self.config);
         if !confirmed.is_empty() {

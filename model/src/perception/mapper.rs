@@ -190,7 +190,7 @@ impl Mapper {
     }
 
     /// Counts a scan that is not a keyframe as a sighting of the objects its candidates
-    /// associate with (`tracking.glimpses`; tracker module doc), seen from the pose the scan
+    /// associate with (`tracking.glimpse_spacing_m`; tracker module doc), seen from the pose the scan
     /// would take as a keyframe, `world_from_body(p) · Δ`. Returns the objects this confirmed
     /// (none before the first keyframe, or with `glimpse_spacing_m` 0).
     pub fn glimpse(&mut self, scan: &ScanInput<'_>, config: &MapperConfig) -> Vec<ObjectId> {

@@ -187,7 +187,8 @@ pub struct TrackUpdate {
     /// it is now part of, so an id may repeat).
     pub objects: Vec<ObjectId>,
     pub created: Vec<ObjectId>,
-    /// Objects that reached `confirm_after` sightings with this keyframe.
+    /// Objects that reached `confirm_after` sightings with this keyframe (glimpses confirm
+    /// others between keyframes: [`ObjectTracker::glimpse`] returns them).
     pub newly_confirmed: Vec<ObjectId>,
     /// (kept, merged into it) for each pair of objects found to be one.
     pub merged: Vec<(ObjectId, ObjectId)>,
@@ -388,7 +389,7 @@ impl ObjectTracker {
             };
             self.counted_from.insert(id, (keyframe, Point3::origin()));
             let count = self.sightings.entry(id).or_insert(0);
-            *count += 1;
+            *count = count.saturating_add(1);
             if *count == config.confirm_after && !self.moving.contains(&id) {
                 update.newly_confirmed.push(id);
             }
@@ -443,7 +444,8 @@ impl ObjectTracker {
 
     /// Folds `gone` into `keep` (scene graph: the union of the two) and carries the tracker's
     /// state over: the sightings are the keyframes that saw either (two pieces seen by one
-    /// keyframe are one sighting), the recent sightings both lists, newest kept.
+    /// keyframe are one sighting), or more when glimpses counted more, the recent sightings
+    /// both lists, newest kept, and where the latest sighting of either was counted.
     fn fold(
         &mut self,
         graph: &mut SceneGraph,
@@ -459,7 +461,15 @@ impl ObjectTracker {
         self.points.remove(&gone);
         self.points.insert(keep, p_keep.saturating_add(p_gone));
         let gone_sightings = self.sightings.remove(&gone).unwrap_or(0);
-        self.counted_from.remove(&gone);
+        // The latest counted sighting of either is the kept one's.
+        if let Some(gone_from) = self.counted_from.remove(&gone) {
+            let stamp = |k: Option<&(KeyframeId, Point3<f64>)>| {
+                k.and_then(|(k, _)| graph.keyframe(*k)).map_or(f64::NEG_INFINITY, |f| f.stamp)
+            };
+            if stamp(Some(&gone_from)) >= stamp(self.counted_from.get(&keep)) {
+                self.counted_from.insert(keep, gone_from);
+            }
+        }
         let seen_by = u32::try_from(graph.keyframes_observing(keep).count()).unwrap_or(u32::MAX);
         let sightings = self.sightings.entry(keep).or_insert(0);
         *sightings = seen_by.max(*sightings).max(gone_sightings);
@@ -950,9 +960,6 @@ mod tests {
         }
     }
 
-    /// A false positive seen once (a blob of class 2 at (4, 3)) is gone once it has not been
-    /// seen for `tentative_expiry_s` (10 s); a chair seen three times in the first 3 s is
-    /// confirmed and stays; with the expiry at 0 the blob stays.
     /// A chair at (5, 2) seen by keyframe 0 (the sensor at x = 0), then by scans between
     /// keyframes (candidates in their body frames), with `glimpse_spacing_m` 0.4: the scan from
     /// x = 0.3 is too near where the chair was last counted, the one from 0.5 is a second
@@ -988,11 +995,54 @@ mod tests {
         assert!(tracker.is_confirmed(chair, &config));
         assert_eq!(graph.object_count(), 1, "a glimpse makes no object");
         assert_eq!((graph.centroid_in_world(chair), graph.object(chair).map(|o| o.anchor)), before);
+        // Where a sighting was counted moves with its keyframe: keyframe 0 moved 2 m along x puts
+        // the glimpse counted at 0.9 at 2.9, so one from 3.0 is too near and one from 3.5 is not.
+        let moved = from(2.0);
+        graph.update_keyframe_poses([(KeyframeId(0), &moved)]).unwrap();
+        assert!(tracker.glimpse(&graph, KeyframeId(0), &from(1.0), &seen_from(1.0), &config).is_empty());
+        assert_eq!(tracker.sightings(chair), 3, "0.1 m from the glimpse counted at 0.9, moved to 2.9");
+        assert!(tracker.glimpse(&graph, KeyframeId(0), &from(1.5), &seen_from(1.5), &config).is_empty());
+        assert_eq!(tracker.sightings(chair), 4);
         tracker.moving.insert(chair);
-        assert!(glimpse(&mut tracker, 2.0, &seen_from(2.0), &config).is_empty());
-        assert_eq!(tracker.sightings(chair), 3, "a moving object gains no sightings");
+        assert!(tracker.glimpse(&graph, KeyframeId(0), &from(2.5), &seen_from(2.5), &config).is_empty());
+        assert_eq!(tracker.sightings(chair), 4, "a moving object gains no sightings");
     }
 
+    /// A post seen low by keyframe 0 (x = 0) and high by keyframe 1 (x = 1): the high piece is
+    /// a new object merged into the older one, which takes the piece's counted sighting (keyframe
+    /// 1), so a glimpse 0.2 m past keyframe 1 is too near to count, one 0.6 m past counts.
+    #[test]
+    fn a_merge_keeps_the_latest_counted_sighting() {
+        let mut graph = SceneGraph::new();
+        keyframes(&mut graph, 2, |k| k as f64);
+        let mut tracker = ObjectTracker::default();
+        let config = TrackerConfig { glimpse_spacing_m: 0.4, ..TrackerConfig::default() };
+        let piece =
+            |x: f64, z: f64| ObjectCandidate { centroid: Point3::new(5.0 - x, 2.0, z), ..candidate(3, 0.0, 0.0) };
+        let post = tracker.update(&mut graph, KeyframeId(0), &[piece(0.0, 0.5)], &config).unwrap().objects[0];
+        let second = tracker.update(&mut graph, KeyframeId(1), &[piece(1.0, 2.0)], &config).unwrap();
+        assert_eq!(second.merged.len(), 1, "{second:?}");
+        assert_eq!(second.objects, vec![post]);
+        assert_eq!(tracker.sightings(post), 2);
+        let at = graph.centroid_in_world(post).unwrap();
+        let glimpse = |tracker: &mut ObjectTracker, x: f64| {
+            let seen = [piece(1.0 + x, at.z)];
+            tracker.glimpse(
+                &graph,
+                KeyframeId(1),
+                &pose_from_yaw_translation(0.0, Vector3::new(x, 0.0, 0.0)),
+                &seen,
+                &config,
+            )
+        };
+        assert!(glimpse(&mut tracker, 0.2).is_empty());
+        assert_eq!(tracker.sightings(post), 2, "0.2 m from keyframe 1, where the merged piece was counted");
+        assert_eq!(glimpse(&mut tracker, 0.6), vec![post]);
+    }
+
+    /// A false positive seen once (a blob of class 2 at (4, 3)) is gone once it has not been
+    /// seen for `tentative_expiry_s` (10 s); a chair seen three times in the first 3 s is
+    /// confirmed and stays; with the expiry at 0 the blob stays.
     #[test]
     fn an_unconfirmed_object_unseen_for_a_while_expires() {
         let run = |config: &TrackerConfig| {
