@@ -62,6 +62,8 @@ pub struct MapSummary {
     pub merged_objects: u64,
     /// Tentative objects removed, unseen for `tracker.tracking.tentative_expiry_s`.
     pub expired_objects: u64,
+    /// Sightings counted from scans between keyframes (`tracker.tracking.glimpse_spacing_m`).
+    pub glimpse_sightings: u64,
 }
 
 /// One object of the map, in the world frame.
@@ -440,6 +442,7 @@ impl Handler<GetMapSummary> for Tracker {
             moving_objects: self.map.objects.moving_count(),
             merged_objects: self.map.objects.merged_count(),
             expired_objects: self.map.objects.expired_count(),
+            glimpse_sightings: self.map.objects.glimpse_count(),
         })
     }
 }

@@ -124,6 +124,7 @@ mod tests {
             moving_objects: 0,
             merged_objects: 0,
             expired_objects: 0,
+            glimpse_sightings: 0,
         };
         let header = std_msgs::Header { frame_id: "alpha/odom".into(), ..Default::default() };
         let array = map_markers(&header, &map, &classes);

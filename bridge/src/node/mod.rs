@@ -322,6 +322,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                 "moving_objects": map.moving_objects,
                 "merged_objects": map.merged_objects,
                 "expired_objects": map.expired_objects,
+                "glimpse_sightings": map.glimpse_sightings,
                 "accepted": InputCounts::snapshot(&side.counts.accepted),
                 "refused": InputCounts::snapshot(&side.counts.refused),
                 "sync": sync_counts,

@@ -178,6 +178,9 @@ pub struct ObjectTracker {
     /// counts only `glimpse_spacing_m` away from it.
     #[serde(default)]
     counted_from: BTreeMap<ObjectId, (KeyframeId, Point3<f64>)>,
+    /// Sightings counted from glimpses so far.
+    #[serde(default)]
+    glimpsed: u64,
 }
 
 /// What one keyframe's candidates became.
@@ -238,6 +241,11 @@ impl ObjectTracker {
     /// Tentative objects removed so far.
     pub fn expired_count(&self) -> u64 {
         self.expired
+    }
+
+    /// Sightings counted from glimpses so far.
+    pub fn glimpse_count(&self) -> u64 {
+        self.glimpsed
     }
 
     /// Records the sighting of `id` at `keyframe` (centroid in its body frame; world through
@@ -347,6 +355,7 @@ impl ObjectTracker {
                 continue;
             }
             self.counted_from.insert(id, (keyframe, sensor));
+            self.glimpsed = self.glimpsed.saturating_add(1);
             let count = self.sightings.entry(id).or_insert(0);
             *count = count.saturating_add(1);
             if *count == config.confirm_after {
@@ -1006,6 +1015,7 @@ mod tests {
         tracker.moving.insert(chair);
         assert!(tracker.glimpse(&graph, KeyframeId(0), &from(2.5), &seen_from(2.5), &config).is_empty());
         assert_eq!(tracker.sightings(chair), 4, "a moving object gains no sightings");
+        assert_eq!(tracker.glimpse_count(), 3, "the glimpses from 0.5, 0.9 and 3.5 counted");
     }
 
     /// A post seen low by keyframe 0 (x = 0) and high by keyframe 1 (x = 1): the high piece is

@@ -32,6 +32,8 @@ pub struct RobotReport {
     pub merged_objects: u64,
     /// Tentative objects removed, unseen for `tracker.tracking.tentative_expiry_s`.
     pub expired_objects: u64,
+    /// Sightings counted from scans between keyframes (`tracker.tracking.glimpse_spacing_m`).
+    pub glimpse_sightings: u64,
     /// Confirmed objects whose class has a world object within 2 m (the robot's start frame
     /// placed on the truth), counted once per world object. None when the world is unknown
     /// (a replay).
@@ -362,6 +364,7 @@ pub fn compute(record: &RunRecord) -> Report {
                 moving_objects: map.map_or(0, |m| m.moving_objects),
                 merged_objects: map.map_or(0, |m| m.merged_objects),
                 expired_objects: map.map_or(0, |m| m.expired_objects),
+                glimpse_sightings: map.map_or(0, |m| m.glimpse_sightings),
                 deskew: record.deskew.get(k).copied().flatten().unwrap_or_default(),
                 odometry: record.odometry.get(k).copied().flatten(),
             }

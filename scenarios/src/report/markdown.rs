@@ -154,11 +154,11 @@ pub fn render(report: &Report, timing: &Timing) -> String {
         if report.team_ate_robots.is_empty() { "no robot".into() } else { report.team_ate_robots.join(", ") },
         report.team_ate_robots.first().map_or("—", String::as_str)
     );
-    let _ = writeln!(s, "## Robots\n\n| robot | ATE RMSE (m) | keyframes | objects (confirmed, moving) | merged, expired | distance (m) | frames |\n|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "## Robots\n\n| robot | ATE RMSE (m) | keyframes | objects (confirmed, moving) | merged, expired | glimpses | distance (m) | frames |\n|---|---|---|---|---|---|---|---|");
     for r in &report.robots {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} ({}, {}) | {}, {} | {:.0} | {} |",
+            "| {} | {} | {} | {} ({}, {}) | {}, {} | {} | {:.0} | {} |",
             r.name,
             metres(r.ate_rmse_m),
             r.keyframes,
@@ -167,6 +167,7 @@ pub fn render(report: &Report, timing: &Timing) -> String {
             r.moving_objects,
             r.merged_objects,
             r.expired_objects,
+            r.glimpse_sightings,
             r.distance_m,
             r.frames
         );
