@@ -320,6 +320,14 @@ impl ObjectTracker {
         (in_world, matched)
     }
 
+    /// Counts one more sighting of `id`; whether it confirmed it (reached `confirm_after`, not
+    /// moving).
+    fn count_sighting(&mut self, id: ObjectId, config: &TrackerConfig) -> bool {
+        let count = self.sightings.entry(id).or_insert(0);
+        *count = count.saturating_add(1);
+        *count == config.confirm_after && !self.moving.contains(&id)
+    }
+
     /// Where the sensor stood when `id`'s latest sighting was counted, in the world.
     fn counted_from(&self, graph: &SceneGraph, id: ObjectId) -> Option<Point3<f64>> {
         let (k, p) = self.counted_from.get(&id)?;
@@ -340,10 +348,10 @@ impl ObjectTracker {
         config: &TrackerConfig,
     ) -> Vec<ObjectId> {
         let spacing = config.glimpse_spacing_m;
-        let Some(at) = graph.keyframe(keyframe) else { return Vec::new() };
         if !(spacing > 0.0 && spacing.is_finite()) || candidates.is_empty() {
             return Vec::new();
         }
+        let Some(at) = graph.keyframe(keyframe) else { return Vec::new() };
         let world_from_body = at.world_from_body * keyframe_from_body;
         let (_, matched) = self.associate(graph, &world_from_body, candidates, config);
         let here = Point3::from(world_from_body.translation.vector);
@@ -356,9 +364,7 @@ impl ObjectTracker {
             }
             self.counted_from.insert(id, (keyframe, sensor));
             self.glimpsed = self.glimpsed.saturating_add(1);
-            let count = self.sightings.entry(id).or_insert(0);
-            *count = count.saturating_add(1);
-            if *count == config.confirm_after {
+            if self.count_sighting(id, config) {
                 confirmed.push(id);
             }
         }
@@ -397,9 +403,7 @@ impl ObjectTracker {
                 }
             };
             self.counted_from.insert(id, (keyframe, Point3::origin()));
-            let count = self.sightings.entry(id).or_insert(0);
-            *count = count.saturating_add(1);
-            if *count == config.confirm_after && !self.moving.contains(&id) {
+            if self.count_sighting(id, config) {
                 update.newly_confirmed.push(id);
             }
             update.objects.push(id);
