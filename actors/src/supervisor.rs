@@ -18,7 +18,7 @@ use crate::optimiser::{Optimiser, OptimiserLinks};
 use crate::progress::FrameProgress;
 use crate::sensor::Sensor;
 use crate::snapshot::RobotSnapshot;
-use crate::tracker::{Tracker, TrackerLinks};
+use crate::tracker::{ServedClouds, Tracker, TrackerLinks};
 use crate::transport::{InProcessRadio, Transport};
 use actix::{Actor, Addr, Context, Handler, Supervisor};
 use sgm_model::matching::{LabelSimilarity, MatcherConfig};
@@ -151,7 +151,11 @@ pub fn start_robot_restored(
         }
     });
     let tracker_config_classes = classes.clone();
-    let tracker_config = (config.tracker.clone(), classes, config.optimiser.clone(), config.comms.cloud_resolution_m);
+    let served = ServedClouds {
+        resolution_m: config.comms.cloud_resolution_m,
+        keyframe_voxel_m: config.comms.keyframe_cloud_voxel_m,
+    };
+    let tracker_config = (config.tracker.clone(), classes, config.optimiser.clone(), served);
     let progress = FrameProgress::default();
     let tracker_progress = progress.clone();
     let (tracker_workers, matcher_workers) = (workers.clone(), workers);

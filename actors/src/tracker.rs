@@ -19,6 +19,7 @@ use sgm_model::perception::mapper::{Mapper, MapperConfig, ScanInput};
 use sgm_model::perception::object_cloud::{object_cloud, MAX_VIEWS};
 use sgm_model::perception::tracker::ObjectTracker;
 use sgm_model::scene_graph::{CloudStoreStats, Keyframe, KeyframeId, ObjectId, RobotId, SceneGraph, SceneGraphError};
+use sgm_model::spatial::voxel::downsample;
 use sgm_model::wire::cloud_codec;
 use sgm_model::wire::messages::{
     expand_covariance, pack_covariance, KeyframeRefusal, KeyframeRefusalReason, KeyframeResponse, ObjectCloud,
@@ -104,7 +105,7 @@ pub struct Tracker {
     robot: RobotId,
     config: MapperConfig,
     classes: ClassTable,
-    cloud_resolution_m: f64,
+    clouds: ServedClouds,
     links: Option<TrackerLinks>,
     map: Mapper,
     /// The latest marginal covariance of each keyframe, as served: the wire's packed upper
@@ -119,13 +120,22 @@ pub struct Tracker {
     workers: Workers,
 }
 
+/// How the clouds we serve are encoded (`[comms]`): the codec's quantum, and the voxel a
+/// keyframe's scan is thinned to first — the centroid of each occupied voxel, as the
+/// requester's registration thins it again (`matcher.keyframe_voxel_m`); 0: the whole scan.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServedClouds {
+    pub resolution_m: f64,
+    pub keyframe_voxel_m: f64,
+}
+
 impl Tracker {
     pub fn new(
         robot: RobotId,
         config: TrackerSection,
         classes: ClassTable,
         optimiser: &OptimiserConfig,
-        cloud_resolution_m: f64,
+        clouds: ServedClouds,
     ) -> Self {
         let s = optimiser.odometry_sigmas;
         let odometry_information =
@@ -135,7 +145,7 @@ impl Tracker {
             robot,
             config: MapperConfig { keyframes, tracking, loop_closure, cloud_store, odometry_information },
             classes,
-            cloud_resolution_m,
+            clouds,
             links: None,
             map: Mapper::default(),
             covariances: BTreeMap::new(),
@@ -276,7 +286,7 @@ impl Tracker {
                 // The latest views that still hold a scan (older ones may have been evicted).
                 let views = self.scans_of(o.observed_in.iter().rev().copied()).take(MAX_VIEWS);
                 let points = object_cloud(views, o.label, &centroid, &o.size, 0.3, 0.1);
-                let cloud = cloud_codec::encode(&points, self.cloud_resolution_m).map(|c| c.bytes).unwrap_or_default();
+                let cloud = cloud_codec::encode(&points, self.clouds.resolution_m).map(|c| c.bytes).unwrap_or_default();
                 Some(ObjectCloud { id: *id, keyframes: o.observed_in.iter().copied().collect(), cloud })
             })
             .collect();
@@ -289,7 +299,9 @@ impl Tracker {
         let told = self.told_pose(id)?;
         let scan = self.map.graph.semantic_scan(id)?;
         let points: Vec<Point3<f64>> = scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
-        let cloud = cloud_codec::encode(&points, self.cloud_resolution_m).ok()?.bytes;
+        // Thinned as registration will thin it (0: the whole scan, unchanged).
+        let points = downsample(&points, self.clouds.keyframe_voxel_m);
+        let cloud = cloud_codec::encode(&points, self.clouds.resolution_m).ok()?.bytes;
         let covariance = self.covariances.get(&id).copied().unwrap_or_else(|| {
             pack_covariance(&self.config.odometry_information.try_inverse().unwrap_or_else(Matrix6::identity))
         });

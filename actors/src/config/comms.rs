@@ -57,6 +57,10 @@ pub struct CommsConfig {
     pub link_timeout_s: f64,
     /// Cloud quantum of keyframe responses, m. Default 0.01.
     pub cloud_resolution_m: f64,
+    /// Voxel side a served keyframe cloud is thinned to before it is encoded (the centroid of
+    /// each occupied voxel, as registration thins it again at `matcher.keyframe_voxel_m`), m.
+    /// 0: the whole scan. Default 0.
+    pub keyframe_cloud_voxel_m: f64,
     pub retry: RetryConfig,
     pub limits: WireLimits,
     /// `[comms.pose_updates]`: keyframes we served, told again when our solves move them.
@@ -176,6 +180,7 @@ impl Default for CommsConfig {
             max_responses_per_tick: 16,
             link_timeout_s: 30.0,
             cloud_resolution_m: 0.01,
+            keyframe_cloud_voxel_m: 0.0,
             retry: RetryConfig::default(),
             limits: WireLimits::default(),
             pose_updates: PoseUpdatesConfig::default(),
@@ -220,6 +225,12 @@ impl CommsConfig {
         check(c.max_responses_per_tick >= 1, "comms.max_responses_per_tick", c.max_responses_per_tick, "≥ 1")?;
         check(positive(c.link_timeout_s), "comms.link_timeout_s", c.link_timeout_s, "> 0")?;
         check(positive(c.cloud_resolution_m), "comms.cloud_resolution_m", c.cloud_resolution_m, "> 0")?;
+        check(
+            c.keyframe_cloud_voxel_m.is_finite() && c.keyframe_cloud_voxel_m >= 0.0,
+            "comms.keyframe_cloud_voxel_m",
+            c.keyframe_cloud_voxel_m,
+            "≥ 0 (0: the whole scan)",
+        )?;
         check(positive(c.retry.timeout_s), "comms.retry.timeout_s", c.retry.timeout_s, "> 0")?;
         check(c.retry.backoff.is_finite() && c.retry.backoff >= 1.0, "comms.retry.backoff", c.retry.backoff, "≥ 1")?;
         check(

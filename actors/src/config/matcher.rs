@@ -174,6 +174,10 @@ pub struct ClosureSection {
     /// Keyframe-cloud bytes received from one neighbour for closures, at most (a round starts
     /// only while under it). Default 131072 (128 KiB, about four keyframes of a campus).
     pub max_bytes_per_neighbour: u64,
+    /// How fast that budget grows once the neighbour is aligned, bytes/s: closures all mission
+    /// long at a bounded rate ([`ClosureSection::allowance_bytes`]). 0: a fixed budget.
+    /// Default 0.
+    pub refill_bytes_per_s: f64,
     /// A local and a neighbour object this close through the current transform are one, m.
     /// Default 1.0.
     pub gate_m: f64,
@@ -193,6 +197,7 @@ impl Default for ClosureSection {
             interval_s: 10.0,
             max_keyframes_per_round: 2,
             max_bytes_per_neighbour: 128 * 1024,
+            refill_bytes_per_s: 0.0,
             gate_m: plan.gate_m,
             radius_m: plan.radius_m,
             spacing_m: plan.spacing_m,
@@ -211,10 +216,30 @@ impl ClosureSection {
         }
     }
 
+    /// Keyframe-cloud bytes a neighbour aligned `since_aligned_s` ago may have sent us for
+    /// closures before no further round starts: the budget, plus its refill since then,
+    ///
+    /// ```text
+    /// B(t) = max_bytes_per_neighbour + refill_bytes_per_s · (t − t_aligned)
+    /// ```
+    ///
+    /// so that over a long mission closures go on at refill_bytes_per_s on average, and never
+    /// burst beyond the budget's worth at once. A negative or non-finite time counts as 0.
+    pub fn allowance_bytes(&self, since_aligned_s: f64) -> f64 {
+        let since = if since_aligned_s.is_finite() { since_aligned_s.max(0.0) } else { 0.0 };
+        self.max_bytes_per_neighbour as f64 + self.refill_bytes_per_s * since
+    }
+
     fn validate(&self) -> Result<(), ConfigError> {
         let c = self;
         let in_range = |v: f64, lo: f64, hi: f64| v.is_finite() && v >= lo && v <= hi;
         check(in_range(c.interval_s, 0.0, 3600.0), "matcher.closures.interval_s", c.interval_s, "0 ≤ x ≤ 3600 s")?;
+        check(
+            c.refill_bytes_per_s.is_finite() && c.refill_bytes_per_s >= 0.0,
+            "matcher.closures.refill_bytes_per_s",
+            c.refill_bytes_per_s,
+            "≥ 0 bytes/s (0: a fixed budget)",
+        )?;
         check(
             (1..=64).contains(&c.max_keyframes_per_round),
             "matcher.closures.max_keyframes_per_round",
@@ -384,6 +409,8 @@ mod tests {
         refused(|m| m.closures.radius_m = f64::NAN, "matcher.closures.radius_m = NaN");
         refused(|m| m.closures.spacing_m = -5.0, "matcher.closures.spacing_m = -5");
         refused(|m| m.closures.min_pairs = 2, "matcher.closures.min_pairs = 2");
+        refused(|m| m.closures.refill_bytes_per_s = -1.0, "matcher.closures.refill_bytes_per_s = -1");
+        refused(|m| m.closures.refill_bytes_per_s = f64::NAN, "matcher.closures.refill_bytes_per_s = NaN");
         refused(|m| m.relay.gate_m = 0.0, "matcher.relay.gate_m = 0");
         refused(|m| m.relay.gate_m = f64::INFINITY, "matcher.relay.gate_m = inf");
         refused(|m| m.relay.min_own_factors = 0, "matcher.relay.min_own_factors = 0");
@@ -395,5 +422,18 @@ mod tests {
         refused(|m| m.factor_sigma_floor_m = f64::INFINITY, "matcher.factor_sigma_floor_m = inf");
         let plan = MatcherSection::default().closures.plan();
         assert_eq!((plan.gate_m, plan.radius_m, plan.spacing_m, plan.min_pairs), (1.0, 15.0, 10.0, 3));
+    }
+
+    #[test]
+    fn the_closure_budget_refills_at_its_rate_from_the_alignment() {
+        let fixed = ClosureSection::default();
+        assert_eq!(fixed.allowance_bytes(0.0), 131_072.0);
+        assert_eq!(fixed.allowance_bytes(3600.0), 131_072.0, "no refill: the budget is all there is");
+        let refilled = ClosureSection { max_bytes_per_neighbour: 1000, refill_bytes_per_s: 50.0, ..fixed };
+        assert_eq!(refilled.allowance_bytes(0.0), 1000.0);
+        assert_eq!(refilled.allowance_bytes(120.0), 7000.0);
+        // Before the alignment, or with a clock that jumped back: no refill, never less.
+        assert_eq!(refilled.allowance_bytes(-30.0), 1000.0);
+        assert_eq!(refilled.allowance_bytes(f64::NAN), 1000.0);
     }
 }

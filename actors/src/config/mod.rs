@@ -260,6 +260,18 @@ mod tests {
                 "-0.5",
                 "tracker.tracking.glimpse_spacing_m = -0.5: allowed finite and ≥ 0 (0: only keyframes count)",
             ),
+            (
+                "SGM_TEST_L",
+                "COMMS__KEYFRAME_CLOUD_VOXEL_M",
+                "-0.3",
+                "comms.keyframe_cloud_voxel_m = -0.3: allowed ≥ 0 (0: the whole scan)",
+            ),
+            (
+                "SGM_TEST_M",
+                "MATCHER__CLOSURES__REFILL_BYTES_PER_S",
+                "-1",
+                "matcher.closures.refill_bytes_per_s = -1: allowed ≥ 0 bytes/s (0: a fixed budget)",
+            ),
         ] {
             assert_eq!(refused(prefix, key, value), message);
         }

@@ -27,8 +27,9 @@ impl Matcher {
         let Some(Protocol::Aligned(n)) = &entry.protocol else { return };
         let memory = &entry.closures;
         let due = memory.last_considered.is_none_or(|t| now - t >= config.interval_s);
-        if n.state.closure.is_some() || !entry.link_up || !due || memory.counts.bytes >= config.max_bytes_per_neighbour
-        {
+        let since_aligned = entry.first_aligned.map_or(0.0, |t| now - t);
+        let spent = memory.counts.bytes as f64 >= config.allowance_bytes(since_aligned);
+        if n.state.closure.is_some() || !entry.link_up || !due || spent {
             return;
         }
         let Some(data) = &entry.objects else { return };
