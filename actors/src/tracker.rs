@@ -129,6 +129,16 @@ pub struct ServedClouds {
     pub keyframe_voxel_m: f64,
 }
 
+impl ServedClouds {
+    /// A keyframe's scan as a keyframe response carries it: thinned to `keyframe_voxel_m` (0:
+    /// every return), then encoded at `resolution_m`. None when the codec refuses it.
+    pub fn keyframe_cloud(&self, points_in_body: &[Point3<f32>]) -> Option<Vec<u8>> {
+        let points: Vec<Point3<f64>> = points_in_body.iter().map(|p| p.cast::<f64>()).collect();
+        let points = downsample(&points, self.keyframe_voxel_m);
+        cloud_codec::encode(&points, self.resolution_m).ok().map(|c| c.bytes)
+    }
+}
+
 impl Tracker {
     pub fn new(
         robot: RobotId,
@@ -298,10 +308,7 @@ impl Tracker {
         let kf = self.map.graph.keyframe(id)?;
         let told = self.told_pose(id)?;
         let scan = self.map.graph.semantic_scan(id)?;
-        let points: Vec<Point3<f64>> = scan.points_in_body.iter().map(|p| p.cast::<f64>()).collect();
-        // Thinned as registration will thin it (0: the whole scan, unchanged).
-        let points = downsample(&points, self.clouds.keyframe_voxel_m);
-        let cloud = cloud_codec::encode(&points, self.clouds.resolution_m).ok()?.bytes;
+        let cloud = self.clouds.keyframe_cloud(&scan.points_in_body)?;
         let covariance = self.covariances.get(&id).copied().unwrap_or_else(|| {
             pack_covariance(&self.config.odometry_information.try_inverse().unwrap_or_else(Matrix6::identity))
         });
@@ -488,5 +495,40 @@ mod tests {
         assert!(told.rotation.angle_to(&expected.rotation) < 1e-12);
         assert_eq!(told_pose(&BTreeMap::new(), &graph, KeyframeId(3)), Some(map(3)));
         assert_eq!(told_pose(&own, &graph, KeyframeId(9)), None);
+    }
+
+    /// A served keyframe thinned to 0.3 m voxels is the centroid of each occupied voxel (to the
+    /// codec's quantum) and costs a fraction of the bytes; at 0 it is every return, as before.
+    #[test]
+    fn a_served_keyframe_is_thinned_to_its_voxels() {
+        // A wall and a floor sampled every 5 cm: 20 × 20 returns each over 1 m × 1 m.
+        let mut points: Vec<Point3<f32>> = Vec::new();
+        for i in 0..20 {
+            for j in 0..20 {
+                let (a, b) = (0.025 + 0.05 * i as f32, 0.025 + 0.05 * j as f32);
+                points.push(Point3::new(2.05, a, b));
+                points.push(Point3::new(a + 1.0, b, 0.05));
+            }
+        }
+        let whole = ServedClouds { resolution_m: 0.01, keyframe_voxel_m: 0.0 };
+        let thinned = ServedClouds { keyframe_voxel_m: 0.3, ..whole };
+        let all: Vec<Point3<f64>> = points.iter().map(|p| p.cast::<f64>()).collect();
+        assert_eq!(whole.keyframe_cloud(&points), cloud_codec::encode(&all, 0.01).ok().map(|c| c.bytes));
+        let (full, thin) = (whole.keyframe_cloud(&points).unwrap(), thinned.keyframe_cloud(&points).unwrap());
+        let decoded = cloud_codec::decode(&thin).unwrap();
+        // The centroids by hand: the mean of the returns in each occupied voxel.
+        let mut sums: BTreeMap<[i64; 3], (Vector3<f64>, f64)> = BTreeMap::new();
+        for p in &all {
+            let voxel = [0, 1, 2].map(|a| (p[a] / 0.3).floor() as i64);
+            let e = sums.entry(voxel).or_insert((Vector3::zeros(), 0.0));
+            e.0 += p.coords;
+            e.1 += 1.0;
+        }
+        assert_eq!(decoded.len(), sums.len());
+        for (sum, n) in sums.values() {
+            let centroid = sum / *n;
+            assert!(decoded.iter().any(|p| (p.coords - centroid).abs().max() <= 0.005 + 1e-9), "{centroid} not served");
+        }
+        assert!(thin.len() * 4 < full.len(), "{} bytes thinned against {} whole", thin.len(), full.len());
     }
 }

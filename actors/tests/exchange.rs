@@ -284,6 +284,39 @@ async fn aligned_robots_keep_adding_inter_robot_closures() {
     }
 }
 
+/// A closure budget that one round spends stops the rounds for the rest of the mission; refilled
+/// at a rate (`matcher.closures.refill_bytes_per_s`), it lets them go on.
+#[actix_rt::test]
+async fn a_refilled_closure_budget_keeps_the_rounds_going() {
+    let a = vec![Point3::new(-28.0, -20.0, 0.0), Point3::new(28.0, -20.0, 0.0), Point3::new(28.0, 20.0, 0.0)];
+    let b = vec![Point3::new(28.0, 20.0, 0.0), Point3::new(-28.0, 20.0, 0.0), Point3::new(-28.0, -20.0, 0.0)];
+    let paths = || {
+        vec![(a.clone(), Pose3::identity()), (b.clone(), pose_from_yaw_translation(0.8, Vector3::new(12.0, -7.0, 0.0)))]
+    };
+    let rounds = |refill: f64| {
+        let paths = paths();
+        async move {
+            let team = run_team_with(paths, 90, None, move |c| {
+                c.matcher.closures.interval_s = 5.0;
+                c.matcher.closures.max_bytes_per_neighbour = 1;
+                c.matcher.closures.refill_bytes_per_s = refill;
+            })
+            .await;
+            let mut out = Vec::new();
+            for r in &team {
+                out.push(r.handle.matcher.send(GetNeighbours).await.unwrap()[0].closures);
+            }
+            out
+        }
+    };
+    let (fixed, refilled) = (rounds(0.0).await, rounds(1e6).await);
+    for (i, (f, r)) in fixed.iter().zip(&refilled).enumerate() {
+        // One round starts while nothing is spent; its keyframes spend the byte.
+        assert!(f.rounds <= 1, "robot {i}: {f:?}");
+        assert!(r.rounds >= 2 && r.rounds > f.rounds && r.bytes > f.bytes, "robot {i}: {f:?} against {r:?}");
+    }
+}
+
 /// Also: every actor of the first robot panics 20 s in; the process, the map and the exchange
 /// carry on.
 #[actix_rt::test]
