@@ -122,7 +122,9 @@ pub struct Tracker {
 
 /// How the clouds we serve are encoded (`[comms]`): the codec's quantum, and the voxel a
 /// keyframe's scan is thinned to first — the centroid of each occupied voxel, as the
-/// requester's registration thins it again (`matcher.keyframe_voxel_m`); 0: the whole scan.
+/// requester's registration thins it again (`matcher.keyframe_voxel_m`; a few percent of the
+/// centroids, rounded by the codec onto a voxel face, fall in the next voxel there and merge
+/// with its centroid); 0: the whole scan.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ServedClouds {
     pub resolution_m: f64,

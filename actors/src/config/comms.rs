@@ -58,8 +58,8 @@ pub struct CommsConfig {
     /// Cloud quantum of keyframe responses, m. Default 0.01.
     pub cloud_resolution_m: f64,
     /// Voxel side a served keyframe cloud is thinned to before it is encoded (the centroid of
-    /// each occupied voxel, as registration thins it again at `matcher.keyframe_voxel_m`), m.
-    /// 0: the whole scan. Default 0.
+    /// each occupied voxel, as the requester's registration thins it again at its
+    /// `matcher.keyframe_voxel_m`: set it to that, or finer), m. 0: the whole scan. Default 0.
     pub keyframe_cloud_voxel_m: f64,
     pub retry: RetryConfig,
     pub limits: WireLimits,
@@ -225,11 +225,12 @@ impl CommsConfig {
         check(c.max_responses_per_tick >= 1, "comms.max_responses_per_tick", c.max_responses_per_tick, "≥ 1")?;
         check(positive(c.link_timeout_s), "comms.link_timeout_s", c.link_timeout_s, "> 0")?;
         check(positive(c.cloud_resolution_m), "comms.cloud_resolution_m", c.cloud_resolution_m, "> 0")?;
+        let voxel = c.keyframe_cloud_voxel_m;
         check(
-            c.keyframe_cloud_voxel_m.is_finite() && c.keyframe_cloud_voxel_m >= 0.0,
+            voxel == 0.0 || (voxel.is_finite() && voxel >= c.cloud_resolution_m && voxel <= 5.0),
             "comms.keyframe_cloud_voxel_m",
-            c.keyframe_cloud_voxel_m,
-            "≥ 0 (0: the whole scan)",
+            voxel,
+            "0 (the whole scan) or comms.cloud_resolution_m ≤ x ≤ 5 m",
         )?;
         check(positive(c.retry.timeout_s), "comms.retry.timeout_s", c.retry.timeout_s, "> 0")?;
         check(c.retry.backoff.is_finite() && c.retry.backoff >= 1.0, "comms.retry.backoff", c.retry.backoff, "≥ 1")?;

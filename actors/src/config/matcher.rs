@@ -223,8 +223,11 @@ impl ClosureSection {
     /// B(t) = max_bytes_per_neighbour + refill_bytes_per_s · (t − t_aligned)
     /// ```
     ///
-    /// so that over a long mission closures go on at refill_bytes_per_s on average, and never
-    /// burst beyond the budget's worth at once. A negative or non-finite time counts as 0.
+    /// (t_aligned: the neighbour's first alignment, kept through a withdrawal), so that over a
+    /// long mission closures go on at no more than refill_bytes_per_s on average. Credit left
+    /// unspent while no round was due is spent at the pace rounds run anyway: at most one every
+    /// `interval_s`, of at most `max_keyframes_per_round` keyframes. A negative or non-finite
+    /// time counts as 0.
     pub fn allowance_bytes(&self, since_aligned_s: f64) -> f64 {
         let since = if since_aligned_s.is_finite() { since_aligned_s.max(0.0) } else { 0.0 };
         self.max_bytes_per_neighbour as f64 + self.refill_bytes_per_s * since

@@ -264,7 +264,13 @@ mod tests {
                 "SGM_TEST_L",
                 "COMMS__KEYFRAME_CLOUD_VOXEL_M",
                 "-0.3",
-                "comms.keyframe_cloud_voxel_m = -0.3: allowed ≥ 0 (0: the whole scan)",
+                "comms.keyframe_cloud_voxel_m = -0.3: allowed 0 (the whole scan) or comms.cloud_resolution_m ≤ x ≤ 5 m",
+            ),
+            (
+                "SGM_TEST_N",
+                "COMMS__KEYFRAME_CLOUD_VOXEL_M",
+                "0.001",
+                "comms.keyframe_cloud_voxel_m = 0.001: allowed 0 (the whole scan) or comms.cloud_resolution_m ≤ x ≤ 5 m",
             ),
             (
                 "SGM_TEST_M",
