@@ -155,6 +155,10 @@ pub fn start_robot_restored(
         resolution_m: config.comms.cloud_resolution_m,
         keyframe_voxel_m: config.comms.keyframe_cloud_voxel_m,
     };
+    if served.keyframe_voxel_m > config.matcher.keyframe_voxel_m {
+        tracing::warn!(%robot, served = served.keyframe_voxel_m, registered = config.matcher.keyframe_voxel_m,
+            "comms.keyframe_cloud_voxel_m is coarser than matcher.keyframe_voxel_m: neighbours registering our keyframes at that voxel get fewer points than they would thin to");
+    }
     let tracker_config = (config.tracker.clone(), classes, config.optimiser.clone(), served);
     let progress = FrameProgress::default();
     let tracker_progress = progress.clone();

@@ -133,11 +133,13 @@ pub struct ServedClouds {
 
 impl ServedClouds {
     /// A keyframe's scan as a keyframe response carries it: thinned to `keyframe_voxel_m` (0:
-    /// every return), then encoded at `resolution_m`. None when the codec refuses it.
-    pub fn keyframe_cloud(&self, points_in_body: &[Point3<f32>]) -> Option<Vec<u8>> {
-        let points: Vec<Point3<f64>> = points_in_body.iter().map(|p| p.cast::<f64>()).collect();
-        let points = downsample(&points, self.keyframe_voxel_m);
-        cloud_codec::encode(&points, self.resolution_m).ok().map(|c| c.bytes)
+    /// every return, not copied again), then encoded at `resolution_m`.
+    pub fn keyframe_cloud(&self, points_in_body: &[Point3<f32>]) -> Result<Vec<u8>, cloud_codec::CodecError> {
+        let mut points: Vec<Point3<f64>> = points_in_body.iter().map(|p| p.cast::<f64>()).collect();
+        if self.keyframe_voxel_m > 0.0 {
+            points = downsample(&points, self.keyframe_voxel_m);
+        }
+        cloud_codec::encode(&points, self.resolution_m).map(|c| c.bytes)
     }
 }
 
@@ -298,7 +300,13 @@ impl Tracker {
                 // The latest views that still hold a scan (older ones may have been evicted).
                 let views = self.scans_of(o.observed_in.iter().rev().copied()).take(MAX_VIEWS);
                 let points = object_cloud(views, o.label, &centroid, &o.size, 0.3, 0.1);
-                let cloud = cloud_codec::encode(&points, self.clouds.resolution_m).map(|c| c.bytes).unwrap_or_default();
+                let cloud = match cloud_codec::encode(&points, self.clouds.resolution_m) {
+                    Ok(c) => c.bytes,
+                    Err(e) => {
+                        tracing::warn!(robot = %self.robot, object = %id.0, error = %e, "object cloud served empty: it cannot be encoded");
+                        Vec::new()
+                    }
+                };
                 Some(ObjectCloud { id: *id, keyframes: o.observed_in.iter().copied().collect(), cloud })
             })
             .collect();
@@ -310,7 +318,13 @@ impl Tracker {
         let kf = self.map.graph.keyframe(id)?;
         let told = self.told_pose(id)?;
         let scan = self.map.graph.semantic_scan(id)?;
-        let cloud = self.clouds.keyframe_cloud(&scan.points_in_body)?;
+        let cloud = match self.clouds.keyframe_cloud(&scan.points_in_body) {
+            Ok(cloud) => cloud,
+            Err(e) => {
+                tracing::warn!(robot = %self.robot, keyframe = %id.0, error = %e, "keyframe not served: its cloud cannot be encoded");
+                return None;
+            }
+        };
         let covariance = self.covariances.get(&id).copied().unwrap_or_else(|| {
             pack_covariance(&self.config.odometry_information.try_inverse().unwrap_or_else(Matrix6::identity))
         });
@@ -515,7 +529,7 @@ mod tests {
         let whole = ServedClouds { resolution_m: 0.01, keyframe_voxel_m: 0.0 };
         let thinned = ServedClouds { keyframe_voxel_m: 0.3, ..whole };
         let all: Vec<Point3<f64>> = points.iter().map(|p| p.cast::<f64>()).collect();
-        assert_eq!(whole.keyframe_cloud(&points), cloud_codec::encode(&all, 0.01).ok().map(|c| c.bytes));
+        assert_eq!(whole.keyframe_cloud(&points).ok(), cloud_codec::encode(&all, 0.01).ok().map(|c| c.bytes));
         let (full, thin) = (whole.keyframe_cloud(&points).unwrap(), thinned.keyframe_cloud(&points).unwrap());
         let decoded = cloud_codec::decode(&thin).unwrap();
         // The centroids by hand: the mean of the returns in each occupied voxel.
