@@ -90,6 +90,7 @@ pub struct OdometryStage {
 struct Warned {
     refused: bool,
     coasted: bool,
+    saturated: bool,
 }
 
 impl OdometryStage {
@@ -121,6 +122,15 @@ impl OdometryStage {
     /// estimate as its pose and its points deskewed into the body at its stamp.
     pub fn frame(&mut self, mut frame: SensorFrame) -> StageOutput {
         self.estimator.push_imu(&frame.imu);
+        let saturated = self.estimator.counts().imu.saturated;
+        if saturated > 0 && !self.warned.saturated {
+            self.warned.saturated = true;
+            tracing::warn!(
+                stamp = frame.stamp,
+                "the IMU read at full scale (a jolt beyond its range): such samples are used clipped, and the \
+                 scans re-learn the velocity (counted in its status, imu.saturated)"
+            );
+        }
         let result = self.estimator.process_scan(frame.stamp, &frame.points_in_body, frame.point_times.as_deref());
         let estimate = match result {
             Ok(estimate) => estimate,
@@ -335,6 +345,29 @@ mod tests {
         assert!(latest.velocity.norm() < 0.05, "{latest:?}");
         assert!(latest.angular_velocity.is_some_and(|w| w.norm() < 1e-3), "{latest:?}");
         assert!((0..6).all(|k| latest.covariance[(k, k)] > 0.0), "{latest:?}");
+    }
+
+    /// A knock beyond the accelerometer's range (one 20 g sample) on a body standing still: the
+    /// sample is used clipped and counted, the scans take the body back to where it stands, and
+    /// nothing coasts or resets.
+    #[test]
+    fn a_knock_beyond_the_imus_range_is_counted_and_ridden_out() {
+        let mut stage = OdometryStage::new(OdometryConfig::default()).expect("the default configuration");
+        for k in 1..=40 {
+            let stamp = k as f64 * 0.1;
+            let mut f = frame(stamp, FrameLabels::Unlabelled);
+            if k == 20 {
+                f.imu[10].specific_force = Vector3::new(0.0, 0.0, 20.0 * 9.81);
+            }
+            stage.frame(f);
+        }
+        let status = stage.status();
+        let c = status.counts;
+        assert_eq!((c.imu.saturated, c.coasted, c.resets), (1, 0, 0), "{c:?}");
+        assert_eq!(c.registered + 1, c.scans, "{c:?}");
+        let latest = stage.latest().expect("an estimate");
+        let moved = latest.odom_from_body.translation.vector.norm();
+        assert!(moved < 0.01 && latest.velocity.norm() < 0.05, "{latest:?}");
     }
 
     /// A frame whose stamp does not advance is refused; nothing already estimated moves.

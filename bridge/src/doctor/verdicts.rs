@@ -114,8 +114,8 @@ fn imu_verdict(d: &Doctor, findings: &[Finding]) -> InputVerdict {
     let limits = t.limits();
     if t.saturated > 0 {
         j.warn(format!(
-            "{} samples at the gyro's ({} rad/s) or the accelerometer's ({} m/s²) range: dropped, the sample \
-             before held over them (odometry.estimator.imu_limits)",
+            "{} samples at the gyro's ({} rad/s) or the accelerometer's ({} m/s²) range: used clipped to it, \
+             the velocity re-learnt from the scans (odometry.estimator.imu_limits)",
             t.saturated, limits.gyro_range_rad_s, limits.accel_range_mps2
         ));
     }

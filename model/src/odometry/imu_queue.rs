@@ -16,6 +16,15 @@
 //! coasts at constant velocity: a sample that reads the state's own biases plus a turn rate
 //! ω_c, f = Rᵀ g + b_a; the caller propagates it with the larger noise of a coasting robot.
 //!
+//! A *saturated* sample — at or beyond the gyro's or the accelerometer's full scale on some
+//! axis — is what a real IMU reports when a jolt (a kerb, a stumble) exceeds its range: the
+//! reading is clipped, and the true value lies beyond it by an amount nothing measured. It is
+//! kept, clipped to the range (the nearest value the truth can have), and its segment says
+//! which sensor saturated: the caller grows the uncertainty of what that sensor integrates by
+//! the full scale over the segment (`estimator`). Dropping it instead, and holding the sample
+//! before over the jolt, left a 40 g kerb strike unintegrated: the velocity 1.4 m/s wrong with
+//! the filter sure of it, and the robot sinking through the ground on `legged_campus` seed 3.
+//!
 //! Gravity at start (FAST-LIO2's static initialisation, §IV-B): the mean specific force f̄ over
 //! the first samples points up in the body, so roll φ = atan2(f̄_y, f̄_z) and pitch
 //! θ = atan2(−f̄_x, √(f̄_y² + f̄_z²)) level the odometry frame (yaw is free: it is set to 0).
@@ -54,13 +63,29 @@ impl Default for ImuLimits {
 pub enum ImuDrop {
     /// A NaN or infinite stamp or value.
     NonFinite,
-    /// At or beyond the gyro's or the accelerometer's range on some axis.
+    /// At or beyond the gyro's or the accelerometer's range on some axis (the odometry keeps it,
+    /// clipped: module notes).
     Saturated,
     /// Not after `newest` (time going backwards, or a repeat).
     OutOfOrder,
 }
 
 impl ImuLimits {
+    /// `sample` clipped to the ranges, and which of its sensors reached them.
+    pub fn clip(&self, sample: &ImuSample) -> (ImuSample, Saturation) {
+        let clip = |v: &Vector3<f64>, range: f64| v.map(|c| c.clamp(-range, range));
+        let saturation = Saturation {
+            gyro: sample.angular_velocity.amax() >= self.gyro_range_rad_s,
+            accel: sample.specific_force.amax() >= self.accel_range_mps2,
+        };
+        let clipped = ImuSample {
+            angular_velocity: clip(&sample.angular_velocity, self.gyro_range_rad_s),
+            specific_force: clip(&sample.specific_force, self.accel_range_mps2),
+            ..*sample
+        };
+        (clipped, saturation)
+    }
+
     /// Whether the odometry drops `sample`, and why, after a kept sample stamped `newest`
     /// (`sgm doctor` asks the same of a recording).
     pub fn screen(&self, sample: &ImuSample, newest: Option<f64>) -> Option<ImuDrop> {
@@ -85,7 +110,8 @@ pub struct ImuCounts {
     pub kept: u64,
     /// A NaN or infinite value: dropped.
     pub non_finite: u64,
-    /// At or beyond the range on some axis: dropped (the sample before is held over it).
+    /// At or beyond the range on some axis: kept clipped to it, its segment marked (module
+    /// notes); not counted in `kept`.
     pub saturated: u64,
     /// Not after the newest kept sample (time going backwards, or a repeat): dropped.
     pub out_of_order: u64,
@@ -104,6 +130,28 @@ pub struct Segment {
     pub sample: Option<ImuSample>,
     /// The sample is older than `max_gap_s` at `end`.
     pub gap: bool,
+    /// Which of the sample's sensors read at full scale (the sample is clipped).
+    pub saturation: Saturation,
+}
+
+/// Which sensors of a sample read at or beyond their range.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Saturation {
+    pub gyro: bool,
+    pub accel: bool,
+}
+
+impl Saturation {
+    pub fn any(&self) -> bool {
+        self.gyro || self.accel
+    }
+}
+
+/// A sample the queue holds: clipped, with what saturated.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Held {
+    sample: ImuSample,
+    saturation: Saturation,
 }
 
 /// The sample that leaves `state` moving as it is: turning at `rate`, no acceleration.
@@ -136,9 +184,9 @@ const STILL_RATE_RAD_S: f64 = 0.05;
 pub struct ImuQueue {
     limits: ImuLimits,
     /// The last sample at or before the state's time: it holds at that time.
-    holding: Option<ImuSample>,
+    holding: Option<Held>,
     /// The samples after it, in stamp order.
-    pending: VecDeque<ImuSample>,
+    pending: VecDeque<Held>,
     newest: Option<f64>,
     counts: ImuCounts,
 }
@@ -162,22 +210,33 @@ impl ImuQueue {
         self.newest
     }
 
-    /// Keeps `sample` when it is finite, within range and after the newest (else counts why not).
+    /// Keeps `sample` when it is finite and after the newest, clipped when saturated (else
+    /// counts why not).
     pub fn push(&mut self, sample: &ImuSample) {
+        let late = self.newest.is_some_and(|t| sample.stamp <= t);
         match self.limits.screen(sample, self.newest) {
             Some(ImuDrop::NonFinite) => self.counts.non_finite += 1,
-            Some(ImuDrop::Saturated) => self.counts.saturated += 1,
             Some(ImuDrop::OutOfOrder) => self.counts.out_of_order += 1,
+            Some(ImuDrop::Saturated) if late => self.counts.out_of_order += 1,
+            Some(ImuDrop::Saturated) => {
+                self.counts.saturated += 1;
+                let (sample, saturation) = self.limits.clip(sample);
+                self.keep(Held { sample, saturation });
+            }
             None => {
-                if self.pending.len() >= MAX_PENDING {
-                    self.pending.pop_front();
-                    self.counts.overflow += 1;
-                }
-                self.pending.push_back(*sample);
-                self.newest = Some(sample.stamp);
                 self.counts.kept += 1;
+                self.keep(Held { sample: *sample, saturation: Saturation::default() });
             }
         }
+    }
+
+    fn keep(&mut self, held: Held) {
+        if self.pending.len() >= MAX_PENDING {
+            self.pending.pop_front();
+            self.counts.overflow += 1;
+        }
+        self.newest = Some(held.sample.stamp);
+        self.pending.push_back(held);
     }
 
     /// The segments from `from` to `to` (module notes); empty unless `to > from`.
@@ -189,11 +248,11 @@ impl ImuQueue {
         let mut held = self.holding;
         let mut start = from;
         for s in self.pending.iter() {
-            if s.stamp <= start {
+            if s.sample.stamp <= start {
                 held = Some(*s);
                 continue;
             }
-            let end = s.stamp.min(to);
+            let end = s.sample.stamp.min(to);
             // Before the first sample the robot coasts; after it, the sample held.
             out.push(self.segment(start, end, held));
             start = end;
@@ -206,9 +265,16 @@ impl ImuQueue {
         out
     }
 
-    fn segment(&self, start: f64, end: f64, sample: Option<ImuSample>) -> Segment {
-        let gap = sample.is_none_or(|s| end - s.stamp > self.limits.max_gap_s);
-        Segment { start, end, sample: sample.filter(|_| !gap), gap }
+    fn segment(&self, start: f64, end: f64, held: Option<Held>) -> Segment {
+        let gap = held.is_none_or(|h| end - h.sample.stamp > self.limits.max_gap_s);
+        let held = held.filter(|_| !gap);
+        Segment {
+            start,
+            end,
+            sample: held.map(|h| h.sample),
+            gap,
+            saturation: held.map_or_else(Saturation::default, |h| h.saturation),
+        }
     }
 
     /// Forgets the samples before `time`, keeping the one that holds at it, and counts the gaps
@@ -217,7 +283,7 @@ impl ImuQueue {
         if self.newest.is_some() {
             self.counts.gaps += self.segments(from, time).iter().filter(|s| s.gap).count() as u64;
         }
-        while self.pending.front().is_some_and(|s| s.stamp <= time) {
+        while self.pending.front().is_some_and(|s| s.sample.stamp <= time) {
             self.holding = self.pending.pop_front();
         }
     }
@@ -225,8 +291,14 @@ impl ImuQueue {
     /// Gravity from the samples of the last `window_s` up to `until`; none with fewer than
     /// `min_samples`, or before the samples span (nine tenths of) the window.
     pub fn level(&self, until: f64, window_s: f64, min_samples: usize) -> Option<Level> {
-        let taken: Vec<&ImuSample> =
-            self.pending.iter().filter(|s| s.stamp <= until && s.stamp >= until - window_s).collect();
+        // A clipped sample says nothing exact about gravity: left out.
+        let taken: Vec<&ImuSample> = self
+            .pending
+            .iter()
+            .filter(|h| !h.saturation.any())
+            .map(|h| &h.sample)
+            .filter(|s| s.stamp <= until && s.stamp >= until - window_s)
+            .collect();
         // The whole window: a gait's or a vehicle's accelerations average out over seconds, not
         // over a fraction of a stride (a legged robot's trunk swings by ±1 g at 4 Hz).
         let span = taken.last().zip(taken.first()).map_or(0.0, |(b, a)| b.stamp - a.stamp);
@@ -311,19 +383,37 @@ mod tests {
     }
 
     #[test]
-    fn bad_samples_are_counted_and_dropped() {
+    fn bad_samples_are_counted_and_dropped_and_saturated_ones_kept_clipped() {
         let mut q = ImuQueue::new(ImuLimits::default());
         q.push(&sample(0.0, 0.1));
         q.push(&sample(f64::NAN, 0.1));
         q.push(&ImuSample { specific_force: Vector3::new(0.0, f64::INFINITY, 0.0), ..sample(0.01, 0.0) });
-        q.push(&sample(0.01, 40.0)); // beyond 2000 °/s
-        q.push(&ImuSample { specific_force: Vector3::new(200.0, 0.0, 0.0), ..sample(0.01, 0.0) });
+        q.push(&sample(0.01, -40.0)); // beyond 2000 °/s
+        q.push(&ImuSample { specific_force: Vector3::new(200.0, 0.0, 9.81), ..sample(0.02, 0.0) }); // beyond 16 g
+        q.push(&ImuSample { specific_force: Vector3::new(200.0, 0.0, 9.81), ..sample(0.015, 0.0) }); // and late
         q.push(&sample(0.0, 0.1)); // repeated
         q.push(&sample(-1.0, 0.1)); // backwards
-        q.push(&sample(0.01, 0.1));
+        q.push(&sample(0.03, 0.1));
         let c = q.counts();
-        assert_eq!((c.kept, c.non_finite, c.saturated, c.out_of_order), (2, 2, 2, 2));
-        assert_eq!(q.newest(), Some(0.01));
+        assert_eq!((c.kept, c.non_finite, c.saturated, c.out_of_order), (2, 2, 2, 3));
+        assert_eq!(q.newest(), Some(0.03));
+        // Each sample holds until the next; the saturated ones clipped to the range, and marked.
+        let s = q.segments(0.0, 0.04);
+        let (gyro, accel) = (Saturation { gyro: true, accel: false }, Saturation { gyro: false, accel: true });
+        let marks: Vec<Saturation> = s.iter().map(|s| s.saturation).collect();
+        assert_eq!(marks, vec![Saturation::default(), gyro, accel, Saturation::default()]);
+        let held = |k: usize| s[k].sample.expect("a sample");
+        let limits = ImuLimits::default();
+        assert_eq!(held(1).angular_velocity, Vector3::new(0.0, 0.0, -limits.gyro_range_rad_s));
+        assert_eq!(held(2).specific_force, Vector3::new(limits.accel_range_mps2, 0.0, 9.81));
+        // A clipped sample says nothing exact about gravity: levelling leaves it out.
+        let mut still = ImuQueue::new(limits);
+        for k in 0..=200 {
+            still.push(&sample(k as f64 * 0.005, 0.0));
+        }
+        let level = still.level(1.0, 1.0, 100).expect("levelled");
+        still.push(&ImuSample { specific_force: Vector3::new(0.0, 200.0, 9.81), ..sample(1.001, 0.0) });
+        assert_eq!(still.level(1.001, 1.0, 100).expect("levelled").rotation, level.rotation);
     }
 
     #[test]
@@ -412,9 +502,9 @@ mod tests {
         // Sample by sample to 0.0725 (half-way through a sample's interval).
         let mut direct = start;
         for k in 0..14 {
-            direct = direct.propagated(&q.pending[k], 0.005, noise.gravity_mps2);
+            direct = direct.propagated(&q.pending[k].sample, 0.005, noise.gravity_mps2);
         }
-        direct = direct.propagated(&q.pending[14], 0.0025, noise.gravity_mps2);
+        direct = direct.propagated(&q.pending[14].sample, 0.0025, noise.gravity_mps2);
         let at = track.state_at(0.0725).expect("inside");
         assert!((at.position - direct.position).norm() < 1e-12);
         assert!(at.rotation.angle_to(&direct.rotation) < 1e-12);

@@ -110,6 +110,14 @@ fn deskew(s: &mut String, report: &Report) {
                     c.not_deskewed
                 );
             }
+            let trouble = [
+                (c.imu.saturated, "IMU samples at full scale, used clipped"),
+                (c.coasted, "sweeps coasted on the IMU"),
+                (c.resets, "resets after a divergence"),
+            ];
+            for (n, what) in trouble.iter().filter(|(n, _)| *n > 0) {
+                let _ = write!(s, "; {n} {what}");
+            }
             let _ = write!(s, ")");
             continue;
         }
