@@ -91,6 +91,7 @@ struct Warned {
     refused: bool,
     coasted: bool,
     saturated: bool,
+    low_overlap: bool,
 }
 
 impl OdometryStage {
@@ -158,6 +159,18 @@ impl OdometryStage {
             ScanOutcome::Coasted(reason) if !self.warned.coasted => {
                 self.warned.coasted = true;
                 tracing::warn!(stamp = frame.stamp, "odometry coasted on the IMU: {reason} (counted in its status)");
+            }
+            ScanOutcome::Registered { points, correspondences, .. }
+                if !self.warned.low_overlap && self.estimator.counts().low_overlap > 0 =>
+            {
+                self.warned.low_overlap = true;
+                tracing::warn!(
+                    stamp = frame.stamp,
+                    points,
+                    correspondences,
+                    "odometry: a scan overlapped its local map little (new ground all around, or an estimate that \
+                     left its map; counted in its status, low_overlap)"
+                );
             }
             ScanOutcome::Reset { speed_mps } => {
                 tracing::warn!(

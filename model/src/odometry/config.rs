@@ -57,6 +57,12 @@ pub struct OdometryConfig {
     /// matched the wrong structure), m and rad. Defaults 1.0 and 0.3.
     pub max_correction_m: f64,
     pub max_correction_rad: f64,
+    /// A registered scan of whose points fewer than this fraction found a surface of the local
+    /// map is counted `low_overlap` (the first is warned): it saw mostly what the map does not
+    /// hold — new ground all around, or an estimate that has left its map (a registration that
+    /// agrees with a wrong prediction, onto the points that prediction put in the map). In [0, 1];
+    /// 0 counts none; scans before the body first moved are not counted. Default 0.2.
+    pub min_overlap: f64,
 }
 
 impl Default for OdometryConfig {
@@ -84,6 +90,7 @@ impl Default for OdometryConfig {
             max_speed_mps: 30.0,
             max_correction_m: 1.0,
             max_correction_rad: 0.3,
+            min_overlap: 0.2,
         }
     }
 }
@@ -174,6 +181,7 @@ impl OdometryConfig {
             ("max_speed_mps", self.max_speed_mps, positive(self.max_speed_mps), "finite and > 0"),
             ("max_correction_m", self.max_correction_m, positive(self.max_correction_m), "finite and > 0"),
             ("max_correction_rad", self.max_correction_rad, positive(self.max_correction_rad), "finite and > 0"),
+            ("min_overlap", self.min_overlap, (0.0..=1.0).contains(&self.min_overlap), "between 0 and 1"),
             ("registration.max_iterations", r.max_iterations as f64, r.max_iterations >= 1, "≥ 1"),
             ("registration.convergence_rad", r.convergence_rad, positive(r.convergence_rad), "finite and > 0"),
             ("registration.convergence_m", r.convergence_m, positive(r.convergence_m), "finite and > 0"),
@@ -239,5 +247,10 @@ mod tests {
         c.registration.planarity = 1.5;
         assert_eq!(bad(c), "odometry.registration.planarity = 1.5: must be in (0, 1)");
         assert!(bad(OdometryConfig { max_range_m: 0.2, ..OdometryConfig::default() }).contains("max_range_m"));
+        assert_eq!(
+            bad(OdometryConfig { min_overlap: 1.5, ..OdometryConfig::default() }),
+            "odometry.min_overlap = 1.5: must be between 0 and 1"
+        );
+        assert!(bad(OdometryConfig { min_overlap: f64::NAN, ..OdometryConfig::default() }).contains("min_overlap"));
     }
 }

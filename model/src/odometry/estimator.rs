@@ -80,6 +80,9 @@ pub enum ScanOutcome {
     /// The filter started here: the scan is the local map's first.
     First,
     Registered {
+        /// The scan's points registered (one per `scan_voxel_m`), and those of them that found
+        /// a surface of the map within the threshold.
+        points: usize,
         correspondences: usize,
         iterations: usize,
         converged: bool,
@@ -126,6 +129,10 @@ pub struct OdometryCounts {
     pub coasted: u64,
     /// Of the registered, those with a weak direction.
     pub degenerate: u64,
+    /// Of the registered, those of whose points fewer than `min_overlap` found a surface of the
+    /// map.
+    #[serde(default)]
+    pub low_overlap: u64,
     pub resets: u64,
     pub not_deskewed: u64,
     pub imu: ImuCounts,
@@ -147,7 +154,14 @@ pub struct LidarInertialOdometry {
     filter: Option<Filter>,
     last_registered: Option<Filter>,
     counts: OdometryCounts,
+    /// Where the first scan was taken, and whether the body has been farther than
+    /// [`START_RADIUS_M`] from it since.
+    start: Option<Vector3<f64>>,
+    left_start: bool,
 }
+
+/// How far from its first pose the body must have been before scans of low overlap count, m.
+const START_RADIUS_M: f64 = 1.0;
 
 /// The process noise over a segment of `dt` s whose sample read at full scale: the sensor that
 /// saturated measured its value only up to the range, and the truth lies beyond by an amount
@@ -208,6 +222,8 @@ impl LidarInertialOdometry {
             filter: None,
             last_registered: None,
             counts: OdometryCounts::default(),
+            start: None,
+            left_start: false,
             config,
         })
     }
@@ -392,16 +408,23 @@ impl LidarInertialOdometry {
             self.counts.resets += 1;
         }
         match &outcome {
-            ScanOutcome::Registered { .. } => {
+            ScanOutcome::Registered { points, correspondences, .. } => {
                 self.counts.registered += 1;
                 if degeneracy.as_ref().is_some_and(Degeneracy::is_degenerate) {
                     self.counts.degenerate += 1;
+                }
+                // Until the body has left its first spot, the map is that spot's scans, too
+                // sparse at range for planes (a fifth of a campus scan finds one): not counted.
+                if self.left_start && (*correspondences as f64) < self.config.min_overlap * *points as f64 {
+                    self.counts.low_overlap += 1;
                 }
             }
             ScanOutcome::Coasted(_) => self.counts.coasted += 1,
             ScanOutcome::First | ScanOutcome::Reset { .. } => {}
         }
         let pose = pose_of(&propagator.state);
+        let start = *self.start.get_or_insert(pose.translation.vector);
+        self.left_start |= (pose.translation.vector - start).norm() > START_RADIUS_M;
         if let (Some(f), ScanOutcome::Registered { .. }) = (&self.filter, &outcome) {
             let motion = pose_of(&f.propagator.state).inverse() * pose;
             self.threshold.update(&(prediction.inverse() * pose), &motion);
@@ -472,6 +495,7 @@ impl LidarInertialOdometry {
         let information = scan_information(&registered.scan_hessian, &registered.map_from_body, c.point_noise_m)
             * c.scan_information_scale;
         let outcome = ScanOutcome::Registered {
+            points: scan.len(),
             correspondences: registered.correspondences,
             iterations: registered.iterations,
             converged: registered.converged,
@@ -599,7 +623,7 @@ mod tests {
             "worst error {worst:?} over {length:.1} m, {counts:?}"
         );
         assert_eq!(counts.registered, counts.scans - 1, "{counts:?}");
-        assert_eq!((counts.resets, counts.coasted, counts.not_deskewed), (0, 0, 0));
+        assert_eq!((counts.resets, counts.coasted, counts.not_deskewed, counts.low_overlap), (0, 0, 0, 0));
         // The gyro's bias is found (the accelerometer's is weakly observable on this path).
         let last = &r.track.last().expect("scans").0;
         assert!((last.gyro_bias - imu.gyro_bias).norm() < 5e-4, "{} vs {}", last.gyro_bias, imu.gyro_bias);
@@ -749,6 +773,39 @@ mod tests {
             assert!(close(gyro[(k, k)], (limits.gyro_range_rad_s * dt).powi(2)), "{gyro}");
             assert_eq!((accel[(k, k)], gyro[(6 + k, 6 + k)]), (0.0, 0.0));
         }
+    }
+
+    #[test]
+    fn a_scan_is_counted_low_overlap_below_its_fraction_of_points_on_the_map() {
+        // Each registered scan's fraction of points that found a surface, from its outcome, once
+        // an earlier estimate was more than a metre from the first; the count is those below
+        // `min_overlap`, whatever it is set to.
+        let fractions = |min_overlap: f64| {
+            let config = OdometryConfig { min_overlap, ..OdometryConfig::default() };
+            let r = run(&mut Sensors::new(false, ImuErrors::default(), 4), config, 5.0, true);
+            let first = r.track[0].0.odom_from_body.translation.vector;
+            let mut left = false;
+            let mut fractions = Vec::new();
+            for (e, _) in &r.track {
+                if let (true, ScanOutcome::Registered { points, correspondences, .. }) = (left, &e.outcome) {
+                    fractions.push(*correspondences as f64 / *points as f64);
+                }
+                left |= (e.odom_from_body.translation.vector - first).norm() > START_RADIUS_M;
+            }
+            (fractions, r.odometry.counts().low_overlap)
+        };
+        let (seen, none) = fractions(0.0);
+        assert_eq!(none, 0);
+        assert!(seen.len() >= 20 && seen.iter().all(|f| (0.5..=1.0).contains(f)), "{seen:?}");
+        let median = {
+            let mut s = seen.clone();
+            s.sort_by(f64::total_cmp);
+            s[s.len() / 2]
+        };
+        let (_, below_median) = fractions(median);
+        assert_eq!(below_median as usize, seen.iter().filter(|f| **f < median).count());
+        assert!(below_median > 0);
+        assert_eq!(fractions(1.0).1 as usize, seen.iter().filter(|f| **f < 1.0).count());
     }
 
     #[test]

@@ -112,6 +112,7 @@ fn deskew(s: &mut String, report: &Report) {
             }
             let trouble = [
                 (c.imu.saturated, "IMU samples at full scale, used clipped"),
+                (c.low_overlap, "sweeps that overlapped the local map little"),
                 (c.coasted, "sweeps coasted on the IMU"),
                 (c.resets, "resets after a divergence"),
             ];
