@@ -39,9 +39,14 @@ impl ImuTally {
         };
         match self.limits.screen(&sample, self.newest) {
             Some(ImuDrop::NonFinite) => self.non_finite += 1,
-            Some(ImuDrop::Saturated) => self.saturated += 1,
             Some(ImuDrop::OutOfOrder) => self.out_of_order += 1,
-            None => {
+            // The odometry keeps it, clipped: it holds the time as any sample does.
+            screened @ (Some(ImuDrop::Saturated) | None) => {
+                if screened.is_some() {
+                    self.saturated += 1;
+                } else {
+                    self.kept += 1;
+                }
                 if let Some(newest) = self.newest {
                     let interval = stamp - newest;
                     self.longest_interval_s = self.longest_interval_s.max(interval);
@@ -50,7 +55,6 @@ impl ImuTally {
                     }
                 }
                 self.newest = Some(stamp);
-                self.kept += 1;
             }
         }
     }

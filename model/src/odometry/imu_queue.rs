@@ -21,7 +21,7 @@
 //! reading is clipped, and the true value lies beyond it by an amount nothing measured. It is
 //! kept, clipped to the range (the nearest value the truth can have), and its segment says
 //! which sensor saturated: the caller grows the uncertainty of what that sensor integrates by
-//! the full scale over the segment (`estimator`). Dropping it instead, and holding the sample
+//! the full scale over the jolt (`estimator`). Dropping it instead, and holding the sample
 //! before over the jolt, left a 40 g kerb strike unintegrated: the velocity 1.4 m/s wrong with
 //! the filter sure of it, and the robot sinking through the ground on `legged_campus` seed 3.
 //!
@@ -86,18 +86,19 @@ impl ImuLimits {
         (clipped, saturation)
     }
 
-    /// Whether the odometry drops `sample`, and why, after a kept sample stamped `newest`
-    /// (`sgm doctor` asks the same of a recording).
+    /// What the odometry makes of `sample` after a kept sample stamped `newest` (`sgm doctor`
+    /// asks the same of a recording): `None` kept as it is, `Saturated` kept clipped, the
+    /// others dropped.
     pub fn screen(&self, sample: &ImuSample, newest: Option<f64>) -> Option<ImuDrop> {
         let values = || sample.angular_velocity.iter().chain(sample.specific_force.iter());
         if !(sample.stamp.is_finite() && values().all(|v| v.is_finite())) {
             Some(ImuDrop::NonFinite)
+        } else if newest.is_some_and(|t| sample.stamp <= t) {
+            Some(ImuDrop::OutOfOrder)
         } else if sample.angular_velocity.amax() >= self.gyro_range_rad_s
             || sample.specific_force.amax() >= self.accel_range_mps2
         {
             Some(ImuDrop::Saturated)
-        } else if newest.is_some_and(|t| sample.stamp <= t) {
-            Some(ImuDrop::OutOfOrder)
         } else {
             None
         }
@@ -213,11 +214,9 @@ impl ImuQueue {
     /// Keeps `sample` when it is finite and after the newest, clipped when saturated (else
     /// counts why not).
     pub fn push(&mut self, sample: &ImuSample) {
-        let late = self.newest.is_some_and(|t| sample.stamp <= t);
         match self.limits.screen(sample, self.newest) {
             Some(ImuDrop::NonFinite) => self.counts.non_finite += 1,
             Some(ImuDrop::OutOfOrder) => self.counts.out_of_order += 1,
-            Some(ImuDrop::Saturated) if late => self.counts.out_of_order += 1,
             Some(ImuDrop::Saturated) => {
                 self.counts.saturated += 1;
                 let (sample, saturation) = self.limits.clip(sample);
