@@ -544,14 +544,11 @@ impl LidarInertialOdometry {
         let mut p = self.last_registered.as_ref().map_or_else(|| self.start_fallback(), |f| f.propagator.clone());
         p.clone = None;
         p.state.velocity = Vector3::zeros();
+        decorrelate_velocity(&mut p);
         let v = self.config.initial_velocity_sigma_mps.powi(2);
-        for k in 6..9 {
-            for j in 0..15 {
-                p.covariance[(k, j)] = 0.0;
-                p.covariance[(j, k)] = 0.0;
-            }
-            p.covariance[(k, k)] = v;
-        }
+        let mut velocity = p.covariance.fixed_view_mut::<3, 3>(6, 6);
+        velocity.fill(0.0);
+        velocity.fill_diagonal(v);
         p
     }
 
