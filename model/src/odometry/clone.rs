@@ -25,47 +25,47 @@
 //! Cov(e_Δ) = J [[P_aa, C_a], [C_aᵀ, Σ_c]] Jᵀ
 //! ```
 
-use super::propagation::{Matrix15, NavState};
+use super::propagation::{Matrix17, NavState, STATE_DIM};
 use super::update::{n_matrix, pose_of};
 use crate::geometry::lie::{se3_adjoint, Matrix6};
 use nalgebra::SMatrix;
 
-/// 15 × 6: the running error state against the clone's pose error.
-pub type Matrix15x6 = SMatrix<f64, 15, 6>;
+/// 17 × 6: the running error state against the clone's pose error.
+pub type Matrix17x6 = SMatrix<f64, STATE_DIM, 6>;
 
 /// The pose at a marked scan, and its error's covariance with the running state.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoseClone {
     pub state: NavState,
     /// Cov(δx, a_i).
-    pub cross: Matrix15x6,
+    pub cross: Matrix17x6,
     /// Cov(a_i).
     pub covariance: Matrix6,
 }
 
 impl PoseClone {
     /// The clone of `state` with covariance `covariance` (the module notes: marked).
-    pub fn of(state: &NavState, covariance: &Matrix15) -> Self {
+    pub fn of(state: &NavState, covariance: &Matrix17) -> Self {
         Self {
             state: *state,
-            cross: covariance.fixed_view::<15, 6>(0, 0).into_owned(),
+            cross: covariance.fixed_view::<STATE_DIM, 6>(0, 0).into_owned(),
             covariance: covariance.fixed_view::<6, 6>(0, 0).into_owned(),
         }
     }
 
     /// The running state moved by the transition `f`.
-    pub fn propagate(&mut self, f: &Matrix15) {
+    pub fn propagate(&mut self, f: &Matrix17) {
         self.cross = f * self.cross;
     }
 
     /// The scan's update took the covariance from `prior` to `posterior`; `None` (clone
     /// unchanged) if the prior's pose block is singular.
-    pub fn update(&mut self, prior: &Matrix15, posterior: &Matrix15) -> Option<()> {
+    pub fn update(&mut self, prior: &Matrix17, posterior: &Matrix17) -> Option<()> {
         let p_aa_inv = prior.fixed_view::<6, 6>(0, 0).into_owned().cholesky()?.inverse();
         let sigma_a = posterior.fixed_view::<6, 6>(0, 0).into_owned();
         let w = p_aa_inv - p_aa_inv * sigma_a * p_aa_inv;
         let c_a = self.cross.fixed_view::<6, 6>(0, 0).into_owned();
-        let p_xa = prior.fixed_view::<15, 6>(0, 0).into_owned();
+        let p_xa = prior.fixed_view::<STATE_DIM, 6>(0, 0).into_owned();
         self.cross -= p_xa * w * c_a;
         let c = self.covariance - c_a.transpose() * w * c_a;
         self.covariance = (c + c.transpose()) * 0.5;
@@ -74,7 +74,7 @@ impl PoseClone {
 
     /// Cov(e_Δ) of the motion from the clone to `state` (covariance `covariance`), in the body
     /// frame at `state`, ordered (ω, v) (the module notes).
-    pub fn motion_covariance(&self, state: &NavState, covariance: &Matrix15) -> Matrix6 {
+    pub fn motion_covariance(&self, state: &NavState, covariance: &Matrix17) -> Matrix6 {
         let n = |s: &NavState| n_matrix(&s.rotation.to_rotation_matrix().into_inner());
         let motion = pose_of(&self.state).inverse() * pose_of(state);
         let mut j = SMatrix::<f64, 6, 12>::zeros();
@@ -119,8 +119,8 @@ mod tests {
 
     /// The filter's covariance, with `yaw_m` of yaw (rad) and `position_m` of position (m)
     /// standard deviation besides a small tilt, velocity and bias uncertainty.
-    fn covariance(yaw: f64, position_m: f64) -> Matrix15 {
-        let mut d = [1e-6; 15];
+    fn covariance(yaw: f64, position_m: f64) -> Matrix17 {
+        let mut d = [1e-6; STATE_DIM];
         d[2] = yaw * yaw;
         for v in d.iter_mut().skip(3).take(3) {
             *v = position_m * position_m;
@@ -128,14 +128,14 @@ mod tests {
         for v in d.iter_mut().skip(6).take(3) {
             *v = 1e-3;
         }
-        Matrix15::from_diagonal(&SMatrix::<f64, 15, 1>::from_iterator(d))
+        Matrix17::from_diagonal(&SMatrix::<f64, STATE_DIM, 1>::from_iterator(d))
     }
 
-    fn propagated(p0: Matrix15, seconds: f64) -> (Propagator, PoseClone) {
+    fn propagated(p0: Matrix17, seconds: f64) -> (Propagator, PoseClone) {
         propagated_from(state(), p0, seconds)
     }
 
-    fn propagated_from(start: NavState, p0: Matrix15, seconds: f64) -> (Propagator, PoseClone) {
+    fn propagated_from(start: NavState, p0: Matrix17, seconds: f64) -> (Propagator, PoseClone) {
         let mut p = Propagator::new(start, p0, ImuNoise::default());
         p.clone = Some(PoseClone::of(&p.state, &p.covariance));
         for s in samples(seconds) {
@@ -173,7 +173,7 @@ mod tests {
         assert!(pose_b > 1e6 * ma.norm(), "the pose is far less certain than the motion");
     }
 
-    /// The update is the augmented state's Kalman update: checked against the 21-state filter
+    /// The update is the augmented state's Kalman update: checked against the 23-state filter
     /// built explicitly and updated by the textbook form P⁺ = P − P Hᵀ (H P Hᵀ + Λ⁻¹)⁻¹ H P.
     #[test]
     fn the_update_is_the_augmented_kalman_update() {
@@ -181,20 +181,22 @@ mod tests {
         let lambda = Matrix6::from_diagonal(&nalgebra::Vector6::new(400.0, 300.0, 900.0, 2e4, 1e4, 5e3));
         let registered = pose_of(&p.state);
         let (next, posterior) = apply_pose_update(&p.state, &p.covariance, &registered, &lambda).expect("updates");
-        let mut augmented = SMatrix::<f64, 21, 21>::zeros();
-        augmented.fixed_view_mut::<15, 15>(0, 0).copy_from(&p.covariance);
-        augmented.fixed_view_mut::<15, 6>(0, 15).copy_from(&clone.cross);
-        augmented.fixed_view_mut::<6, 15>(15, 0).copy_from(&clone.cross.transpose());
-        augmented.fixed_view_mut::<6, 6>(15, 15).copy_from(&clone.covariance);
-        let mut h = SMatrix::<f64, 6, 21>::zeros();
+        const N: usize = STATE_DIM + 6;
+        let mut augmented = SMatrix::<f64, N, N>::zeros();
+        augmented.fixed_view_mut::<STATE_DIM, STATE_DIM>(0, 0).copy_from(&p.covariance);
+        augmented.fixed_view_mut::<STATE_DIM, 6>(0, STATE_DIM).copy_from(&clone.cross);
+        augmented.fixed_view_mut::<6, STATE_DIM>(STATE_DIM, 0).copy_from(&clone.cross.transpose());
+        augmented.fixed_view_mut::<6, 6>(STATE_DIM, STATE_DIM).copy_from(&clone.covariance);
+        let mut h = SMatrix::<f64, 6, N>::zeros();
         h.fixed_view_mut::<6, 6>(0, 0).copy_from(&Matrix6::identity());
         let s = h * augmented * h.transpose() + lambda.try_inverse().expect("invertible");
         let expected = augmented - augmented * h.transpose() * s.try_inverse().expect("invertible") * h * augmented;
         clone.update(&p.covariance, &posterior).expect("a regular prior");
         let scale = expected.norm();
-        assert!((clone.cross - expected.fixed_view::<15, 6>(0, 15)).norm() < 1e-9 * scale);
-        assert!((clone.covariance - expected.fixed_view::<6, 6>(15, 15)).norm() < 1e-9 * scale);
-        assert!((posterior - expected.fixed_view::<15, 15>(0, 0)).norm() < 1e-9 * scale, "update agrees too");
+        assert!((clone.cross - expected.fixed_view::<STATE_DIM, 6>(0, STATE_DIM)).norm() < 1e-9 * scale);
+        assert!((clone.covariance - expected.fixed_view::<6, 6>(STATE_DIM, STATE_DIM)).norm() < 1e-9 * scale);
+        let p_next = expected.fixed_view::<STATE_DIM, STATE_DIM>(0, 0);
+        assert!((posterior - p_next).norm() < 1e-9 * scale, "update agrees too");
         let motion = clone.motion_covariance(&next, &posterior);
         assert!(motion.cholesky().is_some(), "positive definite: {motion}");
     }

@@ -45,9 +45,13 @@ pub struct OdometryConfig {
     /// `level_min_samples` of them. Defaults 1.0 s and 20.
     pub level_window_s: f64,
     pub level_min_samples: usize,
-    /// Initial uncertainty: velocity (when the body was not still at start), roll and pitch,
-    /// gyro and accelerometer biases. Defaults 1.0 m/s, 0.02 rad, 0.005 rad/s, 0.1 m/s².
+    /// Initial uncertainty: velocity when the body was not still at start and when it was
+    /// (its IMU at noise level for the window: a platform under way shakes it far beyond),
+    /// where up is in the levelled frame besides what the accelerometer's bias explains (the
+    /// larger of this and the window's force spread over g when the body was moving), gyro and
+    /// accelerometer biases. Defaults 1.0 m/s, 0.05 m/s, 0.002 rad, 0.005 rad/s, 0.1 m/s².
     pub initial_velocity_sigma_mps: f64,
+    pub initial_still_velocity_sigma_mps: f64,
     pub initial_tilt_sigma_rad: f64,
     pub initial_gyro_bias_sigma_rad_s: f64,
     pub initial_accel_bias_sigma_mps2: f64,
@@ -84,7 +88,8 @@ impl Default for OdometryConfig {
             level_window_s: 1.0,
             level_min_samples: 20,
             initial_velocity_sigma_mps: 1.0,
-            initial_tilt_sigma_rad: 0.02,
+            initial_still_velocity_sigma_mps: 0.05,
+            initial_tilt_sigma_rad: 0.002,
             initial_gyro_bias_sigma_rad_s: 0.005,
             initial_accel_bias_sigma_mps2: 0.1,
             max_speed_mps: 30.0,
@@ -158,6 +163,12 @@ impl OdometryConfig {
                 "initial_velocity_sigma_mps",
                 self.initial_velocity_sigma_mps,
                 positive(self.initial_velocity_sigma_mps),
+                "finite and > 0",
+            ),
+            (
+                "initial_still_velocity_sigma_mps",
+                self.initial_still_velocity_sigma_mps,
+                positive(self.initial_still_velocity_sigma_mps),
                 "finite and > 0",
             ),
             (

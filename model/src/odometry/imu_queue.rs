@@ -28,7 +28,12 @@
 //! Gravity at start (FAST-LIO2's static initialisation, §IV-B): the mean specific force f̄ over
 //! the first samples points up in the body, so roll φ = atan2(f̄_y, f̄_z) and pitch
 //! θ = atan2(−f̄_x, √(f̄_y² + f̄_z²)) level the odometry frame (yaw is free: it is set to 0).
-//! When the body was still (the samples' spread is small), the mean rate is the gyro's bias.
+//! When the body was still — the force's norm steady, the rate steady (its spread within the
+//! gyro's noise) and small — the mean rate is the gyro's bias. A body that turned while the
+//! samples were taken (a handheld rig sways even when its bearer stands) is levelled at the
+//! window's end: each force is carried into the body's frame there by the rotation the gyro
+//! measured since, f_k^end = Q_kᵀ f_k with Q_k = Exp(ω_k Δt_k) ⋯ Exp(ω_n Δt_n), and its rate
+//! is not a bias. Taking a swaying rig's mean rate for the bias turned its estimate at 3°/s.
 
 use super::propagation::{ImuNoise, NavState};
 use crate::perception::imu::ImuSample;
@@ -160,7 +165,7 @@ pub fn coasting_sample(state: &NavState, gravity_mps2: f64, stamp: f64, rate: &V
     ImuSample {
         stamp,
         angular_velocity: state.gyro_bias + rate,
-        specific_force: state.rotation.inverse() * (Vector3::z() * gravity_mps2) + state.accel_bias,
+        specific_force: state.rotation.inverse() * (state.up * gravity_mps2) + state.accel_bias,
     }
 }
 
@@ -174,11 +179,19 @@ pub struct Level {
     /// The mean rate, when still.
     pub gyro_bias: Option<Vector3<f64>>,
     pub samples: usize,
+    /// RMS of the forces (in the body at the window's end) about their mean, m/s²: what the
+    /// body's own accelerations could have added to the mean.
+    pub force_spread_mps2: f64,
 }
 
 /// Spread of the specific force's norm and largest mean rate below which the body was still.
 const STILL_FORCE_SPREAD_MPS2: f64 = 0.2;
 const STILL_RATE_RAD_S: f64 = 0.05;
+/// The rate's spread about its mean (RMS over the axes) of a still body is the gyro's white
+/// noise per sample, σ·√rate: a spread beyond this many of them is a turning body; and never
+/// below `STILL_RATE_SPREAD_FLOOR_RAD_S` (0.06°/s: an ideal gyro's zero noise).
+const STILL_RATE_SPREAD_SIGMAS: f64 = 4.0;
+const STILL_RATE_SPREAD_FLOOR_RAD_S: f64 = 1e-3;
 
 /// The samples between the state's time and the newest.
 #[derive(Clone, Debug, Default)]
@@ -287,9 +300,10 @@ impl ImuQueue {
         }
     }
 
-    /// Gravity from the samples of the last `window_s` up to `until`; none with fewer than
-    /// `min_samples`, or before the samples span (nine tenths of) the window.
-    pub fn level(&self, until: f64, window_s: f64, min_samples: usize) -> Option<Level> {
+    /// Gravity from the samples of the last `window_s` up to `until`, in the body at `until`;
+    /// none with fewer than `min_samples`, or before the samples span (nine tenths of) the
+    /// window. `gyro_noise`: the gyro's white-noise density, rad/s/√Hz (module notes: still).
+    pub fn level(&self, until: f64, window_s: f64, min_samples: usize, gyro_noise: f64) -> Option<Level> {
         // A clipped sample says nothing exact about gravity: left out.
         let taken: Vec<&ImuSample> = self
             .pending
@@ -305,23 +319,49 @@ impl ImuQueue {
             return None;
         }
         let n = taken.len() as f64;
-        let force = taken.iter().map(|s| s.specific_force).sum::<Vector3<f64>>() / n;
         let rate = taken.iter().map(|s| s.angular_velocity).sum::<Vector3<f64>>() / n;
+        let rate_spread = (taken.iter().map(|s| (s.angular_velocity - rate).norm_squared()).sum::<f64>() / n).sqrt();
+        let per_sample = gyro_noise * (n / span.max(1e-9)).sqrt() * 3f64.sqrt();
         let mean_norm = taken.iter().map(|s| s.specific_force.norm()).sum::<f64>() / n;
         let spread = (taken.iter().map(|s| (s.specific_force.norm() - mean_norm).powi(2)).sum::<f64>() / n).sqrt();
-        if force.norm() < 1e-6 {
+        let still = spread < STILL_FORCE_SPREAD_MPS2
+            && rate.amax() < STILL_RATE_RAD_S
+            && rate_spread < (STILL_RATE_SPREAD_SIGMAS * per_sample).max(STILL_RATE_SPREAD_FLOOR_RAD_S);
+        let forces: Vec<Vector3<f64>> = if still {
+            taken.iter().map(|s| s.specific_force).collect()
+        } else {
+            forces_at_end(&taken, until).collect()
+        };
+        let force = forces.iter().sum::<Vector3<f64>>() / n;
+        if !force.iter().all(|x| x.is_finite()) || force.norm() < 1e-6 {
             return None;
         }
+        let force_spread_mps2 = (forces.iter().map(|f| (f - force).norm_squared()).sum::<f64>() / n).sqrt();
         let roll = force.y.atan2(force.z);
         let pitch = (-force.x).atan2(force.y.hypot(force.z));
-        let still = spread < STILL_FORCE_SPREAD_MPS2 && rate.amax() < STILL_RATE_RAD_S;
         Some(Level {
             rotation: UnitQuaternion::from_euler_angles(roll, pitch, 0.0),
             still,
             gyro_bias: still.then_some(rate),
             samples: taken.len(),
+            force_spread_mps2,
         })
     }
+}
+
+/// Each sample's specific force in the body at `until` (stamp order in, reverse order out):
+/// f_k^end = Q_kᵀ f_k, Q_k the rotation the gyro measured from t_k to `until` (module notes),
+/// each sample holding until the next.
+fn forces_at_end<'a>(taken: &'a [&ImuSample], until: f64) -> impl Iterator<Item = Vector3<f64>> + 'a {
+    let mut end_from_k = UnitQuaternion::identity();
+    let mut next = until;
+    taken.iter().rev().map(move |s| {
+        let k_from_next = UnitQuaternion::from_scaled_axis(s.angular_velocity * (next - s.stamp).max(0.0));
+        // Q_k = Exp(ω_k Δt_k) Q_{k+1}; the force is carried by Q_kᵀ.
+        end_from_k = k_from_next * end_from_k;
+        next = s.stamp;
+        end_from_k.inverse() * s.specific_force
+    })
 }
 
 /// The predicted motion over a sweep, for deskewing: the state at the start of each segment.
@@ -376,6 +416,7 @@ impl Track {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::TAU;
 
     fn sample(stamp: f64, w: f64) -> ImuSample {
         ImuSample { stamp, angular_velocity: Vector3::new(0.0, 0.0, w), specific_force: Vector3::z() * 9.81 }
@@ -410,9 +451,9 @@ mod tests {
         for k in 0..=200 {
             still.push(&sample(k as f64 * 0.005, 0.0));
         }
-        let level = still.level(1.0, 1.0, 100).expect("levelled");
+        let level = still.level(1.0, 1.0, 100, 0.0).expect("levelled");
         still.push(&ImuSample { specific_force: Vector3::new(0.0, 200.0, 9.81), ..sample(1.001, 0.0) });
-        assert_eq!(still.level(1.001, 1.0, 100).expect("levelled").rotation, level.rotation);
+        assert_eq!(still.level(1.001, 1.0, 100, 0.0).expect("levelled").rotation, level.rotation);
     }
 
     #[test]
@@ -472,12 +513,42 @@ mod tests {
                 specific_force: truth.inverse() * Vector3::z() * 9.81,
             });
         }
-        let level = q.level(0.5, 0.5, 20).expect("enough samples");
+        let level = q.level(0.5, 0.5, 20, 0.0).expect("enough samples");
         assert!(level.rotation.angle_to(&truth) < 1e-9, "{:?}", level.rotation.euler_angles());
         assert!(level.still);
         assert!((level.gyro_bias.expect("still") - bias).norm() < 1e-12);
-        assert!(q.level(0.05, 1.0, 5).is_none(), "0.05 s of samples do not span the window");
-        assert!(q.level(0.5, 0.5, 200).is_none(), "101 samples are too few");
+        assert!(q.level(0.05, 1.0, 5, 0.0).is_none(), "0.05 s of samples do not span the window");
+        assert!(q.level(0.5, 0.5, 200, 0.0).is_none(), "101 samples are too few");
+    }
+
+    /// A body turning about its own point (a rig swaying in a hand, its bearer standing): no
+    /// acceleration, so every force is gravity, but in a body that turns. Levelled at the
+    /// window's end with the forces carried there by the gyro, roll and pitch are the end's
+    /// to the samples' discretisation; their plain mean is the window's mean attitude, degrees
+    /// off; and the mean rate is no bias.
+    #[test]
+    fn a_turning_body_is_levelled_at_the_windows_end_and_its_rate_is_not_a_bias() {
+        let attitude = |t: f64| {
+            UnitQuaternion::from_euler_angles(0.06 * (TAU * 0.4 * t).sin(), 0.05 * (TAU * 0.9 * t + 1.0).sin(), 0.3 * t)
+        };
+        let dt = 0.005;
+        let mut q = ImuQueue::new(ImuLimits::default());
+        for k in 0..=200 {
+            let t = k as f64 * dt;
+            let rate = (attitude(t).inverse() * attitude(t + dt)).scaled_axis() / dt;
+            q.push(&ImuSample {
+                stamp: t,
+                angular_velocity: rate,
+                specific_force: attitude(t).inverse() * Vector3::z() * 9.81,
+            });
+        }
+        let level = q.level(1.0, 1.0, 20, 1.7e-4).expect("enough samples");
+        let tilt = |r: &UnitQuaternion<f64>| r.inverse() * Vector3::z();
+        let error = tilt(&level.rotation).angle(&tilt(&attitude(1.0)));
+        assert!(error < 1e-3, "{error} rad");
+        assert!(!level.still && level.gyro_bias.is_none());
+        let mean = q.pending.iter().map(|h| h.sample.specific_force).sum::<Vector3<f64>>();
+        assert!(mean.angle(&tilt(&attitude(1.0))) > 0.5f64.to_radians(), "the plain mean is the mean attitude");
     }
 
     #[test]

@@ -9,6 +9,7 @@ use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use std::f64::consts::TAU;
 
 /// An axis-aligned box, [lo, hi].
 #[derive(Clone, Copy, Debug)]
@@ -133,6 +134,8 @@ pub struct Sensors {
     pub corridor: bool,
     pub gait: bool,
     pub kerb: Option<Kerb>,
+    /// Carried in a hand: the body sways at all times, also while its bearer stands.
+    pub sway: bool,
     pub imu_dt: f64,
     pub errors: ImuErrors,
     rng: ChaCha8Rng,
@@ -156,6 +159,7 @@ impl Sensors {
             corridor,
             gait: true,
             kerb: None,
+            sway: false,
             imu_dt: 0.005,
             errors,
             rng: ChaCha8Rng::seed_from_u64(seed),
@@ -165,7 +169,17 @@ impl Sensors {
 
     pub fn truth(&self, t: f64) -> Pose3 {
         let rise = self.kerb.map_or(0.0, |k| k.rise(t));
-        Translation3::new(0.0, 0.0, rise) * truth(t, self.corridor, self.gait)
+        let body = Translation3::new(0.0, 0.0, rise) * truth(t, self.corridor, self.gait);
+        if !self.sway {
+            return body;
+        }
+        // A hand's sway: 3° and 3 cm on every axis, at 0.35 and 0.9 Hz (the simulator's
+        // handheld platform), about the body's own point.
+        let wave = |phase: f64| 0.6 * (TAU * 0.35 * t + phase).sin() + 0.4 * (TAU * 0.9 * t + 2.0 * phase).sin();
+        let a = 3f64.to_radians();
+        let turn = UnitQuaternion::from_euler_angles(a * wave(0.0), a * wave(1.0), a * wave(2.0));
+        let shift = Vector3::new(wave(3.0), wave(4.0), wave(5.0)) * 0.03;
+        Pose3::from_parts(Translation3::from(body.translation.vector + shift), body.rotation * turn)
     }
 
     /// The samples with stamps up to `until` not given before (the simulator's construction).

@@ -1,6 +1,6 @@
 //! The scan's correction of the IMU's prediction: from a registered pose to the whole state.
 //!
-//! The error state splits into the pose a = (δθ, δp) and the rest b = (δv, δb_g, δb_a), prior
+//! The error state splits into the pose a = (δθ, δp) and the rest b = (δv, δb_g, δb_a, δu), prior
 //! N(0, P) around the prediction x̂ (`propagation`). A scan measures only the pose, so the
 //! posterior is the pose's posterior times the rest given the pose (the Gaussian chain rule;
 //! it is the iterated EKF's update when registration iterates the pose to convergence, as
@@ -25,14 +25,16 @@
 //! and its prior, on e = Log(T̂⁻¹ T) ≈ (δθ, R̂ᵀ δp) = N a with N = diag(I, R̂ᵀ), has information
 //! (N P_aa Nᵀ)⁻¹; the same N carries the posterior pose covariance out as Cov(e).
 
-use super::propagation::{Matrix15, NavState};
+use super::propagation::{Matrix17, NavState, STATE_DIM, UP};
 use super::registration::left_from_error;
 use crate::geometry::lie::Matrix6;
 use crate::geometry::Pose3;
 use nalgebra::{Matrix3, SMatrix, Translation3, Vector3};
 
-type Matrix9 = SMatrix<f64, 9, 9>;
-type Matrix9x6 = SMatrix<f64, 9, 6>;
+/// The rest b of the error state, after the pose.
+const REST: usize = STATE_DIM - 6;
+type MatrixRest = SMatrix<f64, REST, REST>;
+type MatrixRestx6 = SMatrix<f64, REST, 6>;
 
 /// The pose of a state.
 pub fn pose_of(state: &NavState) -> Pose3 {
@@ -54,7 +56,7 @@ pub fn pose_covariance(p_aa: &Matrix6, state: &NavState) -> Matrix6 {
 }
 
 /// The information of e = Log(T̂⁻¹T) for registration's prior: (N P_aa Nᵀ)⁻¹ (none if singular).
-pub fn prior_information(covariance: &Matrix15, state: &NavState) -> Option<Matrix6> {
+pub fn prior_information(covariance: &Matrix17, state: &NavState) -> Option<Matrix6> {
     let p_aa = covariance.fixed_view::<6, 6>(0, 0).into_owned();
     let c = pose_covariance(&p_aa, state);
     c.cholesky().map(|ch| {
@@ -84,13 +86,13 @@ pub enum UpdateError {
 /// Λ (module notes).
 pub fn apply_pose_update(
     state: &NavState,
-    covariance: &Matrix15,
+    covariance: &Matrix17,
     registered: &Pose3,
     information: &Matrix6,
-) -> Result<(NavState, Matrix15), UpdateError> {
+) -> Result<(NavState, Matrix17), UpdateError> {
     let p_aa = covariance.fixed_view::<6, 6>(0, 0).into_owned();
-    let p_ba: Matrix9x6 = covariance.fixed_view::<9, 6>(6, 0).into_owned();
-    let p_bb: Matrix9 = covariance.fixed_view::<9, 9>(6, 6).into_owned();
+    let p_ba: MatrixRestx6 = covariance.fixed_view::<REST, 6>(6, 0).into_owned();
+    let p_bb: MatrixRest = covariance.fixed_view::<REST, REST>(6, 6).into_owned();
     let p_aa_inv = p_aa.cholesky().ok_or(UpdateError::PriorSingular)?.inverse();
     let posterior_info = p_aa_inv + information;
     let sigma_a = posterior_info.cholesky().ok_or(UpdateError::PosteriorSingular)?.inverse();
@@ -107,14 +109,15 @@ pub fn apply_pose_update(
         velocity: state.velocity + part(0),
         gyro_bias: state.gyro_bias + part(3),
         accel_bias: state.accel_bias + part(6),
+        up: state.up_moved(&nalgebra::Vector2::new(b[UP - 6], b[UP - 5])),
     };
-    let mut p = Matrix15::zeros();
+    let mut p = Matrix17::zeros();
     let cross = k * sigma_a;
     p.fixed_view_mut::<6, 6>(0, 0).copy_from(&sigma_a);
-    p.fixed_view_mut::<9, 6>(6, 0).copy_from(&cross);
-    p.fixed_view_mut::<6, 9>(0, 6).copy_from(&cross.transpose());
+    p.fixed_view_mut::<REST, 6>(6, 0).copy_from(&cross);
+    p.fixed_view_mut::<6, REST>(0, 6).copy_from(&cross.transpose());
     let bb = p_bb - k * p_ba.transpose() + k * sigma_a * k.transpose();
-    p.fixed_view_mut::<9, 9>(6, 6).copy_from(&((bb + bb.transpose()) * 0.5));
+    p.fixed_view_mut::<REST, REST>(6, 6).copy_from(&((bb + bb.transpose()) * 0.5));
     Ok((next, p))
 }
 
@@ -142,6 +145,7 @@ mod tests {
             velocity: Vector3::new(1.0, 0.2, 0.0),
             gyro_bias: Vector3::new(0.001, 0.0, -0.002),
             accel_bias: Vector3::new(0.01, 0.02, 0.0),
+            up: Vector3::z(),
         }
     }
 
@@ -151,7 +155,7 @@ mod tests {
     #[test]
     fn the_update_is_the_information_form_kalman_update() {
         let s = state();
-        let p = random_spd::<15>(7) * 0.01;
+        let p = random_spd::<STATE_DIM>(7) * 0.01;
         let lambda = random_spd::<6>(11) * 50.0;
         let a = SVector::<f64, 6>::new(0.01, -0.02, 0.005, 0.1, -0.05, 0.02);
         let registered = Pose3::from_parts(
@@ -159,7 +163,7 @@ mod tests {
             s.rotation * UnitQuaternion::from_scaled_axis(Vector3::new(a[0], a[1], a[2])),
         );
         let (next, p_next) = apply_pose_update(&s, &p, &registered, &lambda).expect("well posed");
-        let mut h = SMatrix::<f64, 6, 15>::zeros();
+        let mut h = SMatrix::<f64, 6, STATE_DIM>::zeros();
         h.fixed_view_mut::<6, 6>(0, 0).copy_from(&Matrix6::identity());
         let p_aa = p.fixed_view::<6, 6>(0, 0).into_owned();
         let z = lambda.try_inverse().expect("spd") * (p_aa.try_inverse().expect("spd") + lambda) * a;
@@ -169,6 +173,8 @@ mod tests {
         assert!((x.fixed_rows::<6>(0) - a).amax() < 1e-9);
         assert!((next.velocity - s.velocity - Vector3::new(x[6], x[7], x[8])).amax() < 1e-9);
         assert!((next.accel_bias - s.accel_bias - Vector3::new(x[12], x[13], x[14])).amax() < 1e-9);
+        let up = s.up_moved(&nalgebra::Vector2::new(x[UP], x[UP + 1]));
+        assert!((next.up - up).amax() < 1e-9);
     }
 
     /// Λ = Mᵀ H M / σ²: the scan cost of a small error a, computed in registration's left
@@ -197,7 +203,7 @@ mod tests {
     #[test]
     fn a_singular_prior_is_refused() {
         let s = state();
-        let p = Matrix15::zeros();
+        let p = Matrix17::zeros();
         let r = pose_of(&s);
         assert_eq!(apply_pose_update(&s, &p, &r, &Matrix6::identity()), Err(UpdateError::PriorSingular));
     }
