@@ -109,11 +109,6 @@ impl NavState {
         (UnitQuaternion::from_scaled_axis(Vector3::new(du.x, du.y, 0.0)) * self.up).normalize()
     }
 
-    /// The tilt of this state's up from the frame's ẑ, rad.
-    pub fn up_tilt_rad(&self) -> f64 {
-        self.up.angle(&Vector3::z())
-    }
-
     /// The state after one sample held for `dt` (the module's equations).
     pub fn propagated(&self, sample: &ImuSample, dt: f64, gravity_mps2: f64) -> Self {
         let f = sample.specific_force - self.accel_bias;
