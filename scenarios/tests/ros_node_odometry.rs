@@ -147,7 +147,10 @@ fn a_robot_on_its_own_odometry_reads_the_imu_and_publishes_its_poses() {
         let p = &msg.pose.pose.position;
         let t = expected.odom_from_body.translation.vector;
         let off = (nalgebra::Vector3::new(p.x, p.y, p.z) - t).norm();
-        assert!(off < 1e-6, "at {}: {off} m from the odometry alone", expected.stamp);
+        // Not bit for bit: the node's samples and scans reach the filter through ROS time, and
+        // their stamps' last-bit differences reach the pose at micrometres (7 µm at most on this
+        // bag since up is part of the filter's state; below 1 µm before).
+        assert!(off < 1e-5, "at {}: {off} m from the odometry alone", expected.stamp);
         assert!((0..6).all(|k| msg.pose.covariance[k * 7] > 0.0), "a covariance: {:?}", msg.pose.covariance);
     }
     let last = published.last().unwrap();
