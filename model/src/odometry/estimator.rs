@@ -339,8 +339,8 @@ impl LidarInertialOdometry {
     /// (`frame_turn_since_mark`), as the error it is of the motion published across it.
     fn publish_up(&mut self, state: &NavState, covariance: &Matrix17) -> Pose3 {
         let sigma = covariance.fixed_view::<2, 2>(UP, UP).trace().max(0.0).sqrt();
-        let before = levelled_from(&self.published_up);
         if self.published_up.angle(&state.up) > REPUBLISH_SIGMAS * sigma {
+            let before = levelled_from(&self.published_up);
             self.published_up = state.up;
             self.counts.frame_turns += 1;
             let after = levelled_from(&self.published_up);
