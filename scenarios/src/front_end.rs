@@ -88,7 +88,7 @@ pub fn run_front_end_recording(
     let route = &routes[k];
     let mut lidar = Lidar::new(&scenario.lidar);
     let mount = LidarMount::new(&scenario.lidar, seed, k);
-    let mut imu = Imu::new(&scenario.imu);
+    let mut imu = Imu::new(&scenario.imu, seed, k);
     let mut imu_rng = ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ (k as u64 + 1));
     let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (k as u64 + 1));
     let mut synthetic = Odometry::new(&scenario.odometry);

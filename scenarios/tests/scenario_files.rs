@@ -92,6 +92,8 @@ fn impossible_terrain_platforms_and_imus_are_refused_with_their_key() {
         "imu.rate_hz = 5: allowed ≥ the frame rate (1 / scenario.frame_interval_s) and ≤ 2000 Hz",
     );
     refused("[imu]\ngyro_noise = -1e-4", "imu.gyro_noise = -0.0001: allowed 0 ≤ x ≤ 1");
+    refused("[imu]\ngyro_turn_on_bias = 0.5", "imu.gyro_turn_on_bias = 0.5: allowed 0 ≤ x ≤ 0.1 rad/s");
+    refused("[imu]\naccel_turn_on_bias = -0.1", "imu.accel_turn_on_bias = -0.1: allowed 0 ≤ x ≤ 1 m/s²");
     // A camera firing further from its scan than a frame, a wild mount, a clock a second off.
     refused(
         "[scenario]\nframe_interval_s = 0.1\n[camera]\nexposure_offset_s = 0.2",

@@ -57,7 +57,7 @@ impl SensorState {
                 lidar: Lidar::new(&scenario.lidar),
                 lidar_mount: LidarMount::new(&scenario.lidar, seed, k),
                 camera: CameraMount::new(&scenario.camera, seed, k),
-                imu: scenario.imu.enabled.then(|| (Imu::new(&scenario.imu), stream(k, 0x2545_F491_4F6C_DD1D))),
+                imu: scenario.imu.enabled.then(|| (Imu::new(&scenario.imu, seed, k), stream(k, 0x2545_F491_4F6C_DD1D))),
                 rng: stream(k, 0x9E37_79B9_7F4A_7C15),
                 segmenter_rng: stream(k, 0x5E67_4D45_4E54_4552),
                 sweep_rng: stream(k, 0x5357_4545_5053_0001),

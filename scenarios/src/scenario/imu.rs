@@ -18,6 +18,11 @@ pub struct ImuSpec {
     pub accel_noise: f64,
     /// Accelerometer bias random walk, m/s³/√Hz. Default 3.0e-3.
     pub accel_bias_walk: f64,
+    /// Turn-on bias: each robot's IMU starts with biases drawn per axis from N(0, σ²), its own
+    /// at every power-up (a datasheet's "bias repeatability" or "zero-rate offset"), then walks
+    /// from there. Gyroscope rad/s, accelerometer m/s². Defaults 0 (the biases start at zero).
+    pub gyro_turn_on_bias: f64,
+    pub accel_turn_on_bias: f64,
     /// Gravity, m/s². Default 9.81.
     pub gravity_mps2: f64,
 }
@@ -31,6 +36,8 @@ impl Default for ImuSpec {
             gyro_bias_walk: 1.9393e-5,
             accel_noise: 2.0e-3,
             accel_bias_walk: 3.0e-3,
+            gyro_turn_on_bias: 0.0,
+            accel_turn_on_bias: 0.0,
             gravity_mps2: 9.81,
         }
     }

@@ -127,6 +127,18 @@ impl Scenario {
         ] {
             check(within(v, 0.0, 1.0), key, v, "0 ≤ x ≤ 1")?;
         }
+        check(
+            within(i.gyro_turn_on_bias, 0.0, 0.1),
+            "imu.gyro_turn_on_bias",
+            i.gyro_turn_on_bias,
+            "0 ≤ x ≤ 0.1 rad/s",
+        )?;
+        check(
+            within(i.accel_turn_on_bias, 0.0, 1.0),
+            "imu.accel_turn_on_bias",
+            i.accel_turn_on_bias,
+            "0 ≤ x ≤ 1 m/s²",
+        )?;
         check(within(i.gravity_mps2, 9.7, 9.9), "imu.gravity_mps2", i.gravity_mps2, "9.7 ≤ x ≤ 9.9 m/s²")?;
 
         self.validate_segmentation()?;

@@ -12,11 +12,13 @@
 //! p_{k+1} = p_k + v_k Δt, the odometry's propagation (`sgm_model::odometry::propagation`) —
 //! gives back the truth exactly when the noise is off (the test).
 //! Measured: ω̃ = ω + b_g + n_g, f̃ = f + b_a + n_a, n ~ N(0, σ²·rate) per sample, and each
-//! bias steps by N(0, σ_b²·Δt) per sample.
+//! bias steps by N(0, σ_b²·Δt) per sample from its turn-on value, drawn per axis from
+//! N(0, σ_on²) (`gyro_turn_on_bias`, `accel_turn_on_bias`) by the robot's own seeded stream.
 
 use crate::scenario::ImuSpec;
 use nalgebra::Vector3;
-use rand::Rng;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use sgm_model::geometry::Pose3;
 
@@ -31,9 +33,21 @@ pub struct Imu {
     next_tick: i64,
 }
 
+/// Salts the turn-on biases' stream, apart from every other stream of the robot.
+const TURN_ON_SALT: u64 = 0x1A0B_1A50;
+
 impl Imu {
-    pub fn new(spec: &ImuSpec) -> Self {
-        Self { spec: spec.clone(), gyro_bias: Vector3::zeros(), accel_bias: Vector3::zeros(), next_tick: 0 }
+    /// Robot `robot`'s IMU in the scenario of `seed`, powered up: its biases at their turn-on
+    /// values (zero when the spec has none; drawing them leaves every other stream as it was).
+    pub fn new(spec: &ImuSpec, seed: u64, robot: usize) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ TURN_ON_SALT ^ ((robot as u64 + 1) << 32));
+        let mut draw = |sigma: f64| {
+            let unit: Vector3<f64> = Vector3::from_fn(|_, _| StandardNormal.sample(&mut rng));
+            unit * sigma
+        };
+        let gyro_bias = draw(spec.gyro_turn_on_bias);
+        let accel_bias = draw(spec.accel_turn_on_bias);
+        Self { spec: spec.clone(), gyro_bias, accel_bias, next_tick: 0 }
     }
 
     pub fn interval_s(&self) -> f64 {
@@ -125,7 +139,7 @@ mod tests {
         };
         let route = route();
         let truth = |t: f64| route.pose_at(t);
-        let mut imu = Imu::new(&spec);
+        let mut imu = Imu::new(&spec, 1, 0);
         let samples = imu.samples_until(30.0, &truth, &mut ChaCha8Rng::seed_from_u64(1));
         let dt = imu.interval_s();
         assert_eq!(samples.len(), 6000, "from t = Δt (tick 0 has no pose before it) to 30 s");
@@ -153,7 +167,7 @@ mod tests {
     fn noise_and_bias_walks_have_their_datasheet_densities() {
         let spec = ImuSpec::default();
         let truth = |_: f64| Some(Pose3::identity());
-        let mut imu = Imu::new(&spec);
+        let mut imu = Imu::new(&spec, 1, 0);
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let samples = imu.samples_until(200.0, &truth, &mut rng);
         let n = samples.len() as f64;
@@ -164,11 +178,54 @@ mod tests {
         // Bias walks: after T seconds each axis has variance σ_b²·T; over 400 robots of 50 s.
         let mut spread = 0.0;
         for seed in 0..400 {
-            let mut imu = Imu::new(&spec);
+            let mut imu = Imu::new(&spec, 1, 0);
             imu.samples_until(50.0, &truth, &mut ChaCha8Rng::seed_from_u64(seed));
             spread += imu.biases().1.x.powi(2);
         }
         let expected = spec.accel_bias_walk.powi(2) * 50.0;
         assert!((spread / 400.0 / expected - 1.0).abs() < 0.2, "{} vs {expected}", spread / 400.0);
+    }
+
+    #[test]
+    fn turn_on_biases_are_each_robots_own_and_have_their_spread() {
+        let truth = |_: f64| Some(Pose3::identity());
+        // None by default: the biases start at zero.
+        assert_eq!(Imu::new(&ImuSpec::default(), 3, 1).biases(), (Vector3::zeros(), Vector3::zeros()));
+        let spec = ImuSpec { gyro_turn_on_bias: 0.002, accel_turn_on_bias: 0.05, ..ImuSpec::default() };
+        // Drawn per axis from N(0, σ²): over 500 robots, each axis's spread is σ.
+        let (mut gyro, mut accel) = (Vector3::zeros(), Vector3::zeros());
+        for robot in 0..500 {
+            let (g, a) = Imu::new(&spec, 7, robot).biases();
+            gyro += g.component_mul(&g);
+            accel += a.component_mul(&a);
+        }
+        for axis in 0..3 {
+            assert!(((gyro[axis] / 500.0).sqrt() / 0.002 - 1.0).abs() < 0.1, "gyro {gyro}");
+            assert!(((accel[axis] / 500.0).sqrt() / 0.05 - 1.0).abs() < 0.1, "accel {accel}");
+        }
+        // Each robot its own, the same at every run; the seed changes them.
+        assert_ne!(Imu::new(&spec, 7, 0).biases(), Imu::new(&spec, 7, 1).biases());
+        assert_eq!(Imu::new(&spec, 7, 0).biases(), Imu::new(&spec, 7, 0).biases());
+        assert_ne!(Imu::new(&spec, 7, 0).biases(), Imu::new(&spec, 8, 0).biases());
+        // The samples carry it: at rest the mean rate is the gyro's turn-on bias; the white
+        // noise leaves the mean of 10 s at 200 Hz within 5.4e-5 rad/s per axis (1σ).
+        let quiet = ImuSpec { gyro_bias_walk: 0.0, ..spec.clone() };
+        let mut imu = Imu::new(&quiet, 7, 0);
+        let (start, _) = imu.biases();
+        let samples = imu.samples_until(10.0, &truth, &mut ChaCha8Rng::seed_from_u64(1));
+        let mean = samples.iter().map(|s| s.angular_velocity).sum::<Vector3<f64>>() / samples.len() as f64;
+        assert!(start.norm() > 1e-3 && (mean - start).norm() < 3e-4, "{mean} vs {start}");
+        // The other streams are untouched: without the walk and noise the samples differ from
+        // an unbiased IMU's by the turn-on biases exactly.
+        let silent = ImuSpec { gyro_noise: 0.0, accel_noise: 0.0, accel_bias_walk: 0.0, ..quiet };
+        let unbiased = ImuSpec { gyro_turn_on_bias: 0.0, accel_turn_on_bias: 0.0, ..silent.clone() };
+        let mut biased = Imu::new(&silent, 7, 0);
+        let (g, a) = biased.biases();
+        let with = biased.samples_until(0.5, &truth, &mut ChaCha8Rng::seed_from_u64(2));
+        let without = Imu::new(&unbiased, 7, 0).samples_until(0.5, &truth, &mut ChaCha8Rng::seed_from_u64(2));
+        for (w, o) in with.iter().zip(&without) {
+            assert!((w.angular_velocity - o.angular_velocity - g).norm() < 1e-15);
+            assert!((w.specific_force - o.specific_force - a).norm() < 1e-15);
+        }
     }
 }

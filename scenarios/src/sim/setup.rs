@@ -78,7 +78,7 @@ mod tests {
     fn envelope(name: &str) -> (f64, f64) {
         let scenario = Scenario::load(name).expect("library scenario");
         let sim = SimulatedWorld::of(&scenario);
-        let imu = Imu::new(&ImuSpec { rate_hz: 100.0, ..ImuSpec::default() });
+        let imu = Imu::new(&ImuSpec { rate_hz: 100.0, ..ImuSpec::default() }, 0, 0);
         let (mut rate, mut force) = (0.0f64, 0.0f64);
         for route in &sim.routes {
             let truth = |t: f64| route.pose_at(t);
