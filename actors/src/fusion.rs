@@ -219,6 +219,7 @@ impl Handler<SensorFrame> for Fusion {
                 labels: fused.labels,
                 candidates: fused.candidates,
                 motion_covariance: frame.motion_covariance,
+                measured_up: frame.measured_up,
             });
         });
     }

@@ -5,6 +5,7 @@ use actix::Message;
 use nalgebra::{Matrix6, Point3, UnitQuaternion};
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::scan_context::ScanContext;
+use sgm_model::optim::gravity::MeasuredUp;
 use sgm_model::perception::clustering::ObjectCandidate;
 use sgm_model::perception::imu::ImuSample;
 use sgm_model::perception::projection::{CameraModel, LabelImage};
@@ -58,6 +59,9 @@ pub struct SensorFrame {
     /// frame: set by the robot's own odometry (`odometry::clone`); `None`: the Tracker's
     /// odometry factors take the configured noise.
     pub motion_covariance: Option<Matrix6<f64>>,
+    /// Up in the body and its σ, as an odometry that estimates them measured them (the robot's
+    /// own sets it); `None`: the tilt is read from `odom_from_body`, taken as gravity-aligned.
+    pub measured_up: Option<MeasuredUp>,
 }
 
 /// Fusion → Tracker: a labelled scan and its object candidates (body frame).
@@ -72,6 +76,8 @@ pub struct LabelledScan {
     pub candidates: Vec<ObjectCandidate>,
     /// The frame's [`SensorFrame::motion_covariance`].
     pub motion_covariance: Option<Matrix6<f64>>,
+    /// The frame's [`SensorFrame::measured_up`].
+    pub measured_up: Option<MeasuredUp>,
 }
 
 /// Tracker → Optimiser: a new keyframe and the edges it brings (odometry, loops).
@@ -83,6 +89,9 @@ pub struct NewKeyframe {
     /// The body's attitude as its odometry measured it (odom_from_body's rotation): in a
     /// gravity-aligned odometry frame its tilt is the keyframe's against gravity.
     pub odom_from_body_rotation: UnitQuaternion<f64>,
+    /// Up in the body with its σ, when the odometry measured them ([`SensorFrame::measured_up`]):
+    /// the keyframe's gravity prior is then made from it, not from the attitude.
+    pub measured_up: Option<MeasuredUp>,
 }
 
 /// Tracker → Matcher and Comms: the map changed (a keyframe added, scans compacted or evicted,

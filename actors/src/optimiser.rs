@@ -131,14 +131,22 @@ impl Optimiser {
     }
 
     /// Adds the keyframe and its edges, and in gravity-aligned worlds its measured tilt (held by
-    /// a prior unless `gravity_sigma_deg` is 0); whether to solve now.
+    /// a prior unless `gravity_sigma_deg` is 0): the up its odometry measured with its σ when it
+    /// did, else the attitude's; whether to solve now.
     fn add_keyframe(&mut self, msg: &NewKeyframe) -> bool {
         let due = self.graph.add_keyframe(&msg.keyframe, &msg.edges, self.config.every_keyframes);
         // Recorded whenever the frames are level, so that σ can be changed on a resumed graph.
-        if self.level_anchors && !self.graph.record_tilt(msg.keyframe.id, &msg.odom_from_body_rotation) {
+        if !self.level_anchors {
+            return due;
+        }
+        let recorded = match &msg.measured_up {
+            Some(up) => self.graph.record_up(msg.keyframe.id, up),
+            None => self.graph.record_tilt(msg.keyframe.id, &msg.odom_from_body_rotation),
+        };
+        if !recorded {
             self.failures.refused_attitudes += 1;
             tracing::warn!(robot = %self.robot, keyframe = msg.keyframe.id.0,
-                "keyframe's odometry attitude is not a rotation: no gravity prior for it");
+                "keyframe's measured up or odometry attitude is not valid: no gravity prior for it");
         }
         due
     }
@@ -299,6 +307,7 @@ mod tests {
                 keyframe: keyframe(0, 0.0),
                 edges: Vec::new(),
                 odom_from_body_rotation: nalgebra::UnitQuaternion::identity(),
+                measured_up: None,
             })
             .await
             .unwrap();
@@ -316,6 +325,7 @@ mod tests {
                 keyframe: keyframe(1, 5.0),
                 edges: vec![edge],
                 odom_from_body_rotation: nalgebra::UnitQuaternion::identity(),
+                measured_up: None,
             })
             .await
             .unwrap();
@@ -335,7 +345,12 @@ mod tests {
             let mut optimiser = Optimiser::new(RobotId(0), config).with_level_anchors(level);
             for k in 0..3 {
                 let keyframe = keyframe(k, f64::from(k));
-                optimiser.add_keyframe(&NewKeyframe { keyframe, edges: Vec::new(), odom_from_body_rotation: tilted });
+                optimiser.add_keyframe(&NewKeyframe {
+                    keyframe,
+                    edges: Vec::new(),
+                    odom_from_body_rotation: tilted,
+                    measured_up: None,
+                });
             }
             optimiser.freeze().tilts
         };
@@ -349,7 +364,12 @@ mod tests {
         let not_a_rotation =
             nalgebra::UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(f64::NAN, 0.0, 0.0, 0.0));
         let keyframe = keyframe(0, 0.0);
-        optimiser.add_keyframe(&NewKeyframe { keyframe, edges: Vec::new(), odom_from_body_rotation: not_a_rotation });
+        optimiser.add_keyframe(&NewKeyframe {
+            keyframe,
+            edges: Vec::new(),
+            odom_from_body_rotation: not_a_rotation,
+            measured_up: None,
+        });
         assert!(optimiser.freeze().tilts.is_empty());
         assert_eq!(optimiser.failures.refused_attitudes, 1);
     }

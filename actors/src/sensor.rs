@@ -125,6 +125,7 @@ mod tests {
             labels: FrameLabels::PerPoint(vec![Some(LabelId(1)); labels]),
             imu: Vec::new(),
             motion_covariance: None,
+            measured_up: None,
         }
     }
 

@@ -223,6 +223,7 @@ mod tests {
                 updated: Vec::new(),
                 withdrawals: vec![(RobotId(2), 1)],
                 tilts: vec![(KeyframeId(0), nalgebra::Vector3::new(0.01, -0.02, 1.0).normalize())],
+                tilt_sigmas: vec![(KeyframeId(0), 0.003)],
             },
             comms: CommsState {
                 sequence: 99,

@@ -231,6 +231,7 @@ impl Tracker {
                 keyframe: added.keyframe,
                 edges: added.edges,
                 odom_from_body_rotation,
+                measured_up: scan.measured_up,
             });
         }
         if !added.scans_changed.is_empty() {

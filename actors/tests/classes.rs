@@ -90,6 +90,7 @@ fn fusion_maps_ade_ids_and_counts_an_unknown_one() {
             labels: FrameLabels::PerPoint(labels),
             imu: Vec::new(),
             motion_covariance: None,
+            measured_up: None,
         };
         fusion.send(frame.clone()).await.unwrap();
         fusion.send(frame).await.unwrap();

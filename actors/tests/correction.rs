@@ -61,6 +61,7 @@ async fn map_of_a_loop(loop_closure: bool) -> SceneGraph {
             labels: FrameLabels::PerPoint(labels),
             imu: Vec::new(),
             motion_covariance: None,
+            measured_up: None,
         });
         settle().await;
         robot.supervisor.do_send(Tick { now: t });

@@ -90,6 +90,7 @@ async fn run_team_with(
                 labels: FrameLabels::PerPoint(labels),
                 imu: Vec::new(),
                 motion_covariance: None,
+                measured_up: None,
             });
         }
         settle().await;
@@ -387,6 +388,7 @@ async fn foreign_replayed_truncated_and_oversized_envelopes_are_refused_and_coun
             labels: FrameLabels::PerPoint(labels),
             imu: Vec::new(),
             motion_covariance: None,
+            measured_up: None,
         });
         settle().await;
         handle.supervisor.do_send(Tick { now: t });

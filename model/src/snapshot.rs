@@ -34,8 +34,9 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// alignments and the pose graph how many withdrawals of each neighbour it has handled.
 /// Version 9: the pose graph keeps each own keyframe's measured tilt (its gravity prior).
 /// Version 10: the object tracker keeps where each object's latest sighting was counted from
-/// (glimpses' spacing).
-pub const FORMAT_VERSION: u32 = 10;
+/// (glimpses' spacing). Version 11: the pose graph keeps the σ of each own keyframe's up when
+/// its odometry measured one.
+pub const FORMAT_VERSION: u32 = 11;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).

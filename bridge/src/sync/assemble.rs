@@ -121,6 +121,7 @@ impl Synchroniser {
                 labels,
                 imu,
                 motion_covariance: None,
+                measured_up: None,
             });
         }
         self.prune();

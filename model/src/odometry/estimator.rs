@@ -55,6 +55,7 @@ use super::threshold::AdaptiveThreshold;
 use super::update::{apply_pose_update, pose_covariance, pose_of, prior_information, scan_information, UpdateError};
 use crate::geometry::lie::Matrix6;
 use crate::geometry::Pose3;
+use crate::optim::gravity::MeasuredUp;
 use crate::perception::deskew::{deskew_with, sweep_end_s, DeskewRefusal};
 use crate::perception::imu::ImuSample;
 use crate::spatial::voxel::downsample_first;
@@ -134,6 +135,11 @@ pub struct OdometryEstimate {
     /// Up (against gravity) in the filter's own frame (the published frame is that frame
     /// turned so that the last up it followed is ẑ): ẑ but for what the levelling got wrong.
     pub up: Vector3<f64>,
+    /// Up in the body now, as the filter estimates it, and its σ ([`NavState::up_in_body`]):
+    /// R_Fᵀ û with R_F the body's attitude in the filter's frame. The published pose's R_Pᵀ ẑ
+    /// follows it only once the two part by more than 3σ (the frame's turns), so a keyframe's
+    /// gravity prior is made from this one ([`crate::optim::gravity`]).
+    pub up_in_body: MeasuredUp,
 }
 
 /// Counts over the run, for status and the report.
@@ -562,6 +568,8 @@ impl LidarInertialOdometry {
         let state = filter.propagator.state;
         let covariance = pose_covariance(&filter.propagator.covariance.fixed_view::<6, 6>(0, 0).into_owned(), &state);
         let levelled = self.publish_up(&state, &filter.propagator.covariance);
+        let (up, up_sigma) = state.up_in_body(&filter.propagator.covariance);
+        let up_in_body = MeasuredUp { up_in_body: up, sigma_rad: up_sigma };
         let motion_covariance = filter
             .propagator
             .clone
@@ -582,6 +590,7 @@ impl LidarInertialOdometry {
             gyro_bias: state.gyro_bias,
             accel_bias: state.accel_bias,
             up: state.up,
+            up_in_body,
         })
     }
 

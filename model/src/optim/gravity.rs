@@ -22,6 +22,17 @@
 //! the vertical, costs nothing; the translation rows are zero. The mean is made again before each
 //! solve: a yaw that moves by β within one solve changes the tilt's cost by a factor
 //! ((β/2)/sin(β/2))², 0.2 % at 0.2 rad. No Euler angles, so no heading is ever extracted.
+//!
+//! An odometry that estimates up itself (SGM's own: [`crate::odometry`]) hands u_m with its
+//! uncertainty σ_u ([`MeasuredUp`]); the prior's σ is then √(σ² + σ_u²), so keyframes taken
+//! before the filter has learnt up weigh little, and later ones set the map's tilt. Its pose's
+//! R_mᵀ ẑ would not do: the published frame follows the filter's up only once the two part by
+//! 3σ_u (a swaying start's first 12 s on `handheld_indoor` seed 2: 1.67° off, while the
+//! filter's own up was within 0.4° after 2 s and 0.15° after 6 s).
+//!
+//! With gravity priors the map's tilt is measured, not a gauge: the first keyframe's anchor
+//! (GTSAM's default prior) then holds only its yaw and position ([`yaw_only`]), or it would pin
+//! the whole map to the tilt of its first pose.
 
 use super::factors::Prior;
 use crate::geometry::Pose3;
@@ -35,6 +46,32 @@ pub fn up_in_body(attitude: &UnitQuaternion<f64>) -> Option<Vector3<f64>> {
     let q = attitude.quaternion();
     let rotation = q.coords.iter().all(|v| v.is_finite()) && (q.norm() - 1.0).abs() < 1e-6;
     rotation.then(|| attitude.inverse() * Vector3::z())
+}
+
+/// Up in a body as an odometry that estimates it measured it: a unit vector, and its
+/// uncertainty (σ of the angle on each horizontal axis, rad).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MeasuredUp {
+    pub up_in_body: Vector3<f64>,
+    pub sigma_rad: f64,
+}
+
+impl MeasuredUp {
+    /// `None` unless `up_in_body` is a finite unit vector (within 1e-6) and `sigma_rad` finite
+    /// and ≥ 0: what came from outside is checked once, here.
+    pub fn checked(up_in_body: Vector3<f64>, sigma_rad: f64) -> Option<Self> {
+        let unit = up_in_body.iter().all(|v| v.is_finite()) && (up_in_body.norm() - 1.0).abs() < 1e-6;
+        (unit && sigma_rad.is_finite() && sigma_rad >= 0.0).then_some(Self { up_in_body, sigma_rad })
+    }
+}
+
+/// `prior` (on a pose, residual (ω, v) in its body) holding only the turn about `up` (the
+/// body's up) of its rotation, and its translation: S' = S · diag(u uᵀ, I). A keyframe's tilt is
+/// then its gravity prior's to hold.
+pub fn yaw_only(prior: &Prior<Pose3, 6>, up: &Vector3<f64>) -> Prior<Pose3, 6> {
+    let mut keep = Matrix6::identity();
+    keep.fixed_view_mut::<3, 3>(0, 0).copy_from(&(up * up.transpose()));
+    Prior { sqrt_information: prior.sqrt_information * keep, ..prior.clone() }
 }
 
 /// The gravity prior of a keyframe now at `current` whose measured up is `up` (from
@@ -51,9 +88,11 @@ pub fn gravity_prior(variable: usize, current: &Pose3, up: &Vector3<f64>, sigma_
 }
 
 /// The gravity priors of the keyframes in `ups` that have a variable (`variable_of`), at their
-/// values in `values`.
+/// values in `values`; σ = √(`sigma_rad`² + σ_u²) with σ_u a keyframe's in `up_sigmas` (0 if
+/// absent).
 pub fn gravity_priors(
     ups: &BTreeMap<KeyframeId, Vector3<f64>>,
+    up_sigmas: &BTreeMap<KeyframeId, f64>,
     variable_of: impl Fn(KeyframeId) -> Option<usize>,
     values: &[Pose3],
     sigma_rad: f64,
@@ -61,7 +100,8 @@ pub fn gravity_priors(
     ups.iter()
         .filter_map(|(k, up)| {
             let i = variable_of(*k)?;
-            gravity_prior(i, values.get(i)?, up, sigma_rad)
+            let sigma = up_sigmas.get(k).map_or(sigma_rad, |s| sigma_rad.hypot(*s));
+            gravity_prior(i, values.get(i)?, up, sigma)
         })
         .collect()
 }
@@ -143,8 +183,60 @@ mod tests {
         let upside_down = pose(std::f64::consts::PI, 0.0, 0.0, [0.0; 3]);
         assert!(gravity_prior(0, &upside_down, &Vector3::z(), 0.01).is_none());
         let ups = BTreeMap::from([(KeyframeId(0), Vector3::z()), (KeyframeId(1), Vector3::z())]);
-        let priors = gravity_priors(&ups, |k| (k.0 == 1).then_some(0), &[Pose3::identity()], 0.01);
+        let priors = gravity_priors(&ups, &BTreeMap::new(), |k| (k.0 == 1).then_some(0), &[Pose3::identity()], 0.01);
         assert_eq!(priors.len(), 1, "a keyframe without a variable has no prior");
+    }
+
+    #[test]
+    fn measured_ups_are_checked_and_their_uncertainty_widens_the_prior() {
+        assert!(MeasuredUp::checked(Vector3::z(), 0.01).is_some());
+        assert!(MeasuredUp::checked(Vector3::new(f64::NAN, 0.0, 1.0), 0.01).is_none());
+        assert!(MeasuredUp::checked(Vector3::new(0.0, 0.0, 1.01), 0.01).is_none(), "not unit");
+        assert!(MeasuredUp::checked(Vector3::z(), -0.01).is_none());
+        assert!(MeasuredUp::checked(Vector3::z(), f64::INFINITY).is_none());
+        // σ = √(σ_config² + σ_u²): 3 and 4 make 5; a keyframe without σ_u keeps σ_config.
+        let ups = BTreeMap::from([(KeyframeId(0), Vector3::z()), (KeyframeId(1), Vector3::z())]);
+        let sigmas = BTreeMap::from([(KeyframeId(1), 0.004)]);
+        let values = [Pose3::identity(), Pose3::identity()];
+        let priors = gravity_priors(&ups, &sigmas, |k| Some(k.0 as usize), &values, 0.003);
+        let weight = |p: &Prior<Pose3, 6>| p.sqrt_information[(0, 0)];
+        assert!((weight(&priors[0]) - 1.0 / 0.003).abs() < 1e-9);
+        assert!((weight(&priors[1]) - 1.0 / 0.005).abs() < 1e-9);
+    }
+
+    /// Closed form: a keyframe anchored at a pose tilted by θ (GTSAM's default prior, σ_a =
+    /// 1e-3 rad) and held to level by its gravity prior (σ_g) settles at θ σ_g²/(σ_g² + σ_a²),
+    /// nearly θ: the anchor pins the map's tilt. Anchored in yaw and position only, it settles
+    /// level, at the anchor's yaw and position.
+    #[test]
+    fn an_anchor_in_yaw_and_position_only_leaves_the_tilt_to_gravity() {
+        let (theta, yaw, sigma_g) = (0.03, 0.8, 0.0035);
+        let start = pose(theta, 0.0, yaw, [1.0, 2.0, 0.5]);
+        let level = Vector3::z();
+        let settle = |yaw_only_anchor: bool| {
+            let mut graph = Graph3::default();
+            graph.keys.push(0);
+            graph.values.push(start);
+            graph.fixed.push(false);
+            graph.add_prior_at_current(0, GTSAM_PRIOR_SIGMAS_3D);
+            if yaw_only_anchor {
+                graph.priors[0] = yaw_only(&graph.priors[0], &up_in_body(&start.rotation).unwrap());
+            }
+            graph.priors.push(gravity_prior(0, &start, &level, sigma_g).unwrap());
+            for _ in 0..3 {
+                let structure = Structure::new(&graph).unwrap();
+                optimize_with(&mut graph, &LmParams::default(), &structure, &least_squares).unwrap();
+                *graph.priors.last_mut().unwrap() = gravity_prior(0, &graph.values[0], &level, sigma_g).unwrap();
+            }
+            graph.values[0]
+        };
+        let pinned = settle(false);
+        let expected = theta * sigma_g.powi(2) / (sigma_g.powi(2) + 1e-6);
+        assert!((tilt_error(&pinned, &level) - expected).abs() < 1e-4, "{}", tilt_error(&pinned, &level));
+        let free = settle(true);
+        assert!(tilt_error(&free, &level) < 1e-6, "{}", tilt_error(&free, &level));
+        assert!((crate::geometry::yaw_of(&free) - crate::geometry::yaw_of(&start)).abs() < 1e-3);
+        assert!((free.translation.vector - start.translation.vector).norm() < 1e-9);
     }
 
     /// Closed form: one keyframe held by a relative measurement that tilts it by θ about x

@@ -39,7 +39,7 @@
 use super::consistency::{largest_consistent_set, Consistency, ImpliedClosure};
 use super::factors::{Between, Prior};
 use super::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
-use super::gravity::{gravity_priors, up_in_body};
+use super::gravity::{gravity_priors, up_in_body, yaw_only, MeasuredUp};
 use super::marginals::marginal_covariances_with;
 use super::robust::{optimize_gnc_incremental_with, rejection_weights, weighted};
 use super::solver::{least_squares, optimize_with, LmParams, SolveError, Structure};
@@ -70,6 +70,8 @@ pub struct KeyframeGraphState {
     pub withdrawals: Vec<(RobotId, u32)>,
     /// Local keyframes' measured tilts: the world's up in each body ([`KeyframeGraph::record_tilt`]).
     pub tilts: Vec<(KeyframeId, Vector3<f64>)>,
+    /// The uncertainty of those an odometry measured with one ([`KeyframeGraph::record_up`]), rad.
+    pub tilt_sigmas: Vec<(KeyframeId, f64)>,
 }
 
 /// What a solve gives: every local keyframe's pose, the newest ones' marginal covariances, and
@@ -142,6 +144,8 @@ pub struct KeyframeGraph {
     /// Local keyframes' tilts as their odometry measured them against gravity: the world's up
     /// in each body ([`KeyframeGraph::record_tilt`]).
     tilts: BTreeMap<KeyframeId, Vector3<f64>>,
+    /// σ_u of the tilts measured with one, rad ([`KeyframeGraph::record_up`]).
+    tilt_sigmas: BTreeMap<KeyframeId, f64>,
     /// σ of the gravity priors, rad; `None`: none ([`KeyframeGraph::set_gravity_priors`]).
     gravity_sigma_rad: Option<f64>,
     /// While a solve holds its gravity priors: how many priors the graph has without them. Set
@@ -219,6 +223,7 @@ impl KeyframeGraph {
             updated: self.updated.iter().copied().collect(),
             withdrawals: self.withdrawals.iter().map(|(r, n)| (*r, *n)).collect(),
             tilts: self.tilts.iter().map(|(k, u)| (*k, *u)).collect(),
+            tilt_sigmas: self.tilt_sigmas.iter().map(|(k, s)| (*k, *s)).collect(),
         }
     }
 
@@ -247,7 +252,10 @@ impl KeyframeGraph {
                     local.contains(&KeyframeRef::Local(*k))
                         && u.iter().all(|v| v.is_finite())
                         && (u.norm() - 1.0).abs() < 1e-6
-                })
+                }) && state
+                    .tilt_sigmas
+                    .iter()
+                    .all(|(k, s)| local.contains(&KeyframeRef::Local(*k)) && s.is_finite() && *s >= 0.0)
             };
         consistent.then(|| Self {
             graph: state.graph,
@@ -267,6 +275,7 @@ impl KeyframeGraph {
             level: false,
             withdrawals: state.withdrawals.into_iter().collect(),
             tilts: state.tilts.into_iter().collect(),
+            tilt_sigmas: state.tilt_sigmas.into_iter().collect(),
             gravity_sigma_rad: None,
             transient_from: None,
         })
@@ -558,6 +567,20 @@ impl KeyframeGraph {
             return false;
         }
         self.tilts.insert(keyframe, up);
+        self.tilt_sigmas.remove(&keyframe);
+        true
+    }
+
+    /// Records up in local keyframe `keyframe`'s body as an odometry that estimates it measured
+    /// it, with its uncertainty: its gravity prior's σ grows to √(σ² + σ_u²) ([`super::gravity`]).
+    /// Whether it was recorded (not for a keyframe the graph does not hold).
+    pub fn record_up(&mut self, keyframe: KeyframeId, measured: &MeasuredUp) -> bool {
+        let Some(checked) = MeasuredUp::checked(measured.up_in_body, measured.sigma_rad) else { return false };
+        if !self.index.contains_key(&KeyframeRef::Local(keyframe)) {
+            return false;
+        }
+        self.tilts.insert(keyframe, checked.up_in_body);
+        self.tilt_sigmas.insert(keyframe, checked.sigma_rad);
         true
     }
 
@@ -565,7 +588,36 @@ impl KeyframeGraph {
     fn gravity_priors(&self) -> Vec<Prior<Pose3, 6>> {
         let Some(sigma) = self.gravity_sigma_rad else { return Vec::new() };
         let variable_of = |k| self.index.get(&KeyframeRef::Local(k)).copied();
-        gravity_priors(&self.tilts, variable_of, &self.graph.values, sigma)
+        gravity_priors(&self.tilts, &self.tilt_sigmas, variable_of, &self.graph.values, sigma)
+    }
+
+    /// The measured up of each local keyframe an odometry measured it for with its uncertainty
+    /// ([`Self::record_up`]), by variable; none without gravity priors.
+    fn ups_with_uncertainty(&self) -> BTreeMap<usize, Vector3<f64>> {
+        if self.gravity_sigma_rad.is_none() {
+            return BTreeMap::new();
+        }
+        self.tilt_sigmas
+            .keys()
+            .filter_map(|k| Some((*self.index.get(&KeyframeRef::Local(*k))?, *self.tilts.get(k)?)))
+            .collect()
+    }
+
+    /// With gravity priors, a prior on a local keyframe (the first one's anchor) whose up an
+    /// odometry measured with its uncertainty holds yaw and position only, about that up: its
+    /// tilt is then its gravity prior's, at the σ the odometry gave, and not pinned to the first
+    /// pose's ([`super::gravity`]). An odometry that tells no uncertainty keeps the anchor whole.
+    /// The priors as they were, to put back after the solve.
+    fn free_anchor_tilts(&mut self) -> Vec<(usize, Prior<Pose3, 6>)> {
+        let up_of = self.ups_with_uncertainty();
+        let mut saved = Vec::new();
+        for (k, prior) in self.graph.priors.iter_mut().enumerate() {
+            if let Some(up) = up_of.get(&prior.variable) {
+                saved.push((k, prior.clone()));
+                *prior = yaw_only(prior, up);
+            }
+        }
+        saved
     }
 
     /// Gravity-aligned worlds (`level`): every solve holds every anchor level
@@ -617,10 +669,14 @@ impl KeyframeGraph {
         Self::drop_transient_priors(&mut self.graph, self.transient_from.take());
         let held = self.graph.priors.len();
         let gravity = self.gravity_priors();
+        let anchors = self.free_anchor_tilts();
         self.graph.priors.extend(gravity);
         self.transient_from = Some(held);
         let solved = self.solve_held(reject_outliers, marginals);
         Self::drop_transient_priors(&mut self.graph, self.transient_from.take());
+        for (k, prior) in anchors {
+            self.graph.priors[k] = prior;
+        }
         solved
     }
 
@@ -708,6 +764,14 @@ impl KeyframeGraph {
         // (`add_keyframe` anchors only the graph's first variable): the first of ours takes it.
         if own.priors.is_empty() && !own.values.is_empty() {
             own.add_prior_at_current(0, GTSAM_PRIOR_SIGMAS_3D);
+        }
+        // As in a solve: an anchor whose up came with its uncertainty holds yaw and position.
+        let up_of = self.ups_with_uncertainty();
+        for p in own.priors.iter_mut() {
+            // The own graph's variable j is local keyframe j.
+            if let Some(up) = local.get(p.variable).and_then(|(_, i)| up_of.get(i)) {
+                *p = yaw_only(p, up);
+            }
         }
         for p in self.gravity_priors() {
             if let Some(&variable) = new_of.get(&p.variable) {
@@ -1041,6 +1105,73 @@ mod tests {
             let off = (anchor.translation.vector - translation).norm();
             assert!(off < 1e-3, "level {level}: {off} m");
         }
+    }
+
+    /// An odometry that learns up (SGM's own) publishes its first poses in a frame tilted by what
+    /// its levelling got wrong (here 1.5° about the chain's axis), while the up it measures in
+    /// each body, with its σ, is right. Recorded as attitudes (`record_tilt`), the first
+    /// keyframe's anchor pins the chain at the published tilt; recorded as measured ups
+    /// (`record_up`: σ_u 2° for the first three, 0.01° after), the anchor holds yaw and position
+    /// only and the whole chain settles level, where the anchor and the odometry put it
+    /// otherwise. The σ_u survive a freeze; a thaw refuses one that is negative.
+    #[test]
+    fn an_anchor_whose_up_came_with_its_uncertainty_does_not_pin_the_tilt() {
+        let tilt = Pose3::from_parts(
+            nalgebra::Translation3::identity(),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 1.5f64.to_radians()),
+        );
+        let step = pose_from_yaw_translation(0.0, Vector3::new(2.0, 0.0, 0.0));
+        let build = |measured: bool| {
+            let mut graph = KeyframeGraph::default();
+            for k in 0..10u32 {
+                let published = tilt * (0..k).fold(Pose3::identity(), |p, _| p * step);
+                let edges: Vec<KeyframeEdge> = (k > 0).then(|| odometry(k - 1, k, &step)).into_iter().collect();
+                graph.add_keyframe(
+                    &Keyframe { id: KeyframeId(k), stamp: f64::from(k), world_from_body: published },
+                    &edges,
+                    100,
+                );
+                let recorded = if measured {
+                    let sigma_rad = if k < 3 { 2f64 } else { 0.01 }.to_radians();
+                    graph.record_up(KeyframeId(k), &MeasuredUp { up_in_body: Vector3::z(), sigma_rad })
+                } else {
+                    graph.record_tilt(KeyframeId(k), &UnitQuaternion::identity())
+                };
+                assert!(recorded);
+            }
+            graph.set_gravity_priors(Some(0.2f64.to_radians()));
+            graph.solve(false, 0).expect("solves");
+            let solved = graph.solve(false, 0).expect("solves");
+            (graph, solved.poses)
+        };
+        let tilt_deg = |p: &Pose3| (p.rotation * Vector3::z()).angle(&Vector3::z()).to_degrees();
+        let (_, pinned) = build(false);
+        assert!(tilt_deg(&pinned[0].1) > 1.3, "pinned: {}°", tilt_deg(&pinned[0].1));
+        let (mut graph, free) = build(true);
+        for (k, p) in &free {
+            assert!(tilt_deg(p) < 0.02, "keyframe {}: {}°", k.0, tilt_deg(p));
+            assert!(crate::geometry::yaw_of(p).abs() < 1e-6, "keyframe {}", k.0);
+            let expected = Vector3::new(2.0 * f64::from(k.0), 0.0, 0.0);
+            assert!((p.translation.vector - expected).norm() < 1e-3, "keyframe {}: {}", k.0, p.translation.vector);
+        }
+        // The anchor is whole again after the solve: what a freeze keeps is unchanged by it.
+        assert_eq!(
+            graph.graph.priors[0].sqrt_information,
+            Matrix6::from_diagonal(&nalgebra::Vector6::from_iterator(GTSAM_PRIOR_SIGMAS_3D.iter().map(|s| 1.0 / s),))
+        );
+        // Bad measured ups are refused; a keyframe the graph does not hold too.
+        let unit = MeasuredUp { up_in_body: Vector3::z(), sigma_rad: 0.01 };
+        assert!(!graph.record_up(KeyframeId(99), &unit));
+        assert!(!graph.record_up(KeyframeId(3), &MeasuredUp { up_in_body: Vector3::new(0.0, 0.0, 2.0), ..unit }));
+        assert!(!graph.record_up(KeyframeId(3), &MeasuredUp { sigma_rad: f64::NAN, ..unit }));
+        let state = graph.freeze();
+        assert_eq!(state.tilt_sigmas.len(), 10);
+        let mut thawed = KeyframeGraph::thaw(state.clone()).expect("fits");
+        thawed.set_gravity_priors(Some(0.2f64.to_radians()));
+        assert_eq!(thawed, graph);
+        let mut broken = state;
+        broken.tilt_sigmas[0].1 = -1.0;
+        assert_eq!(KeyframeGraph::thaw(broken), None, "a negative σ_u");
     }
 
     /// A loop closure that puts keyframe 9 of a level 18 m chain 0.3 m lower than odometry says

@@ -11,7 +11,7 @@
 use super::{aligned_right, duration_arg, load_cut, or_dash, run_all, Job, Section};
 use serde::Serialize;
 use sgm_scenarios::report::Report;
-use sgm_scenarios::scenario::{LidarPattern, Platform, Scenario};
+use sgm_scenarios::scenario::{LidarPattern, OdometrySourceSpec, Platform, Scenario};
 use std::fmt::Write;
 
 /// One effect: its name, what it turns on, and how.
@@ -81,6 +81,16 @@ fn people(s: &mut Scenario) {
 
 fn tilt_drift(s: &mut Scenario) {
     s.odometry.tilt_walk_deg = 0.1;
+}
+
+/// Each robot's own LiDAR-inertial odometry on its sweeps and an IMU whose biases start where a
+/// calibrated MEMS part's do (the library's realism scenarios' values).
+fn own_odometry(s: &mut Scenario) {
+    sweep(s);
+    s.imu.enabled = true;
+    s.imu.gyro_turn_on_bias = 0.003;
+    s.imu.accel_turn_on_bias = 0.05;
+    s.odometry.source = OdometrySourceSpec::Internal;
 }
 
 const EFFECTS: &[Effect] = &[
@@ -161,6 +171,11 @@ const EFFECTS: &[Effect] = &[
             tilt_drift(s);
             s.matcher.matching.max_tilt_deg = 0.0;
         },
+    },
+    Effect {
+        name: "own odometry",
+        what: "each robot's own LiDAR-inertial odometry on 0.1 s sweeps and an IMU with turn-on biases (0.003 rad/s, 0.05 m/s²), not the synthetic one",
+        apply: own_odometry,
     },
 ];
 

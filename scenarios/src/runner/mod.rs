@@ -165,6 +165,7 @@ pub async fn run_with(
                     labels: FrameLabels::Unlabelled,
                     imu: sweep.imu,
                     motion_covariance: None,
+                    measured_up: None,
                 };
                 team.frame(k, || scenario.robot_config(k), sweep_frame).await?;
             }
@@ -200,6 +201,7 @@ pub async fn run_with(
                 labels: frame.labels,
                 imu: frame.imu,
                 motion_covariance: None,
+                measured_up: None,
             };
             team.frame(k, || scenario.robot_config(k), sensor_frame).await?;
         }
