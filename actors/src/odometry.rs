@@ -187,7 +187,7 @@ impl OdometryStage {
         self.handed_on += 1;
         // The next frame handed on carries the motion's covariance from this one.
         frame.motion_covariance = estimate.motion_covariance;
-        frame.measured_up = Some(estimate.up_in_body);
+        frame.measured_up = Some(estimate.measured_up);
         self.estimator.mark();
         frame.odom_from_body = estimate.odom_from_body;
         frame.points_deskewed = estimate.deskew.is_ok();

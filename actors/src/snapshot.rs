@@ -223,7 +223,8 @@ mod tests {
                 updated: Vec::new(),
                 withdrawals: vec![(RobotId(2), 1)],
                 tilts: vec![(KeyframeId(0), nalgebra::Vector3::new(0.01, -0.02, 1.0).normalize())],
-                tilt_sigmas: vec![(KeyframeId(0), 0.003)],
+                frame_attitudes: vec![(KeyframeId(1), nalgebra::UnitQuaternion::from_euler_angles(0.01, 0.0, 1.0))],
+                frame_up: Some((nalgebra::Vector3::new(0.0, 0.01, 1.0).normalize(), 0.003)),
             },
             comms: CommsState {
                 sequence: 99,

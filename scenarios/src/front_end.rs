@@ -26,8 +26,8 @@ use std::time::{Duration, Instant};
 pub struct FrontEndFrame {
     pub t: f64,
     pub estimate: Option<Pose3>,
-    /// The filter's up in the body (`OdometryEstimate::up_in_body`) with the estimate.
-    pub up_in_body: Option<nalgebra::Vector3<f64>>,
+    /// The filter's up and attitude in its own frame (`OdometryEstimate::measured_up`).
+    pub measured_up: Option<sgm_model::optim::gravity::MeasuredUp>,
     pub outcome: Option<ScanOutcome>,
     pub truth: Pose3,
     pub synthetic: Pose3,
@@ -134,11 +134,11 @@ pub fn run_front_end_recording(
         estimator.push_imu(&samples);
         let result = estimator.process_scan(t, &frame.points, times);
         estimator_time += started.elapsed();
-        let (estimate, up_in_body, outcome) = match result {
-            Ok(e) => (Some(e.odom_from_body), Some(e.up_in_body.up_in_body), Some(e.outcome)),
+        let (estimate, measured_up, outcome) = match result {
+            Ok(e) => (Some(e.odom_from_body), Some(e.measured_up), Some(e.outcome)),
             Err(_) => (None, None, None),
         };
-        frames.push(FrontEndFrame { t, estimate, up_in_body, outcome, truth, synthetic: odometry });
+        frames.push(FrontEndFrame { t, estimate, measured_up, outcome, truth, synthetic: odometry });
     }
     if let Some(recorder) = recorder {
         recorder.finish()?;

@@ -135,11 +135,11 @@ pub struct OdometryEstimate {
     /// Up (against gravity) in the filter's own frame (the published frame is that frame
     /// turned so that the last up it followed is ẑ): ẑ but for what the levelling got wrong.
     pub up: Vector3<f64>,
-    /// Up in the body now, as the filter estimates it, and its σ ([`NavState::up_in_body`]):
-    /// R_Fᵀ û with R_F the body's attitude in the filter's frame. The published pose's R_Pᵀ ẑ
-    /// follows it only once the two part by more than 3σ (the frame's turns), so a keyframe's
-    /// gravity prior is made from this one ([`crate::optim::gravity`]).
-    pub up_in_body: MeasuredUp,
+    /// The body's attitude in the filter's own frame and up in that frame with its σ (the worse
+    /// horizontal axis of δu's covariance): the published pose's R_Pᵀ ẑ follows the filter's up
+    /// only once the two part by more than 3σ (the frame's turns), so keyframes' gravity priors
+    /// are made from this, each held to the latest up ([`crate::optim::gravity`]).
+    pub measured_up: MeasuredUp,
 }
 
 /// Counts over the run, for status and the report.
@@ -568,8 +568,12 @@ impl LidarInertialOdometry {
         let state = filter.propagator.state;
         let covariance = pose_covariance(&filter.propagator.covariance.fixed_view::<6, 6>(0, 0).into_owned(), &state);
         let levelled = self.publish_up(&state, &filter.propagator.covariance);
-        let (up, up_sigma) = state.up_in_body(&filter.propagator.covariance);
-        let up_in_body = MeasuredUp { up_in_body: up, sigma_rad: up_sigma };
+        let up_sigma = filter.propagator.covariance.fixed_view::<2, 2>(UP, UP).symmetric_eigenvalues().max();
+        let measured_up = MeasuredUp {
+            attitude_in_frame: state.rotation,
+            up_in_frame: state.up,
+            sigma_rad: up_sigma.max(0.0).sqrt(),
+        };
         let motion_covariance = filter
             .propagator
             .clone
@@ -590,7 +594,7 @@ impl LidarInertialOdometry {
             gyro_bias: state.gyro_bias,
             accel_bias: state.accel_bias,
             up: state.up,
-            up_in_body,
+            measured_up,
         })
     }
 

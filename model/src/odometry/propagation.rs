@@ -109,24 +109,6 @@ impl NavState {
         (UnitQuaternion::from_scaled_axis(Vector3::new(du.x, du.y, 0.0)) * self.up).normalize()
     }
 
-    /// Up in the body, û_b = R̂ᵀ û, and the σ of its direction (rad, on the worse of its two
-    /// horizontal axes) under `covariance`. With R = R̂ Exp(δθ) and u = Exp(B δu) û, to first
-    /// order
-    ///
-    ///   û_b(δ) = û_b + [û_b]× δθ − R̂ᵀ [û]× B δu,   Σ_b = J Σ Jᵀ,   J = ([û_b]×, −R̂ᵀ [û]× B).
-    pub fn up_in_body(&self, covariance: &Matrix17) -> (Vector3<f64>, f64) {
-        let body_from_frame = self.rotation.inverse();
-        let up_in_body = body_from_frame * self.up;
-        let horizontal = nalgebra::Matrix3x2::new(1.0, 0.0, 0.0, 1.0, 0.0, 0.0);
-        let mut jacobian = SMatrix::<f64, 3, STATE_DIM>::zeros();
-        jacobian.fixed_view_mut::<3, 3>(0, 0).copy_from(&hat(&up_in_body));
-        jacobian
-            .fixed_view_mut::<3, 2>(0, UP)
-            .copy_from(&(-(body_from_frame.to_rotation_matrix().matrix() * hat(&self.up)) * horizontal));
-        let spread = jacobian * covariance * jacobian.transpose();
-        (up_in_body, spread.symmetric_eigenvalues().max().max(0.0).sqrt())
-    }
-
     /// The state after one sample held for `dt` (the module's equations).
     pub fn propagated(&self, sample: &ImuSample, dt: f64, gravity_mps2: f64) -> Self {
         let f = sample.specific_force - self.accel_bias;
@@ -260,35 +242,6 @@ mod tests {
         let (r, p) = truth(2000.0 * dt);
         assert!((state.position - p).norm() < 1e-6, "{} vs {p}", state.position);
         assert!(state.rotation.angle_to(&r) < 1e-9);
-    }
-
-    /// The σ of up in the body is the first-order spread of R̂ᵀ û under the state's error:
-    /// against the state moved by ε along each of δθ's and δu's axes alone.
-    #[test]
-    fn up_in_the_body_and_its_sigma_match_numeric_differentiation() {
-        let state = NavState {
-            up: Vector3::new(0.02, -0.03, 1.0).normalize(),
-            ..NavState::at_rest(UnitQuaternion::from_euler_angles(0.1, -0.2, 2.0), Vector3::new(1.0, 2.0, 3.0))
-        };
-        let (up, _) = state.up_in_body(&Matrix17::zeros());
-        assert!((up - state.rotation.inverse() * state.up).norm() < 1e-15);
-        let eps = 1e-6;
-        // Each axis alone, and pairs whose effects add or cancel (the signs of J's blocks).
-        for (k, j) in [(0, 0), (1, 1), (2, 2), (UP, UP), (UP + 1, UP + 1), (0, UP), (1, UP + 1), (0, UP + 1), (1, UP)] {
-            let mut d = Vector17::zeros();
-            d[k] = eps;
-            d[j] += 0.7 * eps * if j == k { 0.0 } else { 1.0 };
-            let moved = perturbed(&state, &d);
-            let numeric = (moved.rotation.inverse() * moved.up - up).norm();
-            let (_, sigma) = state.up_in_body(&(d * d.transpose()));
-            assert!((sigma - numeric).abs() < 1e-3 * numeric.max(1e-12), "axes {k}, {j}: {sigma} vs {numeric}");
-        }
-        // Position, velocity and biases do not move up in the body.
-        let mut others = Matrix17::identity();
-        for k in [0, 1, 2, UP, UP + 1] {
-            others[(k, k)] = 0.0;
-        }
-        assert!(state.up_in_body(&others).1 < 1e-12);
     }
 
     /// The state moved by an error δx: R Exp(δθ), p + δp, v + δv, biases + δb, Exp(B δu) u.

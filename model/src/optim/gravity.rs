@@ -23,12 +23,14 @@
 //! solve: a yaw that moves by β within one solve changes the tilt's cost by a factor
 //! ((β/2)/sin(β/2))², 0.2 % at 0.2 rad. No Euler angles, so no heading is ever extracted.
 //!
-//! An odometry that estimates up itself (SGM's own: [`crate::odometry`]) hands u_m with its
-//! uncertainty σ_u ([`MeasuredUp`]); the prior's σ is then √(σ² + σ_u²), so keyframes taken
-//! before the filter has learnt up weigh little, and later ones set the map's tilt. Its pose's
-//! R_mᵀ ẑ would not do: the published frame follows the filter's up only once the two part by
-//! 3σ_u (a swaying start's first 12 s on `handheld_indoor` seed 2: 1.67° off, while the
-//! filter's own up was within 0.4° after 2 s and 0.15° after 6 s).
+//! An odometry that estimates up itself (SGM's own: [`crate::odometry`]) keeps a frame of its
+//! own and learns where up is in it, û with σ_u ([`MeasuredUp`]). The graph keeps each
+//! keyframe's attitude in that frame, R_F, and the latest û: u_m = R_Fᵀ û_latest, σ =
+//! √(σ² + σ_u²). What the odometry learns later levels the keyframes it measured before, whose
+//! ups were wrong together (a turn-on bias of the accelerometer tilts every one alike until the
+//! body turns). Its pose's R_mᵀ ẑ would not do: the published frame follows the filter's up
+//! only once the two part by 3σ_u (a swaying start's first 12 s on `handheld_indoor` seed 1:
+//! 2.1° off, while the filter's own up was within 0.3° after 2 s).
 //!
 //! With gravity priors the map's tilt is measured, not a gauge: the first keyframe's anchor
 //! (GTSAM's default prior) then holds only its yaw and position ([`yaw_only`]), or it would pin
@@ -48,21 +50,35 @@ pub fn up_in_body(attitude: &UnitQuaternion<f64>) -> Option<Vector3<f64>> {
     rotation.then(|| attitude.inverse() * Vector3::z())
 }
 
-/// Up in a body as an odometry that estimates it measured it: a unit vector, and its
-/// uncertainty (σ of the angle on each horizontal axis, rad).
+/// What an odometry that estimates up measured at a scan: the body's attitude in the
+/// odometry's own frame (fixed for its run), and up in that frame as it knew it then, with its
+/// σ (rad, on each horizontal axis).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MeasuredUp {
-    pub up_in_body: Vector3<f64>,
+    pub attitude_in_frame: UnitQuaternion<f64>,
+    pub up_in_frame: Vector3<f64>,
     pub sigma_rad: f64,
 }
 
 impl MeasuredUp {
-    /// `None` unless `up_in_body` is a finite unit vector (within 1e-6) and `sigma_rad` finite
-    /// and ≥ 0: what came from outside is checked once, here.
-    pub fn checked(up_in_body: Vector3<f64>, sigma_rad: f64) -> Option<Self> {
-        let unit = up_in_body.iter().all(|v| v.is_finite()) && (up_in_body.norm() - 1.0).abs() < 1e-6;
-        (unit && sigma_rad.is_finite() && sigma_rad >= 0.0).then_some(Self { up_in_body, sigma_rad })
+    /// Whether the attitude is a finite unit quaternion, up a finite unit vector (both within
+    /// 1e-6) and σ finite and ≥ 0: what came from outside is checked once, here.
+    pub fn is_valid(&self) -> bool {
+        unit_up(&self.up_in_frame)
+            && up_in_body(&self.attitude_in_frame).is_some()
+            && self.sigma_rad.is_finite()
+            && self.sigma_rad >= 0.0
     }
+
+    /// Up in the body: R_Fᵀ û.
+    pub fn up_in_body(&self) -> Vector3<f64> {
+        self.attitude_in_frame.inverse() * self.up_in_frame
+    }
+}
+
+/// Whether `up` is a finite unit vector (within 1e-6).
+pub fn unit_up(up: &Vector3<f64>) -> bool {
+    up.iter().all(|v| v.is_finite()) && (up.norm() - 1.0).abs() < 1e-6
 }
 
 /// `prior` (on a pose, residual (ω, v) in its body) holding only the turn about `up` (the
@@ -189,11 +205,19 @@ mod tests {
 
     #[test]
     fn measured_ups_are_checked_and_their_uncertainty_widens_the_prior() {
-        assert!(MeasuredUp::checked(Vector3::z(), 0.01).is_some());
-        assert!(MeasuredUp::checked(Vector3::new(f64::NAN, 0.0, 1.0), 0.01).is_none());
-        assert!(MeasuredUp::checked(Vector3::new(0.0, 0.0, 1.01), 0.01).is_none(), "not unit");
-        assert!(MeasuredUp::checked(Vector3::z(), -0.01).is_none());
-        assert!(MeasuredUp::checked(Vector3::z(), f64::INFINITY).is_none());
+        let m = MeasuredUp {
+            attitude_in_frame: UnitQuaternion::from_euler_angles(0.0, 0.5, 0.0),
+            up_in_frame: Vector3::z(),
+            sigma_rad: 0.01,
+        };
+        assert!(m.is_valid());
+        assert!((m.up_in_body() - up(0.0, 0.5, 0.0)).norm() < 1e-12);
+        assert!(!MeasuredUp { up_in_frame: Vector3::new(f64::NAN, 0.0, 1.0), ..m }.is_valid());
+        assert!(!MeasuredUp { up_in_frame: Vector3::new(0.0, 0.0, 1.01), ..m }.is_valid(), "not unit");
+        let unnormalised = UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(2.0, 0.0, 0.0, 0.0));
+        assert!(!MeasuredUp { attitude_in_frame: unnormalised, ..m }.is_valid());
+        assert!(!MeasuredUp { sigma_rad: -0.01, ..m }.is_valid());
+        assert!(!MeasuredUp { sigma_rad: f64::INFINITY, ..m }.is_valid());
         // σ = √(σ_config² + σ_u²): 3 and 4 make 5; a keyframe without σ_u keeps σ_config.
         let ups = BTreeMap::from([(KeyframeId(0), Vector3::z()), (KeyframeId(1), Vector3::z())]);
         let sigmas = BTreeMap::from([(KeyframeId(1), 0.004)]);

@@ -39,7 +39,7 @@
 use super::consistency::{largest_consistent_set, Consistency, ImpliedClosure};
 use super::factors::{Between, Prior};
 use super::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
-use super::gravity::{gravity_priors, up_in_body, yaw_only, MeasuredUp};
+use super::gravity::{gravity_priors, unit_up, up_in_body, yaw_only, MeasuredUp};
 use super::marginals::marginal_covariances_with;
 use super::robust::{optimize_gnc_incremental_with, rejection_weights, weighted};
 use super::solver::{least_squares, optimize_with, LmParams, SolveError, Structure};
@@ -70,8 +70,11 @@ pub struct KeyframeGraphState {
     pub withdrawals: Vec<(RobotId, u32)>,
     /// Local keyframes' measured tilts: the world's up in each body ([`KeyframeGraph::record_tilt`]).
     pub tilts: Vec<(KeyframeId, Vector3<f64>)>,
-    /// The uncertainty of those an odometry measured with one ([`KeyframeGraph::record_up`]), rad.
-    pub tilt_sigmas: Vec<(KeyframeId, f64)>,
+    /// Local keyframes measured by an odometry that learns up: each one's attitude in that
+    /// odometry's frame ([`KeyframeGraph::record_up`]).
+    pub frame_attitudes: Vec<(KeyframeId, UnitQuaternion<f64>)>,
+    /// The latest up in that frame, and its σ, rad.
+    pub frame_up: Option<(Vector3<f64>, f64)>,
 }
 
 /// What a solve gives: every local keyframe's pose, the newest ones' marginal covariances, and
@@ -144,8 +147,10 @@ pub struct KeyframeGraph {
     /// Local keyframes' tilts as their odometry measured them against gravity: the world's up
     /// in each body ([`KeyframeGraph::record_tilt`]).
     tilts: BTreeMap<KeyframeId, Vector3<f64>>,
-    /// σ_u of the tilts measured with one, rad ([`KeyframeGraph::record_up`]).
-    tilt_sigmas: BTreeMap<KeyframeId, f64>,
+    /// Local keyframes' attitudes in the frame of an odometry that learns up, and the latest
+    /// up in it with its σ ([`KeyframeGraph::record_up`]).
+    frame_attitudes: BTreeMap<KeyframeId, UnitQuaternion<f64>>,
+    frame_up: Option<(Vector3<f64>, f64)>,
     /// σ of the gravity priors, rad; `None`: none ([`KeyframeGraph::set_gravity_priors`]).
     gravity_sigma_rad: Option<f64>,
     /// While a solve holds its gravity priors: how many priors the graph has without them. Set
@@ -223,7 +228,8 @@ impl KeyframeGraph {
             updated: self.updated.iter().copied().collect(),
             withdrawals: self.withdrawals.iter().map(|(r, n)| (*r, *n)).collect(),
             tilts: self.tilts.iter().map(|(k, u)| (*k, *u)).collect(),
-            tilt_sigmas: self.tilt_sigmas.iter().map(|(k, s)| (*k, *s)).collect(),
+            frame_attitudes: self.frame_attitudes.iter().map(|(k, r)| (*k, *r)).collect(),
+            frame_up: self.frame_up,
         }
     }
 
@@ -253,9 +259,10 @@ impl KeyframeGraph {
                         && u.iter().all(|v| v.is_finite())
                         && (u.norm() - 1.0).abs() < 1e-6
                 }) && state
-                    .tilt_sigmas
+                    .frame_attitudes
                     .iter()
-                    .all(|(k, s)| local.contains(&KeyframeRef::Local(*k)) && s.is_finite() && *s >= 0.0)
+                    .all(|(k, r)| local.contains(&KeyframeRef::Local(*k)) && up_in_body(r).is_some())
+                    && state.frame_up.is_none_or(|(u, s)| unit_up(&u) && s.is_finite() && s >= 0.0)
             };
         consistent.then(|| Self {
             graph: state.graph,
@@ -275,7 +282,8 @@ impl KeyframeGraph {
             level: false,
             withdrawals: state.withdrawals.into_iter().collect(),
             tilts: state.tilts.into_iter().collect(),
-            tilt_sigmas: state.tilt_sigmas.into_iter().collect(),
+            frame_attitudes: state.frame_attitudes.into_iter().collect(),
+            frame_up: state.frame_up,
             gravity_sigma_rad: None,
             transient_from: None,
         })
@@ -567,40 +575,55 @@ impl KeyframeGraph {
             return false;
         }
         self.tilts.insert(keyframe, up);
-        self.tilt_sigmas.remove(&keyframe);
+        self.frame_attitudes.remove(&keyframe);
         true
     }
 
-    /// Records up in local keyframe `keyframe`'s body as an odometry that estimates it measured
-    /// it, with its uncertainty: its gravity prior's σ grows to √(σ² + σ_u²) ([`super::gravity`]).
-    /// Whether it was recorded (not for a keyframe the graph does not hold).
+    /// Records local keyframe `keyframe` as measured by an odometry that learns up: its attitude
+    /// in that odometry's frame, and up in the frame as the odometry knows it now, which
+    /// replaces the up every keyframe measured so is held to (u_m = R_Fᵀ û_latest, σ =
+    /// √(σ² + σ_u²): [`super::gravity`]). Whether it was recorded: not for a keyframe the graph
+    /// does not hold, nor for a measurement that is not valid ([`MeasuredUp::is_valid`]).
     pub fn record_up(&mut self, keyframe: KeyframeId, measured: &MeasuredUp) -> bool {
-        let Some(checked) = MeasuredUp::checked(measured.up_in_body, measured.sigma_rad) else { return false };
-        if !self.index.contains_key(&KeyframeRef::Local(keyframe)) {
+        if !measured.is_valid() || !self.index.contains_key(&KeyframeRef::Local(keyframe)) {
             return false;
         }
-        self.tilts.insert(keyframe, checked.up_in_body);
-        self.tilt_sigmas.insert(keyframe, checked.sigma_rad);
+        self.tilts.remove(&keyframe);
+        self.frame_attitudes.insert(keyframe, measured.attitude_in_frame);
+        self.frame_up = Some((measured.up_in_frame, measured.sigma_rad));
         true
+    }
+
+    /// Each local keyframe's measured up in its body and that up's own σ (0 for those measured
+    /// as an attitude alone).
+    fn measured_ups(&self) -> (BTreeMap<KeyframeId, Vector3<f64>>, BTreeMap<KeyframeId, f64>) {
+        let mut ups = self.tilts.clone();
+        let mut sigmas = BTreeMap::new();
+        if let Some((up, sigma)) = self.frame_up {
+            for (k, attitude) in &self.frame_attitudes {
+                ups.insert(*k, attitude.inverse() * up);
+                sigmas.insert(*k, sigma);
+            }
+        }
+        (ups, sigmas)
     }
 
     /// The gravity priors for the next solve, at the current values (none unless set).
     fn gravity_priors(&self) -> Vec<Prior<Pose3, 6>> {
         let Some(sigma) = self.gravity_sigma_rad else { return Vec::new() };
         let variable_of = |k| self.index.get(&KeyframeRef::Local(k)).copied();
-        gravity_priors(&self.tilts, &self.tilt_sigmas, variable_of, &self.graph.values, sigma)
+        let (ups, up_sigmas) = self.measured_ups();
+        gravity_priors(&ups, &up_sigmas, variable_of, &self.graph.values, sigma)
     }
 
-    /// The measured up of each local keyframe an odometry measured it for with its uncertainty
+    /// The measured up of each local keyframe an odometry that learns up measured
     /// ([`Self::record_up`]), by variable; none without gravity priors.
     fn ups_with_uncertainty(&self) -> BTreeMap<usize, Vector3<f64>> {
         if self.gravity_sigma_rad.is_none() {
             return BTreeMap::new();
         }
-        self.tilt_sigmas
-            .keys()
-            .filter_map(|k| Some((*self.index.get(&KeyframeRef::Local(*k))?, *self.tilts.get(k)?)))
-            .collect()
+        let (ups, sigmas) = self.measured_ups();
+        sigmas.keys().filter_map(|k| Some((*self.index.get(&KeyframeRef::Local(*k))?, *ups.get(k)?))).collect()
     }
 
     /// With gravity priors, a prior on a local keyframe (the first one's anchor) whose up an
@@ -1107,33 +1130,41 @@ mod tests {
         }
     }
 
-    /// An odometry that learns up (SGM's own) publishes its first poses in a frame tilted by what
-    /// its levelling got wrong (here 1.5° about the chain's axis), while the up it measures in
-    /// each body, with its σ, is right. Recorded as attitudes (`record_tilt`), the first
-    /// keyframe's anchor pins the chain at the published tilt; recorded as measured ups
-    /// (`record_up`: σ_u 2° for the first three, 0.01° after), the anchor holds yaw and position
-    /// only and the whole chain settles level, where the anchor and the odometry put it
-    /// otherwise. The σ_u survive a freeze; a thaw refuses one that is negative.
+    /// An odometry that learns up (SGM's own) keeps the frame it levelled at the start, here
+    /// 1.5° off gravity about the chain's axis, and learns up in it: for the first three
+    /// keyframes it still believes the levelling (û = ẑ, σ_u 2°), from the fourth it knows
+    /// (û = the frame's true up, σ_u 0.01°). Recorded as attitudes in that frame
+    /// (`record_tilt`), the first keyframe's anchor pins the chain at the frame's tilt. Recorded
+    /// as measurements (`record_up`), every keyframe is held to the latest up, so what was
+    /// learnt at the fourth levels the first three too, and the anchor holds yaw and position
+    /// only: the whole chain settles level, where the anchor and the odometry put it
+    /// otherwise. After three keyframes alone it is where the levelling put it. A freeze keeps
+    /// the attitudes and the latest up; a thaw refuses an up that is not a unit vector.
     #[test]
-    fn an_anchor_whose_up_came_with_its_uncertainty_does_not_pin_the_tilt() {
-        let tilt = Pose3::from_parts(
-            nalgebra::Translation3::identity(),
-            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 1.5f64.to_radians()),
-        );
+    fn keyframes_are_held_to_the_up_their_odometry_learnt_last_and_the_anchor_does_not_pin_it() {
+        let tilt = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 1.5f64.to_radians());
+        let frame_from_world = Pose3::from_parts(nalgebra::Translation3::identity(), tilt);
         let step = pose_from_yaw_translation(0.0, Vector3::new(2.0, 0.0, 0.0));
-        let build = |measured: bool| {
+        let tilt_deg = |p: &Pose3| (p.rotation * Vector3::z()).angle(&Vector3::z()).to_degrees();
+        let build = |measured: bool, keyframes: u32| {
             let mut graph = KeyframeGraph::default();
-            for k in 0..10u32 {
-                let published = tilt * (0..k).fold(Pose3::identity(), |p, _| p * step);
+            for k in 0..keyframes {
+                let in_frame = frame_from_world * (0..k).fold(Pose3::identity(), |p, _| p * step);
                 let edges: Vec<KeyframeEdge> = (k > 0).then(|| odometry(k - 1, k, &step)).into_iter().collect();
                 graph.add_keyframe(
-                    &Keyframe { id: KeyframeId(k), stamp: f64::from(k), world_from_body: published },
+                    &Keyframe { id: KeyframeId(k), stamp: f64::from(k), world_from_body: in_frame },
                     &edges,
                     100,
                 );
                 let recorded = if measured {
-                    let sigma_rad = if k < 3 { 2f64 } else { 0.01 }.to_radians();
-                    graph.record_up(KeyframeId(k), &MeasuredUp { up_in_body: Vector3::z(), sigma_rad })
+                    let (up_in_frame, sigma_deg) =
+                        if k < 3 { (Vector3::z(), 2.0) } else { (tilt * Vector3::z(), 0.01) };
+                    let m = MeasuredUp {
+                        attitude_in_frame: in_frame.rotation,
+                        up_in_frame,
+                        sigma_rad: f64::to_radians(sigma_deg),
+                    };
+                    graph.record_up(KeyframeId(k), &m)
                 } else {
                     graph.record_tilt(KeyframeId(k), &UnitQuaternion::identity())
                 };
@@ -1144,10 +1175,13 @@ mod tests {
             let solved = graph.solve(false, 0).expect("solves");
             (graph, solved.poses)
         };
-        let tilt_deg = |p: &Pose3| (p.rotation * Vector3::z()).angle(&Vector3::z()).to_degrees();
-        let (_, pinned) = build(false);
+        let (_, pinned) = build(false, 10);
         assert!(tilt_deg(&pinned[0].1) > 1.3, "pinned: {}°", tilt_deg(&pinned[0].1));
-        let (mut graph, free) = build(true);
+        let (_, early) = build(true, 3);
+        for (k, p) in &early {
+            assert!((tilt_deg(p) - 1.5).abs() < 0.01, "keyframe {} before the odometry knew: {}°", k.0, tilt_deg(p));
+        }
+        let (mut graph, free) = build(true, 10);
         for (k, p) in &free {
             assert!(tilt_deg(p) < 0.02, "keyframe {}: {}°", k.0, tilt_deg(p));
             assert!(crate::geometry::yaw_of(p).abs() < 1e-6, "keyframe {}", k.0);
@@ -1155,23 +1189,22 @@ mod tests {
             assert!((p.translation.vector - expected).norm() < 1e-3, "keyframe {}: {}", k.0, p.translation.vector);
         }
         // The anchor is whole again after the solve: what a freeze keeps is unchanged by it.
-        assert_eq!(
-            graph.graph.priors[0].sqrt_information,
-            Matrix6::from_diagonal(&nalgebra::Vector6::from_iterator(GTSAM_PRIOR_SIGMAS_3D.iter().map(|s| 1.0 / s),))
-        );
-        // Bad measured ups are refused; a keyframe the graph does not hold too.
-        let unit = MeasuredUp { up_in_body: Vector3::z(), sigma_rad: 0.01 };
-        assert!(!graph.record_up(KeyframeId(99), &unit));
-        assert!(!graph.record_up(KeyframeId(3), &MeasuredUp { up_in_body: Vector3::new(0.0, 0.0, 2.0), ..unit }));
-        assert!(!graph.record_up(KeyframeId(3), &MeasuredUp { sigma_rad: f64::NAN, ..unit }));
+        let whole = nalgebra::Vector6::from_iterator(GTSAM_PRIOR_SIGMAS_3D.iter().map(|s| 1.0 / s));
+        assert_eq!(graph.graph.priors[0].sqrt_information, Matrix6::from_diagonal(&whole));
+        // Bad measurements are refused; a keyframe the graph does not hold too.
+        let good =
+            MeasuredUp { attitude_in_frame: UnitQuaternion::identity(), up_in_frame: Vector3::z(), sigma_rad: 0.01 };
+        assert!(!graph.record_up(KeyframeId(99), &good));
+        assert!(!graph.record_up(KeyframeId(3), &MeasuredUp { up_in_frame: Vector3::new(0.0, 0.0, 2.0), ..good }));
+        assert!(!graph.record_up(KeyframeId(3), &MeasuredUp { sigma_rad: f64::NAN, ..good }));
         let state = graph.freeze();
-        assert_eq!(state.tilt_sigmas.len(), 10);
+        assert_eq!(state.frame_attitudes.len(), 10);
         let mut thawed = KeyframeGraph::thaw(state.clone()).expect("fits");
         thawed.set_gravity_priors(Some(0.2f64.to_radians()));
         assert_eq!(thawed, graph);
         let mut broken = state;
-        broken.tilt_sigmas[0].1 = -1.0;
-        assert_eq!(KeyframeGraph::thaw(broken), None, "a negative σ_u");
+        broken.frame_up = Some((Vector3::new(0.0, 0.0, 2.0), 0.01));
+        assert_eq!(KeyframeGraph::thaw(broken), None, "an up that is not a unit vector");
     }
 
     /// A loop closure that puts keyframe 9 of a level 18 m chain 0.3 m lower than odometry says
