@@ -3,9 +3,9 @@
 
 use actix::Message;
 use nalgebra::{Matrix6, Point3, UnitQuaternion};
+use sgm_model::geometry::up::MeasuredUp;
 use sgm_model::geometry::Pose3;
 use sgm_model::matching::scan_context::ScanContext;
-use sgm_model::optim::gravity::MeasuredUp;
 use sgm_model::perception::clustering::ObjectCandidate;
 use sgm_model::perception::imu::ImuSample;
 use sgm_model::perception::projection::{CameraModel, LabelImage};

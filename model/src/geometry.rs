@@ -13,6 +13,7 @@
 
 pub mod lie;
 pub mod point_to_plane;
+pub mod up;
 
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 

@@ -27,7 +27,7 @@ pub struct FrontEndFrame {
     pub t: f64,
     pub estimate: Option<Pose3>,
     /// The filter's up and attitude in its own frame (`OdometryEstimate::measured_up`).
-    pub measured_up: Option<sgm_model::optim::gravity::MeasuredUp>,
+    pub measured_up: Option<sgm_model::geometry::up::MeasuredUp>,
     pub outcome: Option<ScanOutcome>,
     pub truth: Pose3,
     pub synthetic: Pose3,

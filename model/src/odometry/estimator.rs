@@ -54,8 +54,8 @@ use super::registration::{register_scan, Degeneracy, Prior, RegistrationError};
 use super::threshold::AdaptiveThreshold;
 use super::update::{apply_pose_update, pose_covariance, pose_of, prior_information, scan_information, UpdateError};
 use crate::geometry::lie::Matrix6;
+use crate::geometry::up::MeasuredUp;
 use crate::geometry::Pose3;
-use crate::optim::gravity::MeasuredUp;
 use crate::perception::deskew::{deskew_with, sweep_end_s, DeskewRefusal};
 use crate::perception::imu::ImuSample;
 use crate::spatial::voxel::downsample_first;
@@ -138,7 +138,7 @@ pub struct OdometryEstimate {
     /// The body's attitude in the filter's own frame and up in that frame with its σ (the worse
     /// horizontal axis of δu's covariance): the published pose's R_Pᵀ ẑ follows the filter's up
     /// only once the two part by more than 3σ (the frame's turns), so keyframes' gravity priors
-    /// are made from this, each held to the latest up ([`crate::optim::gravity`]).
+    /// are made from this, each held to the latest up (the pose graph's gravity priors).
     pub measured_up: MeasuredUp,
 }
 
@@ -568,12 +568,14 @@ impl LidarInertialOdometry {
         let state = filter.propagator.state;
         let covariance = pose_covariance(&filter.propagator.covariance.fixed_view::<6, 6>(0, 0).into_owned(), &state);
         let levelled = self.publish_up(&state, &filter.propagator.covariance);
-        let up_sigma = filter.propagator.covariance.fixed_view::<2, 2>(UP, UP).symmetric_eigenvalues().max();
-        let measured_up = MeasuredUp {
-            attitude_in_frame: state.rotation,
-            up_in_frame: state.up,
-            sigma_rad: up_sigma.max(0.0).sqrt(),
+        // σ of up on its worse axis; NaN (refused downstream) when the block is not finite.
+        let block = filter.propagator.covariance.fixed_view::<2, 2>(UP, UP).into_owned();
+        let up_sigma = if block.iter().all(|v| v.is_finite()) {
+            block.symmetric_eigenvalues().max().max(0.0).sqrt()
+        } else {
+            f64::NAN
         };
+        let measured_up = MeasuredUp { attitude_in_frame: state.rotation, up_in_frame: state.up, sigma_rad: up_sigma };
         let motion_covariance = filter
             .propagator
             .clone

@@ -23,7 +23,7 @@
 //! solve: a yaw that moves by β within one solve changes the tilt's cost by a factor
 //! ((β/2)/sin(β/2))², 0.2 % at 0.2 rad. No Euler angles, so no heading is ever extracted.
 //!
-//! An odometry that estimates up itself (SGM's own: [`crate::odometry`]) keeps a frame of its
+//! An odometry that estimates up itself (SGM's own LiDAR-inertial one) keeps a frame of its
 //! own and learns where up is in it, û with σ_u ([`MeasuredUp`]). The graph keeps each
 //! keyframe's attitude in that frame, R_F, and the latest û: u_m = R_Fᵀ û_latest, σ =
 //! √(σ² + σ_u²). What the odometry learns later levels the keyframes it measured before, whose
@@ -36,50 +36,13 @@
 //! (GTSAM's default prior) then holds only its yaw and position ([`yaw_only`]), or it would pin
 //! the whole map to the tilt of its first pose.
 
+pub use crate::geometry::up::{unit_up, up_in_body, MeasuredUp};
+
 use super::factors::Prior;
 use crate::geometry::Pose3;
 use crate::scene_graph::KeyframeId;
 use nalgebra::{Isometry3, Matrix3, Matrix6, UnitQuaternion, Vector3};
 use std::collections::BTreeMap;
-
-/// The world's up seen in a body at `attitude` (world_from_body rotation), or `None` unless the
-/// attitude is a finite unit quaternion.
-pub fn up_in_body(attitude: &UnitQuaternion<f64>) -> Option<Vector3<f64>> {
-    let q = attitude.quaternion();
-    let rotation = q.coords.iter().all(|v| v.is_finite()) && (q.norm() - 1.0).abs() < 1e-6;
-    rotation.then(|| attitude.inverse() * Vector3::z())
-}
-
-/// What an odometry that estimates up measured at a scan: the body's attitude in the
-/// odometry's own frame (fixed for its run), and up in that frame as it knew it then, with its
-/// σ (rad, on each horizontal axis).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct MeasuredUp {
-    pub attitude_in_frame: UnitQuaternion<f64>,
-    pub up_in_frame: Vector3<f64>,
-    pub sigma_rad: f64,
-}
-
-impl MeasuredUp {
-    /// Whether the attitude is a finite unit quaternion, up a finite unit vector (both within
-    /// 1e-6) and σ finite and ≥ 0: what came from outside is checked once, here.
-    pub fn is_valid(&self) -> bool {
-        unit_up(&self.up_in_frame)
-            && up_in_body(&self.attitude_in_frame).is_some()
-            && self.sigma_rad.is_finite()
-            && self.sigma_rad >= 0.0
-    }
-
-    /// Up in the body: R_Fᵀ û.
-    pub fn up_in_body(&self) -> Vector3<f64> {
-        self.attitude_in_frame.inverse() * self.up_in_frame
-    }
-}
-
-/// Whether `up` is a finite unit vector (within 1e-6).
-pub fn unit_up(up: &Vector3<f64>) -> bool {
-    up.iter().all(|v| v.is_finite()) && (up.norm() - 1.0).abs() < 1e-6
-}
 
 /// `prior` (on a pose, residual (ω, v) in its body) holding only the turn about `up` (the
 /// body's up) of its rotation, and its translation: S' = S · diag(u uᵀ, I). A keyframe's tilt is

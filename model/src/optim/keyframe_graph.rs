@@ -157,6 +157,9 @@ pub struct KeyframeGraph {
     /// when they are added and cleared when they are taken away; still set only if a solve
     /// was cut short by a panic, and then the next solve and any freeze take them away first.
     transient_from: Option<usize>,
+    /// While a solve holds anchors in yaw and position only ([`KeyframeGraph::free_anchor_tilts`]):
+    /// those priors whole, by index, put back as `transient_from`'s priors are taken away.
+    transient_anchors: Vec<(usize, Prior<Pose3, 6>)>,
 }
 
 /// Pose updates held per neighbour for keyframes not yet in the graph, at most. A keyframe
@@ -210,7 +213,7 @@ fn anchor_key(robot: RobotId) -> u64 {
 impl KeyframeGraph {
     pub fn freeze(&self) -> KeyframeGraphState {
         let mut graph = self.graph.clone();
-        Self::drop_transient_priors(&mut graph, self.transient_from);
+        Self::drop_transient_priors(&mut graph, self.transient_from, &self.transient_anchors);
         KeyframeGraphState {
             graph,
             index: self.index.iter().map(|(r, i)| (*r, *i)).collect(),
@@ -233,10 +236,17 @@ impl KeyframeGraph {
         }
     }
 
-    /// The graph without a cut-short solve's gravity priors (see `transient_from`).
-    fn drop_transient_priors(graph: &mut Graph3, transient_from: Option<usize>) {
+    /// The graph without a solve's gravity priors and with its anchors whole again (see
+    /// `transient_from`, `transient_anchors`): after every solve, and before the next solve and
+    /// in a freeze should a solve have been cut short by a panic.
+    fn drop_transient_priors(graph: &mut Graph3, transient_from: Option<usize>, anchors: &[(usize, Prior<Pose3, 6>)]) {
         if let Some(held) = transient_from {
             graph.priors.truncate(held);
+        }
+        for (k, prior) in anchors {
+            if let Some(p) = graph.priors.get_mut(*k) {
+                *p = prior.clone();
+            }
         }
     }
 
@@ -286,6 +296,7 @@ impl KeyframeGraph {
             frame_up: state.frame_up,
             gravity_sigma_rad: None,
             transient_from: None,
+            transient_anchors: Vec::new(),
         })
     }
 
@@ -630,12 +641,14 @@ impl KeyframeGraph {
     /// odometry measured with its uncertainty holds yaw and position only, about that up: its
     /// tilt is then its gravity prior's, at the σ the odometry gave, and not pinned to the first
     /// pose's ([`super::gravity`]). An odometry that tells no uncertainty keeps the anchor whole.
-    /// The priors as they were, to put back after the solve.
-    fn free_anchor_tilts(&mut self) -> Vec<(usize, Prior<Pose3, 6>)> {
+    /// Only variables that hold a gravity prior in this solve (`gravity`) are freed. The priors
+    /// as they were, to put back after the solve.
+    fn free_anchor_tilts(&mut self, gravity: &[Prior<Pose3, 6>]) -> Vec<(usize, Prior<Pose3, 6>)> {
+        let held: BTreeSet<usize> = gravity.iter().map(|p| p.variable).collect();
         let up_of = self.ups_with_uncertainty();
         let mut saved = Vec::new();
         for (k, prior) in self.graph.priors.iter_mut().enumerate() {
-            if let Some(up) = up_of.get(&prior.variable) {
+            if let Some(up) = up_of.get(&prior.variable).filter(|_| held.contains(&prior.variable)) {
                 saved.push((k, prior.clone()));
                 *prior = yaw_only(prior, up);
             }
@@ -689,17 +702,16 @@ impl KeyframeGraph {
     pub fn solve(&mut self, reject_outliers: bool, marginals: usize) -> Result<Solved, SolveError> {
         // The gravity priors hold for this solve and its marginals, then go: their means follow
         // the yaw, so they are made again each time.
-        Self::drop_transient_priors(&mut self.graph, self.transient_from.take());
+        let cut_short = std::mem::take(&mut self.transient_anchors);
+        Self::drop_transient_priors(&mut self.graph, self.transient_from.take(), &cut_short);
         let held = self.graph.priors.len();
         let gravity = self.gravity_priors();
-        let anchors = self.free_anchor_tilts();
+        self.transient_anchors = self.free_anchor_tilts(&gravity);
         self.graph.priors.extend(gravity);
         self.transient_from = Some(held);
         let solved = self.solve_held(reject_outliers, marginals);
-        Self::drop_transient_priors(&mut self.graph, self.transient_from.take());
-        for (k, prior) in anchors {
-            self.graph.priors[k] = prior;
-        }
+        let anchors = std::mem::take(&mut self.transient_anchors);
+        Self::drop_transient_priors(&mut self.graph, self.transient_from.take(), &anchors);
         solved
     }
 
@@ -788,15 +800,19 @@ impl KeyframeGraph {
         if own.priors.is_empty() && !own.values.is_empty() {
             own.add_prior_at_current(0, GTSAM_PRIOR_SIGMAS_3D);
         }
-        // As in a solve: an anchor whose up came with its uncertainty holds yaw and position.
+        // As in a solve: an anchor whose up came with its uncertainty, and that holds a gravity
+        // prior, holds yaw and position only.
+        let gravity = self.gravity_priors();
+        let held: BTreeSet<usize> = gravity.iter().map(|p| p.variable).collect();
         let up_of = self.ups_with_uncertainty();
         for p in own.priors.iter_mut() {
             // The own graph's variable j is local keyframe j.
-            if let Some(up) = local.get(p.variable).and_then(|(_, i)| up_of.get(i)) {
+            let graph_variable = local.get(p.variable).map(|(_, i)| *i).filter(|i| held.contains(i));
+            if let Some(up) = graph_variable.and_then(|i| up_of.get(&i)) {
                 *p = yaw_only(p, up);
             }
         }
-        for p in self.gravity_priors() {
+        for p in gravity {
             if let Some(&variable) = new_of.get(&p.variable) {
                 own.priors.push(Prior { variable, ..p });
             }
@@ -1191,6 +1207,19 @@ mod tests {
         // The anchor is whole again after the solve: what a freeze keeps is unchanged by it.
         let whole = nalgebra::Vector6::from_iterator(GTSAM_PRIOR_SIGMAS_3D.iter().map(|s| 1.0 / s));
         assert_eq!(graph.graph.priors[0].sqrt_information, Matrix6::from_diagonal(&whole));
+        // A solve cut short (a panic) with its anchor cut and its gravity priors in: a freeze
+        // and the next solve make the anchor whole again.
+        let before = graph.freeze();
+        let gravity = graph.gravity_priors();
+        let held = graph.graph.priors.len();
+        graph.transient_anchors = graph.free_anchor_tilts(&gravity);
+        graph.graph.priors.extend(gravity);
+        graph.transient_from = Some(held);
+        assert_ne!(graph.graph.priors[0].sqrt_information, Matrix6::from_diagonal(&whole));
+        assert_eq!(graph.freeze(), before);
+        graph.solve(false, 0).expect("solves");
+        assert_eq!(graph.graph.priors[0].sqrt_information, Matrix6::from_diagonal(&whole));
+        assert!(graph.transient_anchors.is_empty() && graph.transient_from.is_none());
         // Bad measurements are refused; a keyframe the graph does not hold too.
         let good =
             MeasuredUp { attitude_in_frame: UnitQuaternion::identity(), up_in_frame: Vector3::z(), sigma_rad: 0.01 };
