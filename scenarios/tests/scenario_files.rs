@@ -86,6 +86,12 @@ fn impossible_terrain_platforms_and_imus_are_refused_with_their_key() {
     refused("[terrain]\nramp_slope_deg = 0.0", "terrain.ramp_slope_deg = 0: allowed 0 < x ≤ 30°");
     refused("[terrain]\nkerb_height_m = -0.1", "terrain.kerb_height_m = -0.1: allowed 0 ≤ x ≤ 0.5 m");
     refused("[platforms]\ngait_hz = -2.0", "platforms.gait_hz = -2: allowed 0.1 ≤ x ≤ 10 Hz");
+    // A ceiling over a campus; a sensor that would look down on one.
+    refused("[world]\nceiling = true", "world.ceiling = true: allowed true only with kind = \"indoor\"");
+    refused(
+        "[world]\nkind = \"indoor\"\nceiling = true\nwall_height_m = 1.0",
+        "robots[0].sensor_height_m = 0.8: allowed with world.ceiling, under it: x + the ramps' and kerbs' height < world.wall_height_m − 0.3 m",
+    );
     // An IMU slower than the LiDAR's frames.
     refused(
         "[scenario]\nframe_interval_s = 0.1\n[imu]\nrate_hz = 5.0",

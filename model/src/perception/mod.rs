@@ -3,6 +3,7 @@
 //! the map from their pixel values to classes, clustering, keyframe selection, object tracking,
 //! intra-robot loop closure.
 
+pub mod ceiling;
 pub mod classes;
 pub mod clustering;
 pub mod colour_ids;

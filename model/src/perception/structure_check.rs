@@ -25,10 +25,16 @@
 //! the 95th percentile of all points is 0.36–0.45 m, of those within 15 m at most 0.07 m in
 //! most scans).
 //!
+//! A ceiling over the scan ([`crate::perception::ceiling`]: a flat plane over the sensor) is
+//! left out as the ground is, with the points within `ground_clearance_m` under it: under one,
+//! a half turn in a grid of identical rooms agreed on the ceiling alone (`handheld_indoor`
+//! seed 6 with `world.ceiling`: four directions aligned 180° off).
+//!
 //! A true registration of overlapping scans scores high; a wrong inter-robot transform, which
 //! the ground alone cannot reveal, scores low.
 
 use crate::geometry::Pose3;
+use crate::perception::ceiling::find_ceiling;
 use crate::perception::ground::{heights_above_ground, GroundParams};
 use crate::spatial::point_tree::PointTree;
 use crate::spatial::voxel::downsample;
@@ -97,12 +103,16 @@ fn structure(scan: &[Point3<f64>], check: &StructureCheck) -> Vec<Point3<f64>> {
     }
     offsets.sort_unstable_by(f64::total_cmp);
     let level = offsets.get(offsets.len() * 19 / 20).is_none_or(|&q| q <= LEVEL_M);
-    points
+    let above_ground: Vec<Point3<f64>> = points
         .into_iter()
         .zip(above)
         .filter(|(p, h)| if level { p.z - low } else { h.unwrap_or(p.z - low) } > check.ground_clearance_m)
         .map(|(p, _)| p)
-        .collect()
+        .collect();
+    match find_ceiling(&above_ground, check.ground_cell_m, check.ground_clearance_m, check.max_ground_slope_deg) {
+        Some(ceiling) => above_ground.into_iter().filter(|p| !ceiling.holds(p, check.ground_clearance_m)).collect(),
+        None => above_ground,
+    }
 }
 
 /// The agreement of `target_from_source` (source and target in their body frames); `None`
@@ -371,6 +381,68 @@ mod tests {
             proptest::prop_assert!(ground_kept < 0.02, "ground taken for structure: {}", ground_kept);
             proptest::prop_assert!(high_lost < 0.08, "box points lost: {}", high_lost);
         }
+    }
+
+    /// A square room 8 m across, walls and ceiling 3 m high (the ceiling only if `covered`), and
+    /// three boxes that break its symmetry, scanned from `world_from_body`.
+    fn room_scan(covered: bool, world_from_body: &Pose3, rng: &mut ChaCha8Rng) -> Vec<Point3<f64>> {
+        let mut world = Vec::new();
+        for _ in 0..4000 {
+            let (x, y) = (rng.random_range(-4.0..4.0), rng.random_range(-4.0..4.0));
+            world.push(Point3::new(x, y, 0.0));
+            if covered {
+                world.push(Point3::new(x, y, 3.0));
+            }
+        }
+        for _ in 0..600 {
+            let (s, z) = (rng.random_range(-4.0..4.0), rng.random_range(0.0..3.0));
+            world.extend([
+                Point3::new(4.0, s, z),
+                Point3::new(-4.0, s, z),
+                Point3::new(s, 4.0, z),
+                Point3::new(s, -4.0, z),
+            ]);
+        }
+        for (bx, by) in [(2.0, 1.5), (-2.5, 2.0), (1.0, -2.5)] {
+            for _ in 0..400 {
+                let (x, y, z) =
+                    (bx + rng.random_range(-0.4..0.4), by + rng.random_range(-0.4..0.4), rng.random_range(0.0..1.2));
+                world.push(Point3::new(x, y, z));
+            }
+        }
+        let body_from_world = world_from_body.inverse();
+        world.iter().map(|p| body_from_world * p).collect()
+    }
+
+    /// Under a ceiling a half turn of a square room agrees no better than in the same room open
+    /// to the sky: the ceiling is left out as the ground is (the walls, symmetric, still agree;
+    /// the boxes do not). The right transform agrees in both.
+    #[test]
+    fn a_ceiling_lends_a_half_turn_no_agreement() {
+        let a = pose_from_yaw_translation(0.3, Vector3::new(-1.0, -0.5, 1.5));
+        let b = pose_from_yaw_translation(-0.8, Vector3::new(1.2, 0.7, 1.5));
+        let check = StructureCheck::default();
+        let half_turn = pose_from_yaw_translation(std::f64::consts::PI, Vector3::zeros());
+        let (right, wrong) = (a.inverse() * b, a.inverse() * half_turn * b);
+        let agreements = |covered: bool| {
+            let mut rng = ChaCha8Rng::seed_from_u64(9);
+            let (sa, sb) = (room_scan(covered, &a, &mut rng), room_scan(covered, &b, &mut rng));
+            let target = StructureTarget::new(&sa, &check);
+            (target.agreement(&sb, &right, &check).unwrap(), target.agreement(&sb, &wrong, &check).unwrap())
+        };
+        let (open_right, open_wrong) = agreements(false);
+        let (covered_right, covered_wrong) = agreements(true);
+        assert!(open_right > 0.9 && covered_right > 0.9, "{open_right} {covered_right}");
+        assert!(open_wrong < 0.85, "{open_wrong}");
+        assert!((covered_wrong - open_wrong).abs() < 0.03, "open {open_wrong}, covered {covered_wrong}");
+        // The ceiling is not structure: none of a covered scan's structure is within 0.3 m of it.
+        let mut rng = ChaCha8Rng::seed_from_u64(10);
+        let kept = structure(&room_scan(true, &a, &mut rng), &check);
+        assert!(
+            kept.iter().all(|p| (a * p).z < 2.7 + 1e-9),
+            "{:?}",
+            kept.iter().map(|p| (a * p).z).fold(0.0, f64::max)
+        );
     }
 
     #[test]

@@ -168,6 +168,10 @@ pub struct WorldSpec {
     pub wall_height_m: f64,
     /// Indoor: width of the door in each wall between rooms, m. Default 1.6.
     pub door_width_m: f64,
+    /// Indoor: a flat ceiling at `wall_height_m` over the rooms (labelled wall), as every
+    /// building has. Default false: the rooms are open to the sky, as every figure measured before
+    /// the key was.
+    pub ceiling: bool,
 }
 
 impl Default for WorldSpec {
@@ -182,6 +186,7 @@ impl Default for WorldSpec {
             room_size_m: 8.0,
             wall_height_m: 3.0,
             door_width_m: 1.6,
+            ceiling: false,
         }
     }
 }

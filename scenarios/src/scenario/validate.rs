@@ -1,6 +1,6 @@
 //! Range checks of a scenario; each failure is (key, value, allowed).
 
-use super::Scenario;
+use super::{Scenario, WorldKind};
 use crate::scenario::shapes::shape_of;
 
 type Failure = (String, String, String);
@@ -63,6 +63,12 @@ impl Scenario {
             "world.door_width_m",
             w.door_width_m,
             "0.5 m ≤ x ≤ world.room_size_m − 1 m",
+        )?;
+        check(
+            !w.ceiling || w.kind == WorldKind::Indoor,
+            "world.ceiling",
+            w.ceiling,
+            "true only with kind = \"indoor\"",
         )?;
 
         let t = &self.terrain;
@@ -276,6 +282,16 @@ impl Scenario {
                 key("sensor_height_m"),
                 robot.sensor_height_m,
                 "0.1 ≤ x ≤ 10 m",
+            )?;
+            // The highest a ramp or kerb lifts a robot (hills are for campuses).
+            let t = &self.terrain;
+            let terrain_rise =
+                if t.ramps > 0 { t.ramp_height_m } else { 0.0 } + if t.kerbs > 0 { t.kerb_height_m } else { 0.0 };
+            check(
+                !self.world.ceiling || robot.sensor_height_m + terrain_rise < self.world.wall_height_m - 0.3,
+                key("sensor_height_m"),
+                robot.sensor_height_m,
+                "with world.ceiling, under it: x + the ramps' and kerbs' height < world.wall_height_m − 0.3 m",
             )?;
             check(
                 within(robot.start_s, 0.0, s.duration_s - s.frame_interval_s),

@@ -5,7 +5,7 @@
 //! the sensor, and a ray tests only the solids of its bin.
 
 use crate::scenario::{LidarPattern, LidarSpec};
-use crate::sim::world::World;
+use crate::sim::world::{World, CEILING_INSTANCE};
 use nalgebra::{Point3, Vector3};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
@@ -207,6 +207,9 @@ impl Lidar {
             if flat && dw.z < -1e-9 {
                 best.0 = -origin.z / dw.z;
             }
+            if let Some((c, t)) = world.ceiling.and_then(|c| Some((c, c.intersect(&origin, &dw)?))) {
+                best = (t, c.label, CEILING_INSTANCE);
+            }
             for &k in &bins[bin] {
                 let solid = &world.solids[k as usize];
                 if let Some(t) = solid.primitive.intersect_turned(&origin, &dw, turns[k as usize]) {
@@ -245,6 +248,7 @@ impl Lidar {
 mod tests {
     use super::*;
     use crate::sim::shapes::{Primitive, Solid};
+    use crate::sim::world::Ceiling;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
@@ -328,6 +332,45 @@ mod tests {
 
     /// A sweep on the move is bent (the wall smeared over the distance travelled); deskewed with
     /// the body's twist (`model::perception::deskew`), every return lies on its surface again.
+    /// Under a ceiling the upward beams return from it, with its label and instance, at its
+    /// height and never from behind the wall; the wall above it is hidden; every return below it
+    /// is the same as without it.
+    #[test]
+    fn a_ceiling_returns_the_upward_beams_and_hides_the_wall_above_it() {
+        let spec = LidarSpec { range_noise_m: 0.0, ..LidarSpec::default() };
+        let pose = Pose3::translation(0.0, 0.0, 1.0);
+        let scan = |world: &World| Lidar::new(&spec).scan(world, &pose, &mut ChaCha8Rng::seed_from_u64(1));
+        let open = scan(&world_with_a_wall());
+        let covered = scan(&World { ceiling: Some(Ceiling { height_m: 3.0, label: 7 }), ..world_with_a_wall() });
+        const F32: f64 = 1e-5;
+        let mut on_ceiling = 0;
+        for ((p, l), i) in covered.points.iter().zip(&covered.labels).zip(&covered.instances) {
+            let w = pose * p;
+            if *l == 7 {
+                on_ceiling += 1;
+                assert_eq!(*i, CEILING_INSTANCE);
+                assert!((w.z - 3.0).abs() < F32, "{w}");
+                assert!(!(w.x > 9.9 && w.y.abs() < 5.0), "behind the wall: {w}");
+            } else {
+                assert!(w.z < 3.0, "{w}");
+            }
+        }
+        assert!(on_ceiling > 1000, "{on_ceiling}");
+        // The wall is 4 m high: without the ceiling its top metre returns.
+        let world_z = |frame: &LidarFrame| frame.points.iter().map(|p| (pose * p).z).collect::<Vec<_>>();
+        assert!(world_z(&open).iter().any(|z| *z > 3.0 + F32));
+        let under = |frame: &LidarFrame| {
+            frame
+                .points
+                .iter()
+                .zip(&frame.labels)
+                .filter(|(p, l)| **l != 7 && (pose * *p).z < 3.0)
+                .map(|(p, _)| *p)
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(under(&open), under(&covered));
+    }
+
     #[test]
     fn a_sweep_on_the_move_is_bent_and_deskewing_straightens_it() {
         use sgm_model::geometry::lie::{se3_exp, Tangent3};

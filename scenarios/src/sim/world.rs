@@ -36,6 +36,25 @@ pub struct World {
     pub colours: std::collections::BTreeMap<u16, [u8; 3]>,
     /// The ground (the plane z = 0 unless `settle_on` put the world on terrain).
     pub terrain: std::sync::Arc<Terrain>,
+    /// The plane over the rooms, if any (`world.ceiling`).
+    pub ceiling: Option<Ceiling>,
+}
+
+/// A flat ceiling: the plane z = `height_m`, seen from below only.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ceiling {
+    pub height_m: f64,
+    pub label: u16,
+}
+
+/// The instance of a ceiling's returns (the ground's is `u32::MAX`).
+pub const CEILING_INSTANCE: u32 = u32::MAX - 1;
+
+impl Ceiling {
+    /// Where the ray from `origin` along `direction` meets the ceiling, if it goes up to it.
+    pub fn intersect(&self, origin: &Point3<f64>, direction: &Vector3<f64>) -> Option<f64> {
+        (direction.z > 1e-9 && origin.z < self.height_m).then(|| (self.height_m - origin.z) / direction.z)
+    }
 }
 
 impl World {
@@ -176,6 +195,9 @@ pub fn generate(spec: &WorldSpec, classes: &[ClassSpec], routes: &[Vec<Point2<f6
                 }
             }
             instance += 1;
+            if spec.ceiling {
+                world.ceiling = Some(Ceiling { height_m: h, label: wall });
+            }
         }
     }
     let in_wall_clearance = |p: Point2<f64>, r: f64| -> bool {
