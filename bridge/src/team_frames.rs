@@ -105,6 +105,7 @@ mod tests {
             aligned_via: None,
             contradicted_by: Vec::new(),
             withdrawals: 0,
+            last_withdrawal: None,
             keyframes_held: 0,
             objects_revision: None,
             match_attempts: Default::default(),

@@ -127,6 +127,21 @@ pub struct RelaySection {
     /// the cycle (on a cycle of two: by which it explains fewer pairs than the other's); within
     /// it the cycle stays flagged, unsettled. Default 3.
     pub settle_margin_pairs: usize,
+    /// Whether our alignments are matched again as the maps grow (at most every
+    /// `match_interval_s`, on new object data) and withdrawn when a stronger match puts the
+    /// neighbour elsewhere: settled by evidence, not by which match came first. A wrong
+    /// alignment on no cycle is contradicted by nothing else. Default true.
+    pub rematch: bool,
+    /// How much more significant (−log₁₀ NFA) than the match our alignment came from the other
+    /// must be (an alignment from a neighbour's counts as the threshold, −log₁₀ `matching.max_false_alarms`).
+    /// Default 1 (ten times fewer false alarms expected).
+    pub rematch_margin: f64,
+    /// ... and at least this significant. Default 3.
+    pub rematch_min_significance: f64,
+    /// ... found this many times running (within the contradiction tolerance of each other),
+    /// each from changed object graphs (ours or its). Default 1: after a robot's route its map
+    /// stops changing, and the last match is all the evidence there will be.
+    pub rematch_confirmations: usize,
 }
 
 impl Default for RelaySection {
@@ -140,6 +155,10 @@ impl Default for RelaySection {
             contradiction_deg: 5.0,
             settle: true,
             settle_margin_pairs: 3,
+            rematch: true,
+            rematch_margin: 1.0,
+            rematch_min_significance: 3.0,
+            rematch_confirmations: 1,
         }
     }
 }
@@ -154,7 +173,13 @@ impl RelaySection {
         check(m.is_finite() && m > 0.0, "matcher.relay.contradiction_m", m, "finite and > 0 m")?;
         check(deg.is_finite() && deg > 0.0 && deg <= 180.0, "matcher.relay.contradiction_deg", deg, "0 < x ≤ 180°")?;
         let margin = self.settle_margin_pairs;
-        check(margin >= 1, "matcher.relay.settle_margin_pairs", margin, "≥ 1 (0 would settle a tie by edge order)")
+        check(margin >= 1, "matcher.relay.settle_margin_pairs", margin, "≥ 1 (0 would settle a tie by edge order)")?;
+        let m = self.rematch_margin;
+        check(m.is_finite() && m >= 0.0, "matcher.relay.rematch_margin", m, "finite and ≥ 0")?;
+        let s = self.rematch_min_significance;
+        check(s.is_finite(), "matcher.relay.rematch_min_significance", s, "finite")?;
+        let n = self.rematch_confirmations;
+        check(n >= 1, "matcher.relay.rematch_confirmations", n, "≥ 1")
     }
 }
 
@@ -421,6 +446,9 @@ mod tests {
         refused(|m| m.relay.contradiction_m = 0.0, "matcher.relay.contradiction_m = 0");
         refused(|m| m.relay.contradiction_deg = 181.0, "matcher.relay.contradiction_deg = 181");
         refused(|m| m.relay.settle_margin_pairs = 0, "matcher.relay.settle_margin_pairs = 0");
+        refused(|m| m.relay.rematch_margin = -1.0, "matcher.relay.rematch_margin = -1");
+        refused(|m| m.relay.rematch_min_significance = f64::NAN, "matcher.relay.rematch_min_significance = NaN");
+        refused(|m| m.relay.rematch_confirmations = 0, "matcher.relay.rematch_confirmations = 0");
         refused(|m| m.factor_sigma_floor_deg = -0.1, "matcher.factor_sigma_floor_deg = -0.1");
         refused(|m| m.factor_sigma_floor_m = f64::INFINITY, "matcher.factor_sigma_floor_m = inf");
         let plan = MatcherSection::default().closures.plan();

@@ -19,6 +19,7 @@ mod association;
 mod closures;
 mod neighbour;
 mod relay;
+mod rematch;
 mod rounds;
 mod settle;
 
@@ -185,6 +186,10 @@ impl Matcher {
             attempts: MatchAttempts::default(),
             withdrawn: Vec::new(),
             withdrawals: 0,
+            last_withdrawal: None,
+            aligned_significance: None,
+            challenger: None,
+            last_rematch: None,
             last_match: None,
         })
     }
@@ -259,6 +264,7 @@ impl Handler<MapChanged> for Matcher {
             }
             let robots: Vec<RobotId> = self.neighbours.keys().copied().collect();
             for robot in robots {
+                self.rematch(robot);
                 self.try_match(robot);
             }
         });
@@ -302,6 +308,7 @@ impl Handler<NeighbourObjects> for Matcher {
             let revision = msg.data.revision;
             entry.objects = Some(msg.data);
             entry.protocol = entry.protocol.take().map(|p| p.on_objects(revision, now));
+            self.rematch(msg.robot);
             self.try_match(msg.robot);
         });
     }
@@ -439,6 +446,7 @@ impl Handler<GetNeighbours> for Matcher {
                     objects_revision: e.objects.as_ref().map(|d| d.revision),
                     match_attempts: e.attempts.clone(),
                     withdrawals: e.withdrawals,
+                    last_withdrawal: e.last_withdrawal.clone(),
                 })
                 .collect(),
         )

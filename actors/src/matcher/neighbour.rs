@@ -29,8 +29,11 @@ pub struct NeighbourStatus {
     /// alignments is wrong (`model::matching::relay::contradicting`).
     pub contradicted_by: Vec<RobotId>,
     /// Times our alignment of it was withdrawn: a contradicted cycle settled against it by
-    /// object evidence (`matcher.relay.settle`).
+    /// object evidence (`matcher.relay.settle`), or a stronger match that put it elsewhere
+    /// (`matcher.relay.rematch`).
     pub withdrawals: u32,
+    /// Why the latest withdrawal was made.
+    pub last_withdrawal: Option<String>,
     /// What object-graph matching with this neighbour has concluded so far: why a pair that
     /// holds each other's object graphs is not aligned.
     pub match_attempts: MatchAttempts,
@@ -133,6 +136,17 @@ pub(super) struct NeighbourEntry {
     pub(super) withdrawn: Vec<Pose3>,
     /// Times an alignment of it was withdrawn.
     pub(super) withdrawals: u32,
+    /// Why the latest was (status only).
+    pub(super) last_withdrawal: Option<String>,
+    /// The significance of the match our alignment came from (`None`: it came from a
+    /// neighbour's alignment, or from before a thaw): what a contradicting match must beat
+    /// (`relay.rematch`).
+    pub(super) aligned_significance: Option<f64>,
+    /// A match that contradicts our alignment, and how many times running it was found.
+    pub(super) challenger: Option<(Pose3, usize)>,
+    /// When our alignment was last matched again, and with what: the revisions of our objects
+    /// and of its object data (the same inputs give the same match, which is not made again).
+    pub(super) last_rematch: Option<(Stamp, u64, u32)>,
     /// The last graph match and what it was made from: the same local objects against the same
     /// object data give the same outcome (`match_graphs` is a pure function), so it is reused.
     pub(super) last_match: Option<LastMatch>,

@@ -235,6 +235,10 @@ impl Matcher {
                     }
                     // Aligned once, or again after a withdrawal: whose alignment this one came from.
                     entry.aligned_via = entry.round_via;
+                    // What a match that puts it elsewhere must beat (`relay.rematch`).
+                    entry.aligned_significance =
+                        if entry.round_via.is_none() { entry.attempts.last_significance } else { None };
+                    entry.challenger = None;
                 }
                 // The first round's ground counts as covered for closure rounds.
                 let at: Vec<Point3<f64>> = n

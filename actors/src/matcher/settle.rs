@@ -7,6 +7,12 @@
 //! other alignments of the cycle then place the neighbour again through the relay
 //! (`relay.rs`), with a round of our own registrations as for any hint. An alignment of
 //! another robot named wrong is left to that robot, which holds the same evidence.
+//!
+//! Before any cycle is scored, an alignment of ours that was relayed by a robot whose
+//! alignments now contradict it is withdrawn: it was made from that robot's
+//! alignments (and ours of that robot, when chained), and they no longer say it. On
+//! `handheld_indoor` seed 6 with `world.ceiling` bravo's wrong alignment of alpha, withdrawn
+//! on a stronger match (`rematch.rs`), had been chained into alignments of charlie by both.
 
 use super::association::graph_objects;
 use super::neighbour::MAX_WITHDRAWN;
@@ -29,10 +35,31 @@ impl Matcher {
     pub(super) fn review_contradictions(&mut self) {
         let mut contradicted = self.contradicted_now();
         if self.config.relay.settle {
+            // An alignment relayed by a robot whose alignments now put the neighbour elsewhere
+            // has lost the ground it stood on (that robot's, or ours it was chained through, was
+            // withdrawn or moved): withdrawn and barred (else the robots it was chained to hand
+            // it back to each other), to be placed again by what holds now.
+            let lost: Vec<(RobotId, RobotId)> = contradicted
+                .iter()
+                .filter_map(|(robot, by)| {
+                    let via = self.neighbours.get(robot)?.aligned_via?;
+                    by.contains(&via).then_some((*robot, via))
+                })
+                .collect();
+            for (robot, via) in lost {
+                self.withdraw(robot, format!("relayed by {via}, whose alignments now put it elsewhere"), true);
+            }
+            contradicted = self.contradicted_now();
             // Each withdrawal leaves one alignment fewer: at most one per neighbour.
             for _ in 0..self.neighbours.len() {
                 let Some(w) = self.next_withdrawal(&contradicted) else { break };
-                self.withdraw(w);
+                let (support, losses) = (&w.settlement.support, w.settlement.losses());
+                let cycle = w.cycle.iter().map(ToString::to_string).collect::<Vec<_>>().join(" → ");
+                let why = format!(
+                    "the object evidence of the contradicted cycle {cycle} names it wrong (pairs per edge, own \
+                     and the others' product: {support:?}; losses: {losses:?})"
+                );
+                self.withdraw(w.robot, why, true);
                 contradicted = self.contradicted_now();
             }
         }
@@ -96,23 +123,28 @@ impl Matcher {
         Some((vec![me, robot, through], vec![ours_of(robot, *own), placed_by(through, robot)?, link]))
     }
 
-    /// Withdraws our alignment of `w.robot`: back to waiting for a match with its objects held,
-    /// the transform barred, any round's keyframes let go, the pose graph told, the team told.
-    fn withdraw(&mut self, w: Withdrawal) {
+    /// Withdraws our alignment of `robot` for the reason `why`: back to waiting for a match with
+    /// its objects held, the transform barred (if `bar`), any round's keyframes let go, the pose
+    /// graph told, the team told.
+    pub(super) fn withdraw(&mut self, robot: RobotId, why: String, bar: bool) {
         let now = self.clock.now();
-        let Some(entry) = self.neighbours.get_mut(&w.robot) else { return };
+        let Some(entry) = self.neighbours.get_mut(&robot) else { return };
         if !matches!(entry.protocol, Some(Protocol::Aligned(_))) {
             return;
         }
         let Some(Protocol::Aligned(aligned)) = entry.protocol.take() else { return };
         let transform = aligned.state.local_from_remote;
         entry.protocol = Some(aligned.withdrawn(now).into());
-        entry.withdrawn.push(transform);
-        if entry.withdrawn.len() > MAX_WITHDRAWN {
-            entry.withdrawn.remove(0);
+        if bar {
+            entry.withdrawn.push(transform);
+            if entry.withdrawn.len() > MAX_WITHDRAWN {
+                entry.withdrawn.remove(0);
+            }
         }
         entry.withdrawals += 1;
         entry.aligned_via = None;
+        entry.aligned_significance = None;
+        entry.challenger = None;
         // Closure rounds of a wrong alignment covered nothing, and its factors are gone: the new
         // alignment's rounds start afresh and may ask for those keyframes again (the bytes they
         // cost stay counted, against `closures.max_bytes_per_neighbour` too).
@@ -120,17 +152,16 @@ impl Matcher {
         entry.closures.requested.clear();
         entry.round.clear();
         let released: Vec<KeyframeId> = std::mem::take(&mut entry.keyframes).into_keys().collect();
-        // Matched again at once: the other alignments of the cycle place it through the relay.
+        // Matched again at once: the other alignments of a cycle place it through the relay, a
+        // stronger match places it itself.
         entry.last_attempt = None;
         entry.match_again = true;
-        let (support, losses) = (&w.settlement.support, w.settlement.losses());
-        let cycle = w.cycle.iter().map(ToString::to_string).collect::<Vec<_>>().join(" → ");
-        tracing::warn!(robot = %self.robot, neighbour = %w.robot, %cycle,
-            local_from_remote = %Brief(&transform), ?support, ?losses,
-            "our alignment of the neighbour withdrawn: the contradicted cycle's object evidence names it wrong");
-        self.release(w.robot, released);
+        entry.last_withdrawal = Some(format!("at {now:.1} s: {why}"));
+        tracing::warn!(robot = %self.robot, neighbour = %robot, local_from_remote = %Brief(&transform), %why,
+            "our alignment of the neighbour withdrawn");
+        self.release(robot, released);
         if let Some(links) = &self.links {
-            links.withdraw.do_send(NeighbourWithdrawn { robot: w.robot });
+            links.withdraw.do_send(NeighbourWithdrawn { robot });
         }
         self.share_alignments();
     }

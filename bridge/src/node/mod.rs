@@ -345,6 +345,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                     "aligned_via": n.aligned_via.map(|r| r.0),
                     "contradicted_by": n.contradicted_by.iter().map(|r| r.0).collect::<Vec<_>>(),
                     "withdrawals": n.withdrawals,
+                    "last_withdrawal": n.last_withdrawal,
                     "closures": n.closures,
                     "match_attempts": n.match_attempts,
                     "local_from_remote": n.local_from_remote.map(|p| {

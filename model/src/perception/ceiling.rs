@@ -27,6 +27,15 @@ use std::collections::{BTreeMap, BTreeSet};
 /// Fewest flat overhead columns that make a ceiling.
 const MIN_COLUMNS: usize = 20;
 
+/// One column's points over the sensor: lowest and highest z, their sum and count.
+#[derive(Clone, Copy)]
+struct Column {
+    low: f64,
+    high: f64,
+    sum: Vector3<f64>,
+    count: usize,
+}
+
 /// A plane z = a + b·x + c·y over the sensor (body frame).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ceiling {
@@ -52,19 +61,20 @@ pub fn find_ceiling(points: &[Point3<f64>], cell_m: f64, clearance_m: f64, max_s
     if !(cell_m.is_finite() && cell_m > 0.0 && clearance_m.is_finite() && clearance_m >= 0.0) {
         return None;
     }
-    let mut columns: BTreeMap<(i64, i64), (f64, f64, Vector3<f64>, usize)> = BTreeMap::new();
+    let mut columns: BTreeMap<(i64, i64), Column> = BTreeMap::new();
     for p in points.iter().filter(|p| p.z > clearance_m && p.coords.iter().all(|v| v.is_finite())) {
         let key = ((p.x / cell_m).floor() as i64, (p.y / cell_m).floor() as i64);
-        let e = columns.entry(key).or_insert((f64::INFINITY, f64::NEG_INFINITY, Vector3::zeros(), 0));
-        e.0 = e.0.min(p.z);
-        e.1 = e.1.max(p.z);
-        e.2 += p.coords;
-        e.3 += 1;
+        let empty = Column { low: f64::INFINITY, high: f64::NEG_INFINITY, sum: Vector3::zeros(), count: 0 };
+        let c = columns.entry(key).or_insert(empty);
+        c.low = c.low.min(p.z);
+        c.high = c.high.max(p.z);
+        c.sum += p.coords;
+        c.count += 1;
     }
     let flat: BTreeMap<(i64, i64), Vector3<f64>> = columns
         .into_iter()
-        .filter(|(_, (low, high, _, _))| high - low <= clearance_m)
-        .map(|(key, (_, _, sum, n))| (key, sum / n as f64))
+        .filter(|(_, c)| c.high - c.low <= clearance_m)
+        .map(|(key, c)| (key, c.sum / c.count as f64))
         .collect();
     if flat.len() < MIN_COLUMNS {
         return None;

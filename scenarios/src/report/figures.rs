@@ -92,8 +92,12 @@ pub struct AlignmentReport {
     /// wrong.
     pub contradicted_by: Vec<String>,
     /// Times the local robot withdrew its alignment of the remote: a contradicted cycle
-    /// settled against it by object evidence (`matcher.relay.settle`).
+    /// settled against it by object evidence (`matcher.relay.settle`), or a stronger match that
+    /// put the remote elsewhere (`matcher.relay.rematch`).
     pub withdrawals: u32,
+    /// When and why the latest withdrawal was made.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub last_withdrawal: Option<String>,
     /// The object-graph matches made against the remote and why the latest started no round
     /// (the local robot's status): why a pair is not aligned.
     pub match_attempts: sgm_actors::matcher::MatchAttempts,
@@ -410,6 +414,7 @@ pub fn compute(record: &RunRecord) -> Report {
                     .filter_map(|v| Some(record.robots.get(v.index()?)?.name.clone()))
                     .collect(),
                 withdrawals: n.withdrawals,
+                last_withdrawal: n.last_withdrawal.clone(),
                 match_attempts: n.match_attempts.clone(),
             });
         }

@@ -198,6 +198,13 @@ pub fn render(report: &Report, timing: &Timing) -> String {
             a.inconsistent_factors
         );
     }
+    let withdrawn: Vec<_> = report.alignments.iter().filter_map(|a| Some((a, a.last_withdrawal.as_ref()?))).collect();
+    if !withdrawn.is_empty() {
+        let _ = writeln!(s, "\nAlignments withdrawn (the latest of each pair, and why):\n");
+        for (a, why) in withdrawn {
+            let _ = writeln!(s, "- {} ← {}: {why}", a.local, a.remote);
+        }
+    }
     let unaligned: Vec<_> = report.alignments.iter().filter(|a| a.first_aligned_s.is_none()).collect();
     if !unaligned.is_empty() {
         let _ = writeln!(s, "\nNot aligned, and why (the local robot's latest object-graph match):\n");

@@ -1,0 +1,88 @@
+//! Our alignments matched again as the maps grow (`matcher.relay.rematch`; beyond the paper).
+//! An alignment starts from one match and one round of keyframe registrations, and in a
+//! building of identical rooms both can be fooled: a match just over the significance threshold
+//! and walls that agree in every room (`handheld_indoor` seed 6 under a ceiling: bravo placed
+//! alpha half a turn off, 32 m, from a match of −log₁₀ NFA 1.23). On no closed cycle nothing
+//! contradicts it, and robots that take it as a hint pass it on. The maps keep growing, and so
+//! does the evidence: at each new object data (at most every `match_interval_s`) the graphs are
+//! matched again, and a match that puts the neighbour elsewhere
+//!
+//! ```text
+//! s' ≥ max(s + rematch_margin, rematch_min_significance)
+//! ```
+//!
+//! (s: the significance of the match our alignment came from; the threshold itself for
+//! one from a neighbour's alignment, −log₁₀ `matching.max_false_alarms`), found
+//! `rematch_confirmations` times running (from changed inputs: the same graphs give the same
+//! match, which is not made again), withdraws
+//! ours: barred for good, it is aligned again from the stronger match, through a round of
+//! keyframe registrations as any. In that run the graphs, matched again at 57.5 s, put alpha
+//! where it was (significance 3.41).
+
+use super::association::graph_objects;
+use super::*;
+use sgm_model::geometry::Brief;
+use sgm_model::matching::relay::agree;
+
+impl Matcher {
+    /// Matches `robot`'s latest object data against ours again while we are aligned with it;
+    /// withdraws our alignment when a stronger match puts it elsewhere (module notes).
+    pub(super) fn rematch(&mut self, robot: RobotId) {
+        let now = self.clock.now();
+        let relay = &self.config.relay;
+        if !relay.rematch || self.config.association != Association::Objects {
+            return;
+        }
+        let Some(entry) = self.neighbours.get(&robot) else { return };
+        let (Some(Protocol::Aligned(aligned)), Some(data)) = (&entry.protocol, &entry.objects) else { return };
+        let inputs = (self.local_objects_revision, data.revision);
+        let (due, changed) = match entry.last_rematch {
+            None => (true, true),
+            Some((t, local, remote)) => (now - t >= self.config.match_interval_s, (local, remote) != inputs),
+        };
+        if !due || !changed {
+            return;
+        }
+        let current = aligned.state.local_from_remote;
+        let standing = entry.aligned_significance.unwrap_or(-self.config.matching.max_false_alarms.log10());
+        let (Ok(local), Ok(remote)) = (
+            ObjectGraph::new(self.map.objects.objects.clone(), usize::MAX),
+            ObjectGraph::new(graph_objects(data), usize::MAX),
+        ) else {
+            return;
+        };
+        let (tolerance_m, tolerance_deg) = (relay.contradiction_m, relay.contradiction_deg);
+        let needed = (standing + relay.rematch_margin).max(relay.rematch_min_significance);
+        let outcome = match_graphs(&local, &remote, &self.labels, &self.config.matching).outcome;
+        let challenger = match outcome {
+            MatchOutcome::Aligned(a)
+                if a.significance >= needed
+                    && a.matches.len() >= self.config.min_matched_objects
+                    && !agree(&current, &a.local_from_remote, tolerance_m, tolerance_deg) =>
+            {
+                Some((a.local_from_remote, a.significance))
+            }
+            _ => None,
+        };
+        let confirmations = relay.rematch_confirmations;
+        let Some(entry) = self.neighbours.get_mut(&robot) else { return };
+        entry.last_rematch = Some((now, inputs.0, inputs.1));
+        let Some((transform, significance)) = challenger else {
+            entry.challenger = None;
+            return;
+        };
+        let times = match entry.challenger {
+            Some((before, n)) if agree(&before, &transform, tolerance_m, tolerance_deg) => n + 1,
+            _ => 1,
+        };
+        entry.challenger = Some((transform, times));
+        if times < confirmations {
+            return;
+        }
+        let why = format!(
+            "a match of significance {significance:.2} (ours {standing:.2}), found {times} times running, puts it at {}",
+            Brief(&transform)
+        );
+        self.withdraw(robot, why, true);
+    }
+}
