@@ -19,7 +19,10 @@ fn direction<'a>(alignments: &'a [AlignmentReport], local: &str, remote: &str) -
 
 #[test]
 fn a_weak_wrong_alignment_gives_way_to_a_stronger_match_and_what_was_chained_through_it_follows() {
-    let scenario = Scenario::load_with_env("handheld_indoor", "SGM_REMATCH_TEST").unwrap().with_seed(6);
+    let mut scenario = Scenario::load_with_env("handheld_indoor", "SGM_REMATCH_TEST").unwrap().with_seed(6);
+    // Everything is settled by 63 s (alpha ↔ bravo withdrawn at 57.5 and 58.5 s, bravo ↔ charlie
+    // at 62 and 63 s) and placed again by 70 s.
+    scenario.scenario.duration_s = 70.0;
     let outcome = actix_rt::System::new().block_on(run(&scenario, None)).unwrap();
     let report = compute(&outcome.record);
     assert_eq!(report.alignments.len(), 6);

@@ -4,7 +4,7 @@
 //! and walls that agree in every room (`handheld_indoor` seed 6 under a ceiling: bravo placed
 //! alpha half a turn off, 32 m, from a match of −log₁₀ NFA 1.23). On no closed cycle nothing
 //! contradicts it, and robots that take it as a hint pass it on. The maps keep growing, and so
-//! does the evidence: at each new object data (at most every `match_interval_s`) the graphs are
+//! does the evidence: at new object data, ours or its (at most every `match_interval_s`), the graphs are
 //! matched again, and a match that puts the neighbour elsewhere
 //!
 //! ```text
@@ -79,8 +79,9 @@ impl Matcher {
         if times < confirmations {
             return;
         }
+        let found = if times == 1 { "found once".to_string() } else { format!("found {times} times running") };
         let why = format!(
-            "a match of significance {significance:.2} (ours {standing:.2}), found {times} times running, puts it at {}",
+            "a match of significance {significance:.2} (ours {standing:.2}), {found}, puts it at {}",
             Brief(&transform)
         );
         self.withdraw(robot, why, true);
