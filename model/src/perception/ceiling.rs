@@ -125,6 +125,31 @@ fn fit(points: &[Vector3<f64>]) -> Option<Ceiling> {
     abc.iter().all(|v| v.is_finite()).then(|| Ceiling { a: abc.x, b: abc.y, c: abc.z })
 }
 
+/// A square room 8 m across centred on the origin, in its own frame, for tests: `floor` points
+/// on the floor (and as many on a ceiling at 3 m if `covered`), `wall` points on each of the four
+/// walls, 3 m high.
+#[cfg(test)]
+pub(crate) fn square_room(covered: bool, floor: usize, wall: usize, rng: &mut impl rand::Rng) -> Vec<Point3<f64>> {
+    let mut world = Vec::new();
+    for _ in 0..floor {
+        let (x, y) = (rng.random_range(-4.0..4.0), rng.random_range(-4.0..4.0));
+        world.push(Point3::new(x, y, 0.0));
+        if covered {
+            world.push(Point3::new(x, y, 3.0));
+        }
+    }
+    for _ in 0..wall {
+        let (s, z) = (rng.random_range(-4.0..4.0), rng.random_range(0.0..3.0));
+        world.extend([
+            Point3::new(4.0, s, z),
+            Point3::new(-4.0, s, z),
+            Point3::new(s, 4.0, z),
+            Point3::new(s, -4.0, z),
+        ]);
+    }
+    world
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -134,23 +159,7 @@ mod tests {
     /// A room seen from 1.5 m over its floor: floor, four walls 3 m high, and a ceiling at 3 m if
     /// `covered`; the body tilted by `roll` and `pitch` (rad).
     fn room(covered: bool, roll: f64, pitch: f64, rng: &mut ChaCha8Rng) -> Vec<Point3<f64>> {
-        let mut world = Vec::new();
-        for _ in 0..3000 {
-            let (x, y) = (rng.random_range(-4.0..4.0), rng.random_range(-4.0..4.0));
-            world.push(Point3::new(x, y, 0.0));
-            if covered {
-                world.push(Point3::new(x, y, 3.0));
-            }
-        }
-        for _ in 0..1500 {
-            let (s, z) = (rng.random_range(-4.0..4.0), rng.random_range(0.0..3.0));
-            world.extend([
-                Point3::new(4.0, s, z),
-                Point3::new(-4.0, s, z),
-                Point3::new(s, 4.0, z),
-                Point3::new(s, -4.0, z),
-            ]);
-        }
+        let world = square_room(covered, 3000, 1500, rng);
         let body = nalgebra::Isometry3::from_parts(
             nalgebra::Translation3::new(0.5, -1.0, 1.5),
             nalgebra::UnitQuaternion::from_euler_angles(roll, pitch, 0.3),

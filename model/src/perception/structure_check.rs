@@ -386,23 +386,7 @@ mod tests {
     /// A square room 8 m across, walls and ceiling 3 m high (the ceiling only if `covered`), and
     /// three boxes that break its symmetry, scanned from `world_from_body`.
     fn room_scan(covered: bool, world_from_body: &Pose3, rng: &mut ChaCha8Rng) -> Vec<Point3<f64>> {
-        let mut world = Vec::new();
-        for _ in 0..4000 {
-            let (x, y) = (rng.random_range(-4.0..4.0), rng.random_range(-4.0..4.0));
-            world.push(Point3::new(x, y, 0.0));
-            if covered {
-                world.push(Point3::new(x, y, 3.0));
-            }
-        }
-        for _ in 0..600 {
-            let (s, z) = (rng.random_range(-4.0..4.0), rng.random_range(0.0..3.0));
-            world.extend([
-                Point3::new(4.0, s, z),
-                Point3::new(-4.0, s, z),
-                Point3::new(s, 4.0, z),
-                Point3::new(s, -4.0, z),
-            ]);
-        }
+        let mut world = crate::perception::ceiling::square_room(covered, 4000, 600, rng);
         for (bx, by) in [(2.0, 1.5), (-2.5, 2.0), (1.0, -2.5)] {
             for _ in 0..400 {
                 let (x, y, z) =
