@@ -248,7 +248,8 @@ impl Neighbour<Aligned> {
         self
     }
 
-    /// The alignment was found wrong (a contradicted cycle settled against it): back to
+    /// The alignment was found wrong (a contradicted cycle settled against it, a stronger
+    /// match elsewhere, the relay it came from gone): back to
     /// waiting for a match, with the object data held (any closure round in progress ends).
     pub fn withdrawn(self, now: Stamp) -> Neighbour<ObjectsReceived> {
         let revision = self.state.revision;

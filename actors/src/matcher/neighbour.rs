@@ -131,8 +131,9 @@ pub(super) struct NeighbourEntry {
     pub(super) refuted_few: Vec<(Pose3, Stamp)>,
     /// What graph matching has concluded (status only).
     pub(super) attempts: MatchAttempts,
-    /// Our alignments of it withdrawn (a contradicted cycle settled against them), at most
-    /// [`MAX_WITHDRAWN`], oldest first: barred for good, as a match and as a hint.
+    /// Our alignments of it withdrawn (a contradicted cycle settled against them, a stronger
+    /// match elsewhere, or the relay they came from gone), at most [`MAX_WITHDRAWN`], oldest
+    /// first: barred for good, as a match and as a hint.
     pub(super) withdrawn: Vec<Pose3>,
     /// Times an alignment of it was withdrawn.
     pub(super) withdrawals: u32,
@@ -217,7 +218,8 @@ pub struct NeighbourMemory {
 }
 
 /// Withdrawn alignments barred per neighbour, at most (the oldest is forgotten beyond it). A
-/// pair is withdrawn only when a cycle names it wrong, once per wrong transform.
+/// pair is withdrawn when a cycle names it wrong, a stronger match puts the neighbour
+/// elsewhere, or the robot it was relayed by contradicts it; once per wrong transform.
 pub(super) const MAX_WITHDRAWN: usize = 8;
 
 /// Drops held neighbour keyframes outside `round`, lowest ids first, until at most `cap` are

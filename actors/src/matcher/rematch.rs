@@ -35,6 +35,10 @@ impl Matcher {
         }
         let Some(entry) = self.neighbours.get(&robot) else { return };
         let (Some(Protocol::Aligned(aligned)), Some(data)) = (&entry.protocol, &entry.objects) else { return };
+        // While the link is down nothing would place it again.
+        if !entry.link_up {
+            return;
+        }
         let inputs = (self.local_objects_revision, data.revision);
         let (due, changed) = match entry.last_rematch {
             None => (true, true),
@@ -55,10 +59,14 @@ impl Matcher {
         let needed = (standing + relay.rematch_margin).max(relay.rematch_min_significance);
         let outcome = match_graphs(&local, &remote, &self.labels, &self.config.matching).outcome;
         let challenger = match outcome {
+            // A match landing on a transform barred or lately refuted by keyframe registration is
+            // no challenger: `try_match` would not pursue it either.
             MatchOutcome::Aligned(a)
                 if a.significance >= needed
                     && a.matches.len() >= self.config.min_matched_objects
-                    && !agree(&current, &a.local_from_remote, tolerance_m, tolerance_deg) =>
+                    && !agree(&current, &a.local_from_remote, tolerance_m, tolerance_deg)
+                    && !entry.withdrawn_near(&a.local_from_remote, relay)
+                    && !refuted_recently(&entry.refuted, &a.local_from_remote, now) =>
             {
                 Some((a.local_from_remote, a.significance))
             }

@@ -109,7 +109,8 @@ pub fn agree(a: &Pose3, b: &Pose3, tolerance_m: f64, tolerance_deg: f64) -> bool
 }
 
 /// Whether `transform` agrees with any of `barred` (our alignments of the same robot withdrawn
-/// for good, a contradicted cycle settled against them) within the contradiction tolerance:
+/// for good: a contradicted cycle settled against them, a stronger match elsewhere, the relay
+/// they came from gone) within the contradiction tolerance:
 /// the alignment that contradicted a withdrawn one, by definition beyond it, is never barred.
 pub fn barred(barred: &[Pose3], transform: &Pose3, tolerance_m: f64, tolerance_deg: f64) -> bool {
     barred.iter().any(|t| agree(t, transform, tolerance_m, tolerance_deg))
