@@ -58,6 +58,8 @@ impl Matcher {
         let (tolerance_m, tolerance_deg) = (relay.contradiction_m, relay.contradiction_deg);
         let needed = (standing + relay.rematch_margin).max(relay.rematch_min_significance);
         let outcome = match_graphs(&local, &remote, &self.labels, &self.config.matching).outcome;
+        // Kept as the last match: after a withdrawal `try_match` takes it, not making it again.
+        let last = LastMatch { local_objects: inputs.0, remote_revision: inputs.1, outcome: outcome.clone() };
         let challenger = match outcome {
             // A match landing on a transform barred or lately refuted by keyframe registration is
             // no challenger: `try_match` would not pursue it either.
@@ -75,6 +77,7 @@ impl Matcher {
         let confirmations = relay.rematch_confirmations;
         let Some(entry) = self.neighbours.get_mut(&robot) else { return };
         entry.last_rematch = Some((now, inputs.0, inputs.1));
+        entry.last_match = Some(last);
         let Some((transform, significance)) = challenger else {
             entry.challenger = None;
             return;
