@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """Feeds one robot's sensor topics from a ROS 1 bag through rospy publishers, at RATE times
 the recorded pace (the rospy side of the ROS interop tests; run with Debian's Python).
-Waits for a subscriber on every topic first; ground truth is not published.
+Waits for a subscriber on every topic first (/tf_static is latched, so later subscribers get
+it too); ground truth is not published.
 Usage: ros_feed.py BAG RATE"""
 import sys
 import time
@@ -19,7 +20,11 @@ def main():
     for topic, info in bag.get_type_and_topic_info().topics.items():
         if not topic.endswith("/ground_truth"):
             cls = roslib.message.get_message_class(info.msg_type)
-            publishers[topic] = (rospy.Publisher(topic, cls, queue_size=100), cls)
+            # /tf_static is latched, as tf2's static broadcaster latches it: both robots' nodes
+            # subscribe to it, and unlatched, the one mount message went only to whichever node
+            # had connected when the wait below ended (CI at 5a08bc87: alpha got no camera mount).
+            latch = topic.endswith("tf_static")
+            publishers[topic] = (rospy.Publisher(topic, cls, queue_size=100, latch=latch), cls)
     deadline = time.monotonic() + 60
     while any(p.get_num_connections() == 0 for p, _ in publishers.values()):
         if time.monotonic() > deadline:
