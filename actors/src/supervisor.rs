@@ -393,6 +393,9 @@ mod tests {
                 aligned_via: None,
                 withdrawn: Vec::new(),
                 withdrawals: 0,
+                last_withdrawal: None,
+                aligned_significance: None,
+                challenged_bar: None,
             }],
         };
         let mut comms = CommsState::default();

@@ -35,8 +35,10 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// Version 9: the pose graph keeps each own keyframe's measured tilt (its gravity prior).
 /// Version 10: the object tracker keeps where each object's latest sighting was counted from
 /// (glimpses' spacing). Version 11: the pose graph keeps the σ of each own keyframe's up when
-/// its odometry measured one.
-pub const FORMAT_VERSION: u32 = 11;
+/// its odometry measured one. Version 12: the Matcher keeps, per neighbour, why its alignment
+/// was last withdrawn, the significance of the match its alignment came from, and a bar that
+/// stands on a stronger match's word (`relay.rematch`).
+pub const FORMAT_VERSION: u32 = 12;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).

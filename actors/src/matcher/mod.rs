@@ -138,6 +138,9 @@ impl Matcher {
                 aligned_via: e.aligned_via,
                 withdrawn: e.withdrawn.clone(),
                 withdrawals: e.withdrawals,
+                last_withdrawal: e.last_withdrawal.clone(),
+                aligned_significance: e.aligned_significance,
+                challenged_bar: e.challenged_bar,
             })
             .collect();
         MatcherState { neighbours }
@@ -157,6 +160,9 @@ impl Matcher {
             entry.aligned_via = memory.aligned_via;
             entry.withdrawn = memory.withdrawn;
             entry.withdrawals = memory.withdrawals;
+            entry.last_withdrawal = memory.last_withdrawal;
+            entry.aligned_significance = memory.aligned_significance;
+            entry.challenged_bar = memory.challenged_bar;
             entry.match_again = true;
         }
         self
@@ -164,34 +170,7 @@ impl Matcher {
 
     fn entry(&mut self, robot: RobotId) -> &mut NeighbourEntry {
         let now = self.clock.now();
-        self.neighbours.entry(robot).or_insert_with(|| NeighbourEntry {
-            protocol: Some(Neighbour::discovered(robot, now).into()),
-            objects: None,
-            keyframes: BTreeMap::new(),
-            first_aligned: None,
-            observed_in: BTreeMap::new(),
-            refuted: Vec::new(),
-            round: BTreeSet::new(),
-            last_attempt: None,
-            places: PlaceCandidates::default(),
-            place_round: None,
-            link_up: true,
-            round_incomplete: false,
-            match_again: false,
-            closures: ClosureMemory::default(),
-            round_via: None,
-            aligned_via: None,
-            refuted_hints: Vec::new(),
-            refuted_few: Vec::new(),
-            attempts: MatchAttempts::default(),
-            withdrawn: Vec::new(),
-            withdrawals: 0,
-            last_withdrawal: None,
-            aligned_significance: None,
-            challenger: None,
-            last_rematch: None,
-            last_match: None,
-        })
+        self.neighbours.entry(robot).or_insert_with(|| NeighbourEntry::discovered(robot, now))
     }
 
     /// Scan Context association: the descriptor of a new local keyframe, shared with the
@@ -456,3 +435,35 @@ impl Handler<GetNeighbours> for Matcher {
 connects!(Matcher => MatcherLinks);
 freezes!(Matcher => MatcherState);
 stops_on_injected_failure!(Matcher => "matcher");
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn matcher() -> Matcher {
+        let labels = LabelSimilarity::hard(4);
+        Matcher::new(RobotId(1), MatcherSection::default(), RetryConfig::default(), Clock::starting_at(5.0), labels)
+    }
+
+    /// What a rematch needs after a crash survives the snapshot: the significance to beat, why
+    /// the alignment was last withdrawn, and a bar that stands on a challenger's word.
+    #[test]
+    fn a_withdrawal_and_what_a_rematch_must_beat_survive_freeze_and_thaw() {
+        let mut before = matcher();
+        let barred = Pose3::translation(32.0, 0.0, 0.0);
+        let entry = before.entry(RobotId(2));
+        entry.bar(barred);
+        entry.withdrawals = 1;
+        entry.challenged_bar = Some(barred);
+        entry.last_withdrawal = Some("at 57.5 s: a match of significance 3.41".into());
+        entry.aligned_significance = Some(1.23);
+        let state = before.freeze();
+        let after = matcher().thawed(state.clone());
+        let entry = &after.neighbours[&RobotId(2)];
+        assert_eq!(entry.withdrawn, [barred]);
+        assert_eq!(entry.challenged_bar, Some(barred));
+        assert_eq!(entry.aligned_significance, Some(1.23));
+        assert_eq!(entry.last_withdrawal.as_deref(), Some("at 57.5 s: a match of significance 3.41"));
+        assert_eq!(after.freeze(), state);
+    }
+}

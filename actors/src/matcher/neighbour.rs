@@ -145,6 +145,10 @@ pub(super) struct NeighbourEntry {
     pub(super) aligned_significance: Option<f64>,
     /// A match that contradicts our alignment, and how many times running it was found.
     pub(super) challenger: Option<(Pose3, usize)>,
+    /// Our alignment withdrawn on a stronger match's word (`relay.rematch`), barred until that
+    /// word is tested: the bar stays once another alignment stands, and is lifted if a round of
+    /// a graph match is refuted first (the match that withdrew it did not hold up on the scans).
+    pub(super) challenged_bar: Option<Pose3>,
     /// When our alignment was last matched again, and with what: the revisions of our objects
     /// and of its object data (the same inputs give the same match, which is not made again).
     pub(super) last_rematch: Option<(Stamp, u64, u32)>,
@@ -154,6 +158,57 @@ pub(super) struct NeighbourEntry {
 }
 
 impl NeighbourEntry {
+    /// A neighbour just heard of, at `now`: nothing known of it yet.
+    pub(super) fn discovered(robot: RobotId, now: Stamp) -> Self {
+        Self {
+            protocol: Some(Neighbour::discovered(robot, now).into()),
+            objects: None,
+            keyframes: BTreeMap::new(),
+            first_aligned: None,
+            observed_in: BTreeMap::new(),
+            refuted: Vec::new(),
+            round: BTreeSet::new(),
+            last_attempt: None,
+            places: PlaceCandidates::default(),
+            place_round: None,
+            link_up: true,
+            round_incomplete: false,
+            match_again: false,
+            closures: ClosureMemory::default(),
+            round_via: None,
+            aligned_via: None,
+            refuted_hints: Vec::new(),
+            refuted_few: Vec::new(),
+            attempts: MatchAttempts::default(),
+            withdrawn: Vec::new(),
+            withdrawals: 0,
+            last_withdrawal: None,
+            aligned_significance: None,
+            challenger: None,
+            challenged_bar: None,
+            last_rematch: None,
+            last_match: None,
+        }
+    }
+
+    /// Bars `transform` as a match and as a hint (the oldest bar forgotten beyond
+    /// [`MAX_WITHDRAWN`]).
+    pub(super) fn bar(&mut self, transform: Pose3) {
+        self.withdrawn.push(transform);
+        if self.withdrawn.len() > MAX_WITHDRAWN {
+            self.withdrawn.remove(0);
+        }
+    }
+
+    /// Lifts the bar a stronger match put on our withdrawn alignment ([`Self::challenged_bar`]),
+    /// if one stands: the transform lifted.
+    pub(super) fn lift_challenged_bar(&mut self) -> Option<Pose3> {
+        let lifted = self.challenged_bar.take()?;
+        let at = self.withdrawn.iter().rposition(|t| *t == lifted)?;
+        self.withdrawn.remove(at);
+        Some(lifted)
+    }
+
     /// Whether `transform` agrees with one of our alignments withdrawn (within the
     /// contradiction tolerance of `relay`): barred as a match and as a hint.
     pub(super) fn withdrawn_near(&self, transform: &Pose3, relay: &crate::config::RelaySection) -> bool {
@@ -215,6 +270,12 @@ pub struct NeighbourMemory {
     /// Alignments withdrawn and barred, and how many times one was.
     pub withdrawn: Vec<Pose3>,
     pub withdrawals: u32,
+    /// Why the latest was.
+    pub last_withdrawal: Option<String>,
+    /// What a match that puts the neighbour elsewhere must beat (`relay.rematch`).
+    pub aligned_significance: Option<f64>,
+    /// A bar that stands on a stronger match's word, until its round is judged.
+    pub challenged_bar: Option<Pose3>,
 }
 
 /// Withdrawn alignments barred per neighbour, at most (the oldest is forgotten beyond it). A
@@ -241,6 +302,31 @@ pub(super) fn hold_at_most(
 mod tests {
     use super::*;
     use nalgebra::Matrix6;
+
+    #[test]
+    fn a_bar_on_a_challengers_word_is_lifted_alone_and_only_once() {
+        let at = |x: f64| Pose3::translation(x, 0.0, 0.0);
+        let mut entry = NeighbourEntry::discovered(RobotId(2), 0.0);
+        // Nothing on a challenger's word: nothing to lift.
+        entry.bar(at(1.0));
+        assert_eq!(entry.lift_challenged_bar(), None);
+        assert_eq!(entry.withdrawn, [at(1.0)]);
+        // A cycle's bar, then one on a challenger's word: only the latter is lifted.
+        entry.bar(at(2.0));
+        entry.challenged_bar = Some(at(2.0));
+        assert_eq!(entry.lift_challenged_bar(), Some(at(2.0)));
+        assert_eq!(entry.withdrawn, [at(1.0)]);
+        assert_eq!(entry.lift_challenged_bar(), None);
+        // The oldest bar goes beyond the cap; a challenged bar forgotten that way lifts nothing.
+        entry.challenged_bar = Some(at(1.0));
+        for k in 0..MAX_WITHDRAWN {
+            entry.bar(at(10.0 + k as f64));
+        }
+        assert_eq!(entry.withdrawn.len(), MAX_WITHDRAWN);
+        assert!(!entry.withdrawn.contains(&at(1.0)));
+        assert_eq!(entry.lift_challenged_bar(), None);
+        assert_eq!(entry.withdrawn.len(), MAX_WITHDRAWN);
+    }
 
     #[test]
     fn held_neighbour_keyframes_beyond_the_cap_go_lowest_first_sparing_the_round() {

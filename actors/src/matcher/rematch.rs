@@ -15,9 +15,14 @@
 //! one from a neighbour's alignment, −log₁₀ `matching.max_false_alarms`), found
 //! `rematch_confirmations` times running (from changed inputs: the same graphs give the same
 //! match, which is not made again), withdraws
-//! ours: barred for good, it is aligned again from the stronger match, through a round of
-//! keyframe registrations as any. In that run the graphs, matched again at 57.5 s, put alpha
-//! where it was (significance 3.41).
+//! ours, and it is aligned again from the stronger match, through a round of keyframe
+//! registrations as any. In that run the graphs, matched again at 57.5 s, put alpha where it
+//! was (significance 3.41).
+//!
+//! The withdrawn transform is barred (as a match and as a hint: else the robots it was chained
+//! to hand it back), but on the challenger's word only: once another alignment stands the bar
+//! stays for good, and if a round of a graph match is refuted first, the bar is lifted, so a
+//! stronger match that does not hold up on the scans cannot bar a right alignment for good.
 
 use super::association::graph_objects;
 use super::*;
@@ -96,5 +101,12 @@ impl Matcher {
             Brief(&transform)
         );
         self.withdraw(robot, why, true);
+        // Barred on the challenger's word: until another alignment stands, a refuted round of a
+        // graph match lifts it (`rounds.rs`).
+        if let Some(entry) = self.neighbours.get_mut(&robot) {
+            if entry.withdrawn.last() == Some(&current) {
+                entry.challenged_bar = Some(current);
+            }
+        }
     }
 }

@@ -216,7 +216,19 @@ impl Matcher {
                     local_from_remote = %Brief(&n.state.local_from_remote), "object match refuted");
                 entry.attempts.rounds_refuted += 1;
                 match entry.round_via {
-                    None => entry.refuted.push((n.state.local_from_remote, now)),
+                    None => {
+                        entry.refuted.push((n.state.local_from_remote, now));
+                        // The stronger match that withdrew our alignment did not hold up.
+                        if let Some(lifted) = entry.lift_challenged_bar() {
+                            tracing::info!(robot = %self.robot, neighbour = %robot, local_from_remote = %Brief(&lifted),
+                                "the bar on our withdrawn alignment lifted: the match that withdrew it was refuted");
+                            if let Some(why) = &mut entry.last_withdrawal {
+                                why.push_str(&format!(
+                                    "; the bar lifted at {now:.1} s: that match was refuted by keyframe registration"
+                                ));
+                            }
+                        }
+                    }
                     Some(_) => {
                         let list = if few { &mut entry.refuted_few } else { &mut entry.refuted_hints };
                         list.retain(|(_, t)| now - t < REFUTED_FOR_S);
@@ -239,6 +251,8 @@ impl Matcher {
                     entry.aligned_significance =
                         if entry.round_via.is_none() { entry.attempts.last_significance } else { None };
                     entry.challenger = None;
+                    // A bar on a stronger match's word stands for good now.
+                    entry.challenged_bar = None;
                 }
                 // The first round's ground counts as covered for closure rounds.
                 let at: Vec<Point3<f64>> = n

@@ -15,7 +15,6 @@
 //! on a stronger match (`rematch.rs`), had been chained into alignments of charlie by both.
 
 use super::association::graph_objects;
-use super::neighbour::MAX_WITHDRAWN;
 use super::*;
 use sgm_model::geometry::Brief;
 use sgm_model::matching::relay::placed_by;
@@ -136,15 +135,14 @@ impl Matcher {
         let transform = aligned.state.local_from_remote;
         entry.protocol = Some(aligned.withdrawn(now).into());
         if bar {
-            entry.withdrawn.push(transform);
-            if entry.withdrawn.len() > MAX_WITHDRAWN {
-                entry.withdrawn.remove(0);
-            }
+            entry.bar(transform);
         }
         entry.withdrawals += 1;
         entry.aligned_via = None;
         entry.aligned_significance = None;
         entry.challenger = None;
+        // A bar still on a challenger's word stays: we were aligned again since.
+        entry.challenged_bar = None;
         // Closure rounds of a wrong alignment covered nothing, and its factors are gone: the new
         // alignment's rounds start afresh and may ask for those keyframes again (the bytes they
         // cost stay counted, against `closures.max_bytes_per_neighbour` too).

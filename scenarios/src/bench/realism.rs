@@ -1,9 +1,10 @@
 //! `sgm bench realism`: what each of the unkind world's effects costs (the simulator's terrain,
-//! platforms, LiDAR, camera, segmenter and odometry keys). The paper's outdoor
-//! mission (`outdoor_two_robots`) is run as it is, with each effect alone, and with all of them
-//! (`legged_campus`, the same mission on the paper's robots); for each: the pairs aligned (and
-//! none more than [`super::WRONG_M`] off), the mean inter-robot error at the end of the mission
-//! and the team ATE (`Report::team_ate_rmse_m`). One seed's odometry drift can move a row more
+//! platforms, LiDAR, camera, segmenter and odometry keys). The paper's outdoor mission
+//! (`outdoor_two_robots`) is run as it is, with each effect alone, and with all of them
+//! (`legged_campus`, the same mission on the paper's robots); indoors, the paper's indoor
+//! mission as it is (`indoor_three_robots`) and with all of them (`handheld_indoor`). For each:
+//! the pairs aligned (and none more than [`super::WRONG_M`] off), the mean inter-robot error at
+//! the end of the mission and the team ATE (`Report::team_ate_rmse_m`). One seed's odometry drift can move a row more
 //! than its effect does (seed 1's terrain run drifts 2° in heading against 0.7° on flat ground,
 //! and doubles bravo's ATE; seeds 2–4 show no cost), so each effect runs over `--seeds`
 //! consecutive seeds and the row gives their mean and the spread of the team ATE.
@@ -179,6 +180,19 @@ const EFFECTS: &[Effect] = &[
     },
 ];
 
+/// Library scenarios run as they are, after the effects: the row's name, the scenario and what
+/// it holds. `legged_campus` is every effect at once outdoors; indoors, `handheld_indoor` (every
+/// effect, the paper's robots, a ceiling) stands beside the kind mission it makes unkind.
+const WHOLE_SCENARIOS: &[(&str, &str, &str)] = &[
+    ("all (legged_campus)", "legged_campus", "every effect above together, on the robots' own odometry"),
+    ("indoors: none (indoor_three_robots)", "indoor_three_robots", "the paper's indoor mission as it is, three robots"),
+    (
+        "indoors: all (handheld_indoor)",
+        "handheld_indoor",
+        "the same rooms under a ceiling, with ramps: two legged robots and a handheld rig (6-DoF sway), every effect above, on the robots' own odometry",
+    ),
+];
+
 /// One effect's figures over its seeds.
 #[derive(Clone, Debug, Serialize)]
 pub struct Row {
@@ -250,8 +264,10 @@ pub fn run_bench(options: &Options) -> anyhow::Result<Section> {
         (effect.apply)(&mut s);
         add(&mut rows, effect.name, effect.what, s);
     }
-    if only.is_none_or(|o| "all (legged_campus)".contains(o)) {
-        add(&mut rows, "all (legged_campus)", "every effect above together", load_cut("legged_campus", duration)?);
+    for &(name, scenario, what) in WHOLE_SCENARIOS {
+        if only.is_none_or(|o| name.contains(o)) {
+            add(&mut rows, name, what, load_cut(scenario, duration)?);
+        }
     }
     let mut runs: Vec<Vec<(u64, Report)>> = rows.iter().map(|_| Vec::new()).collect();
     for (k, seed, report) in run_all(jobs)? {
@@ -281,4 +297,20 @@ pub fn run_bench(options: &Options) -> anyhow::Result<Section> {
         );
     }
     Ok(Section { markdown: md, json: serde_json::json!({ "command": command, "rows": rows }) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every whole-scenario row names a library scenario, and `--only` can pick each alone.
+    #[test]
+    fn whole_scenario_rows_load_and_are_told_apart() {
+        for &(name, scenario, _) in WHOLE_SCENARIOS {
+            assert!(Scenario::load(scenario).is_ok(), "{name}: {scenario} is not in the library");
+            let picked = WHOLE_SCENARIOS.iter().filter(|(other, _, _)| other.contains(scenario)).count();
+            assert_eq!(picked, 1, "--only {scenario} picks {picked} rows");
+            assert!(EFFECTS.iter().all(|e| !e.name.contains(scenario)), "--only {scenario} picks an effect too");
+        }
+    }
 }
