@@ -445,6 +445,47 @@ mod tests {
         Matcher::new(RobotId(1), MatcherSection::default(), RetryConfig::default(), Clock::starting_at(5.0), labels)
     }
 
+    /// Our alignment of `robot` at `local_from_remote`, as a round leaves it.
+    fn aligned_at(robot: RobotId, local_from_remote: Pose3) -> Protocol {
+        let retry = RetryConfig::default();
+        Neighbour::discovered(robot, 0.0)
+            .objects_received(1, 0.0)
+            .matched(local_from_remote, Vec::new(), 0.0, &retry)
+            .keyframes_requested(local_from_remote, BTreeSet::new(), 0.0, &retry)
+            .aligned(local_from_remote, 0.0)
+            .into()
+    }
+
+    /// Robot 1 holds robot 2 through robot 3's alignment of it (relayed); robot 3's alignment
+    /// of 2 now puts it `off_m` from ours. Whether ours is withdrawn.
+    fn relayed_alignment_withdrawn(off_m: f64) -> bool {
+        let (two, three) = (RobotId(2), RobotId(3));
+        let ours_of_two = Pose3::translation(10.0, 0.0, 0.0);
+        let ours_of_three = Pose3::translation(0.0, 10.0, 0.0);
+        let mut matcher = matcher();
+        matcher.entry(two).protocol = Some(aligned_at(two, ours_of_two));
+        matcher.entry(two).aligned_via = Some(three);
+        matcher.entry(three).protocol = Some(aligned_at(three, ours_of_three));
+        let threes_of_two = ours_of_three.inverse() * ours_of_two * Pose3::translation(off_m, 0.0, 0.0);
+        matcher.hints.insert(three, vec![(two, threes_of_two)]);
+        matcher.review_contradictions();
+        let entry = &matcher.neighbours[&two];
+        let withdrawn = !matches!(entry.protocol, Some(Protocol::Aligned(_)));
+        assert_eq!(withdrawn, entry.withdrawn == [ours_of_two], "withdrawn and barred go together");
+        assert_eq!(withdrawn, entry.last_withdrawal.as_deref().is_some_and(|w| w.contains("relayed by")));
+        withdrawn
+    }
+
+    /// A relayed alignment is withdrawn when its relay puts the neighbour beyond twice the
+    /// contradiction tolerance (2 m by default), not when the two drift apart within it.
+    #[test]
+    fn a_relayed_alignment_is_withdrawn_only_when_its_relay_puts_the_neighbour_far_elsewhere() {
+        assert!(!relayed_alignment_withdrawn(1.0), "agreeing");
+        assert!(!relayed_alignment_withdrawn(3.0), "contradicted, but within twice the tolerance");
+        assert!(relayed_alignment_withdrawn(5.0));
+        assert!(relayed_alignment_withdrawn(32.0));
+    }
+
     /// What a rematch needs after a crash survives the snapshot: the significance to beat, why
     /// the alignment was last withdrawn, and a bar that stands on a challenger's word.
     #[test]

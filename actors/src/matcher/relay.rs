@@ -44,6 +44,11 @@ impl Matcher {
     /// The robots whose relayed alignments contradict ours of `robot` (none while it is not
     /// aligned, or without relaying).
     pub(super) fn contradicted_by(&self, robot: RobotId) -> Vec<RobotId> {
+        self.contradicted_beyond(robot, 1.0)
+    }
+
+    /// [`Self::contradicted_by`] with the contradiction tolerance times `scale`.
+    pub(super) fn contradicted_beyond(&self, robot: RobotId, scale: f64) -> Vec<RobotId> {
         let own = self.neighbours.get(&robot).and_then(|e| match &e.protocol {
             Some(p @ Protocol::Aligned(_)) => p.local_from_remote().copied(),
             _ => None,
@@ -51,7 +56,8 @@ impl Matcher {
         let Some(own) = own.filter(|_| self.relaying()) else { return Vec::new() };
         let ours: BTreeMap<RobotId, Pose3> = self.aligned().into_iter().collect();
         let relay = &self.config.relay;
-        contradicting(self.robot, robot, &own, &ours, &self.hints, relay.contradiction_m, relay.contradiction_deg)
+        let (tolerance_m, tolerance_deg) = (scale * relay.contradiction_m, scale * relay.contradiction_deg);
+        contradicting(self.robot, robot, &own, &ours, &self.hints, tolerance_m, tolerance_deg)
     }
 
     /// Whether `transform` agrees with one of our withdrawn alignments of `robot`.

@@ -37,18 +37,15 @@ impl Matcher {
             // An alignment relayed by a robot whose alignments now put the neighbour elsewhere
             // has lost the ground it stood on (that robot's, or ours it was chained through, was
             // withdrawn or moved): withdrawn and barred (else the robots it was chained to hand
-            // it back to each other), to be placed again by what holds now.
-            let lost: Vec<(RobotId, RobotId)> = contradicted
-                .iter()
-                .filter_map(|(robot, by)| {
-                    let via = self.neighbours.get(robot)?.aligned_via?;
-                    by.contains(&via).then_some((*robot, via))
-                })
-                .collect();
-            for (robot, via) in lost {
+            // it back to each other), to be placed again by what holds now. Elsewhere means
+            // beyond twice the contradiction tolerance: a relayed alignment drifts from its
+            // relay's as both are re-estimated, and near the tolerance a contradiction can come
+            // and go at each solve. One at a time: each withdrawal changes the cycles.
+            for _ in 0..self.neighbours.len() {
+                let Some((robot, via)) = self.next_lost_basis(&contradicted) else { break };
                 self.withdraw(robot, format!("relayed by {via}, whose alignments now put it elsewhere"), true);
+                contradicted = self.contradicted_now();
             }
-            contradicted = self.contradicted_now();
             // Each withdrawal leaves one alignment fewer: at most one per neighbour.
             for _ in 0..self.neighbours.len() {
                 let Some(w) = self.next_withdrawal(&contradicted) else { break };
@@ -63,6 +60,16 @@ impl Matcher {
             }
         }
         self.log_contradictions(&contradicted);
+    }
+
+    /// The first of our alignments (neighbour order; `contradicted`: [`Self::contradicted_now`])
+    /// relayed by a robot whose alignments now put the neighbour beyond twice the contradiction
+    /// tolerance, and that robot.
+    fn next_lost_basis(&self, contradicted: &BTreeMap<RobotId, Vec<RobotId>>) -> Option<(RobotId, RobotId)> {
+        contradicted.iter().find_map(|(robot, by)| {
+            let via = self.neighbours.get(robot)?.aligned_via?;
+            (by.contains(&via) && self.contradicted_beyond(*robot, 2.0).contains(&via)).then_some((*robot, via))
+        })
     }
 
     /// The first of our alignments (in neighbour order, then the contradicting robots' order;
