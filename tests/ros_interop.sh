@@ -138,6 +138,7 @@ assert s["neighbours"] and all(n["state"] == "Aligned" for n in s["neighbours"])
 assert s["transport"]["sent"] > 0 and s["transport"]["received"] > 0, s["transport"]
 inter = s["pose_graph"]["inter_robot"]
 assert inter and all(p["factors"] > 0 and p["inconsistent"] == 0 for p in inter), s["pose_graph"]
+assert all(n["suspect"] == [] for n in s["neighbours"]), [n["suspect"] for n in s["neighbours"]]
 print(f"  {sys.argv[2]}: 180/180 frames, {s['keyframes']} keyframes, {s['objects']} objects, aligned at "
       + ", ".join(f"{n['first_aligned'] - 1700000000:.0f} s" for n in s["neighbours"])
       + ", inter-robot factors " + ", ".join(f"{p['factors']} ({n['closures']['rounds']} closure rounds)" for p, n in zip(inter, s["neighbours"]))

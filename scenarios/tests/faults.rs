@@ -93,6 +93,15 @@ fn false_inter_robot_factors_are_rejected_and_team_ate_holds() {
     let (clean_ate, attacked_ate, plain_ate) =
         (clean.team_ate_rmse_m.unwrap(), attacked.team_ate_rmse_m.unwrap(), plain.team_ate_rmse_m.unwrap());
     assert!(attacked_ate <= 1.1 * clean_ate, "team ATE {attacked_ate} m against {clean_ate} m clean");
+    // Not silently outvoted: each direction given false factors holds its neighbour suspect,
+    // naming the count outside the consistent set; the clean run holds none suspect.
+    let suspect = |r: &Report| r.alignments.iter().filter(|a| !a.suspect.is_empty()).count();
+    assert_eq!(suspect(&clean), 0, "{:?}", clean.alignments.iter().map(|a| &a.suspect).collect::<Vec<_>>());
+    assert_eq!(suspect(&attacked), 3);
+    for a in attacked.alignments.iter().filter(|a| !a.suspect.is_empty()) {
+        let counts = format!("{} of its {} inter-robot factors", a.inconsistent_factors, a.inter_robot_factors);
+        assert!(a.inconsistent_factors >= 3 && a.suspect[0].starts_with(&counts), "{:?}", a.suspect);
+    }
     // The factors are harmful: least squares without outlier rejection is far off.
     assert!(plain_ate > 5.0 * clean_ate, "least squares reached {plain_ate} m against {clean_ate} m clean");
     assert_eq!(plain.back_end.false_factors_rejected, 0);

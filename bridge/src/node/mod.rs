@@ -19,6 +19,7 @@ mod error;
 mod odometry_out;
 mod outputs;
 mod sensors;
+mod suspects;
 mod team_key;
 mod world_frames;
 
@@ -241,6 +242,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
         let mut snapshots = store.clone().map(Snapshots::new);
         let mut body_published: Option<sgm_model::scene_graph::Stamp> = None;
         let mut failures = PublishFailures::default();
+        let mut suspects = suspects::Suspects::default();
         while rosrust::is_ok() {
             actix_rt::time::sleep(tick).await;
             handle.supervisor.do_send(Tick { now: handle.clock.now() });
@@ -313,6 +315,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                     objects: Some(confirmed),
                 },
             );
+            let suspect = suspects.judge(&robot_name, &neighbours, &pose_graph.graph);
             let status = serde_json::json!({
                 "robot": robot_name,
                 "id": id,
@@ -346,6 +349,7 @@ pub fn run(config: NodeConfig, public: PublicKeys) -> Result<(), NodeError> {
                     "contradicted_by": n.contradicted_by.iter().map(|r| r.0).collect::<Vec<_>>(),
                     "withdrawals": n.withdrawals,
                     "last_withdrawal": n.last_withdrawal,
+                    "suspect": suspect.get(&n.robot),
                     "closures": n.closures,
                     "match_attempts": n.match_attempts,
                     "local_from_remote": n.local_from_remote.map(|p| {

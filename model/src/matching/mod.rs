@@ -24,6 +24,7 @@ pub mod scan_context;
 pub mod settle;
 pub mod significance;
 mod spectral;
+pub mod suspect;
 mod symmetry;
 pub mod tilt;
 mod verification;

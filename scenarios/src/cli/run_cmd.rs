@@ -146,6 +146,9 @@ pub fn summary(report: &Report, timing: &Timing, dir: &Path) -> String {
             },
             a.contradiction_note()
         );
+        if !a.suspect.is_empty() {
+            let _ = writeln!(s, "    SUSPECT: {}", a.suspect.join("; "));
+        }
     }
     let total: u64 = report.messages.values().map(|m| m.bytes_total).sum();
     let _ = writeln!(

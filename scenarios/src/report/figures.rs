@@ -13,6 +13,7 @@ use serde::Serialize;
 use sgm_actors::protocol::ProtocolStage;
 use sgm_model::eval::ate::ate;
 use sgm_model::geometry::{pose_error, Pose3};
+use sgm_model::matching::suspect::{suspicions, Evidence};
 use sgm_model::scene_graph::RobotId;
 use sgm_model::wire::{MessageKind, TrafficAccount};
 use std::collections::BTreeMap;
@@ -98,6 +99,11 @@ pub struct AlignmentReport {
     /// When and why the latest withdrawal was made.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub last_withdrawal: Option<String>,
+    /// Why the local robot holds the remote suspect (`model::matching::suspect`: many of its
+    /// inter-robot factors outside the consistent set, or its object graph's matches refuted
+    /// again and again), one line per finding; omitted when nothing stands out.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub suspect: Vec<String>,
     /// The object-graph matches made against the remote and why the latest started no round
     /// (the local robot's status): why a pair is not aligned.
     pub match_attempts: sgm_actors::matcher::MatchAttempts,
@@ -415,6 +421,11 @@ pub fn compute(record: &RunRecord) -> Report {
                     .collect(),
                 withdrawals: n.withdrawals,
                 last_withdrawal: n.last_withdrawal.clone(),
+                suspect: suspicions(&Evidence {
+                    factors: held.map_or(0, |h| h.factors),
+                    inconsistent: held.map_or(0, |h| h.inconsistent),
+                    rounds_refuted: n.match_attempts.rounds_refuted,
+                }),
                 match_attempts: n.match_attempts.clone(),
             });
         }

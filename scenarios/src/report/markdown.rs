@@ -205,6 +205,13 @@ pub fn render(report: &Report, timing: &Timing) -> String {
             let _ = writeln!(s, "- {} ← {}: {why}", a.local, a.remote);
         }
     }
+    let suspect: Vec<_> = report.alignments.iter().filter(|a| !a.suspect.is_empty()).collect();
+    if !suspect.is_empty() {
+        let _ = writeln!(s, "\nNeighbours held suspect (by the local robot, and why):\n");
+        for a in suspect {
+            let _ = writeln!(s, "- {} ← {}: {}", a.local, a.remote, a.suspect.join("; "));
+        }
+    }
     let unaligned: Vec<_> = report.alignments.iter().filter(|a| a.first_aligned_s.is_none()).collect();
     if !unaligned.is_empty() {
         let _ = writeln!(s, "\nNot aligned, and why (the local robot's latest object-graph match):\n");
