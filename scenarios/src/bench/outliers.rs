@@ -7,7 +7,7 @@
 //! the pair holds only its first round's factors: early on the wrong ones are even more of
 //! them. The table gives the team ATE against the clean run's, how many of the false factors
 //! the back end rejected (PCM, then GNC-TLS), how many honest factors it rejected with them,
-//! and the pairs still aligned right.
+//! the directions whose robot holds its neighbour suspect, and the pairs still aligned right.
 
 use super::{aligned_right, duration_arg, load_cut, or_dash, run_all, Job, Section};
 use serde::Serialize;
@@ -32,6 +32,9 @@ pub struct Row {
     pub honest_rejected: usize,
     /// Inter-robot factors outside the largest consistent sets (PCM), all pairs.
     pub inconsistent: usize,
+    /// Directions whose local robot holds the remote suspect at the end
+    /// (`alignments[].suspect`): the attacked ones should be.
+    pub suspect: usize,
     pub pairs: usize,
     pub aligned_right: usize,
     pub team_ate_m: Option<f64>,
@@ -77,6 +80,7 @@ fn row(kind: &str, fraction: f64, report: &Report, clean_ate: Option<f64>) -> Ro
         false_rejected: report.back_end.false_factors_rejected,
         honest_rejected: report.back_end.rejected_factors.saturating_sub(report.back_end.false_factors_rejected),
         inconsistent: report.alignments.iter().map(|a| a.inconsistent_factors).sum(),
+        suspect: report.alignments.iter().filter(|a| !a.suspect.is_empty()).count(),
         pairs: report.alignments.len(),
         aligned_right: report.alignments.iter().filter(|a| aligned_right(a)).count(),
         team_ate_m,
@@ -111,7 +115,7 @@ pub fn run_bench(scenario_name: &str, duration: Option<f64>) -> anyhow::Result<S
     }
     let command = format!("sgm bench outliers --scenario {scenario_name}{}", duration_arg(duration));
     let mut md = format!("# Wrong inter-robot closures\n\nCommand: `{command}`.\n\n");
-    md.push_str("| False factors | Wrong | Injected | Rejected | Inconsistent (PCM) | Honest rejected | Pairs aligned | Team ATE | vs clean |\n|---|---|---|---|---|---|---|---|---|\n");
+    md.push_str("| False factors | Wrong | Injected | Rejected | Inconsistent (PCM) | Honest rejected | Held suspect | Pairs aligned | Team ATE | vs clean |\n|---|---|---|---|---|---|---|---|---|---|\n");
     for r in &out {
         let how = KINDS
             .iter()
@@ -119,12 +123,14 @@ pub fn run_bench(scenario_name: &str, duration: Option<f64>) -> anyhow::Result<S
             .map_or("—".to_string(), |k| format!("{} ({} m, {}°)", k.0, k.1, k.2));
         let _ = writeln!(
             md,
-            "| {how} | {:.0} % | {} | {} | {} | {} | {}/{} | {} m | {} |",
+            "| {how} | {:.0} % | {} | {} | {} | {} | {}/{} | {}/{} | {} m | {} |",
             r.fraction * 100.0,
             r.false_injected,
             r.false_rejected,
             r.inconsistent,
             r.honest_rejected,
+            r.suspect,
+            r.pairs,
             r.aligned_right,
             r.pairs,
             or_dash(r.team_ate_m, 3),
