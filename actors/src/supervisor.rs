@@ -396,6 +396,7 @@ mod tests {
                 last_withdrawal: None,
                 aligned_significance: None,
                 challenged_bar: None,
+                discredited: Vec::new(),
             }],
         };
         let mut comms = CommsState::default();

@@ -109,6 +109,7 @@ mod tests {
             keyframes_held: 0,
             objects_revision: None,
             match_attempts: Default::default(),
+            graph_rounds_refuted: 0,
         }
     }
 

@@ -24,7 +24,8 @@ mod rounds;
 mod settle;
 
 pub use neighbour::{
-    ClosureCounts, ClosureMemory, GetNeighbours, MatchAttempts, MatcherState, NeighbourMemory, NeighbourStatus,
+    ChallengedBar, ClosureCounts, ClosureMemory, GetNeighbours, MatchAttempts, MatcherState, NeighbourMemory,
+    NeighbourStatus,
 };
 
 use crate::clock::Clock;
@@ -141,6 +142,7 @@ impl Matcher {
                 last_withdrawal: e.last_withdrawal.clone(),
                 aligned_significance: e.aligned_significance,
                 challenged_bar: e.challenged_bar,
+                discredited: e.discredited.clone(),
             })
             .collect();
         MatcherState { neighbours }
@@ -163,6 +165,7 @@ impl Matcher {
             entry.last_withdrawal = memory.last_withdrawal;
             entry.aligned_significance = memory.aligned_significance;
             entry.challenged_bar = memory.challenged_bar;
+            entry.discredited = memory.discredited;
             entry.match_again = true;
         }
         self
@@ -424,6 +427,7 @@ impl Handler<GetNeighbours> for Matcher {
                     keyframes_held: e.keyframes.len(),
                     objects_revision: e.objects.as_ref().map(|d| d.revision),
                     match_attempts: e.attempts.clone(),
+                    graph_rounds_refuted: e.refuted.len(),
                     withdrawals: e.withdrawals,
                     last_withdrawal: e.last_withdrawal.clone(),
                 })
@@ -495,14 +499,16 @@ mod tests {
         let entry = before.entry(RobotId(2));
         entry.bar(barred);
         entry.withdrawals = 1;
-        entry.challenged_bar = Some(barred);
+        entry.challenged_bar = Some(ChallengedBar { barred, challenger: Pose3::identity() });
+        entry.discredited = vec![Pose3::translation(0.0, 40.0, 0.0)];
         entry.last_withdrawal = Some("at 57.5 s: a match of significance 3.41".into());
         entry.aligned_significance = Some(1.23);
         let state = before.freeze();
         let after = matcher().thawed(state.clone());
         let entry = &after.neighbours[&RobotId(2)];
         assert_eq!(entry.withdrawn, [barred]);
-        assert_eq!(entry.challenged_bar, Some(barred));
+        assert_eq!(entry.challenged_bar, Some(ChallengedBar { barred, challenger: Pose3::identity() }));
+        assert_eq!(entry.discredited, [Pose3::translation(0.0, 40.0, 0.0)]);
         assert_eq!(entry.aligned_significance, Some(1.23));
         assert_eq!(entry.last_withdrawal.as_deref(), Some("at 57.5 s: a match of significance 3.41"));
         assert_eq!(after.freeze(), state);

@@ -37,6 +37,9 @@ pub struct NeighbourStatus {
     /// What object-graph matching with this neighbour has concluded so far: why a pair that
     /// holds each other's object graphs is not aligned.
     pub match_attempts: MatchAttempts,
+    /// Rounds of its keyframes that refuted one of our own matches with it (not those of
+    /// relayed hints), over the mission (kept in snapshots).
+    pub graph_rounds_refuted: usize,
 }
 
 /// The object-graph matches made against one neighbour, and why the latest started no
@@ -133,22 +136,26 @@ pub(super) struct NeighbourEntry {
     pub(super) attempts: MatchAttempts,
     /// Our alignments of it withdrawn (a contradicted cycle settled against them, a stronger
     /// match elsewhere, or the relay they came from gone), at most [`MAX_WITHDRAWN`], oldest
-    /// first: barred for good, as a match and as a hint.
+    /// first: barred as a match and as a hint, for good (one on a stronger match's word until
+    /// that match is tested: [`Self::challenged_bar`]).
     pub(super) withdrawn: Vec<Pose3>,
     /// Times an alignment of it was withdrawn.
     pub(super) withdrawals: u32,
     /// Why the latest was (status only).
     pub(super) last_withdrawal: Option<String>,
     /// The significance of the match our alignment came from (`None`: it came from a
-    /// neighbour's alignment, or from before a thaw): what a contradicting match must beat
-    /// (`relay.rematch`).
+    /// neighbour's alignment): what a contradicting match must beat (`relay.rematch`).
     pub(super) aligned_significance: Option<f64>,
     /// A match that contradicts our alignment, and how many times running it was found.
     pub(super) challenger: Option<(Pose3, usize)>,
     /// Our alignment withdrawn on a stronger match's word (`relay.rematch`), barred until that
-    /// word is tested: the bar stays once another alignment stands, and is lifted if a round of
-    /// a graph match is refuted first (the match that withdrew it did not hold up on the scans).
-    pub(super) challenged_bar: Option<Pose3>,
+    /// word is tested: the bar stays once another alignment stands, and is lifted if the
+    /// challenger's own round is refuted first (it did not hold up on the scans).
+    pub(super) challenged_bar: Option<ChallengedBar>,
+    /// Challengers whose rounds were refuted, at most [`MAX_WITHDRAWN`], oldest first: they
+    /// withdraw nothing again (else a refuted challenger and a restored alignment could take
+    /// turns for the rest of the mission).
+    pub(super) discredited: Vec<Pose3>,
     /// When our alignment was last matched again, and with what: the revisions of our objects
     /// and of its object data (the same inputs give the same match, which is not made again).
     pub(super) last_rematch: Option<(Stamp, u64, u32)>,
@@ -186,6 +193,7 @@ impl NeighbourEntry {
             aligned_significance: None,
             challenger: None,
             challenged_bar: None,
+            discredited: Vec::new(),
             last_rematch: None,
             last_match: None,
         }
@@ -200,13 +208,32 @@ impl NeighbourEntry {
         }
     }
 
-    /// Lifts the bar a stronger match put on our withdrawn alignment ([`Self::challenged_bar`]),
-    /// if one stands: the transform lifted.
-    pub(super) fn lift_challenged_bar(&mut self) -> Option<Pose3> {
-        let lifted = self.challenged_bar.take()?;
-        let at = self.withdrawn.iter().rposition(|t| *t == lifted)?;
+    /// A round of a graph match at `refuted` was refuted: if it was the challenger's that barred
+    /// our withdrawn alignment ([`Self::challenged_bar`], within the contradiction tolerance of
+    /// `relay`), the bar is lifted and the challenger discredited. The transform lifted.
+    pub(super) fn lift_challenged_bar(
+        &mut self,
+        refuted: &Pose3,
+        relay: &crate::config::RelaySection,
+    ) -> Option<Pose3> {
+        let bar = self.challenged_bar?;
+        if !sgm_model::matching::relay::agree(&bar.challenger, refuted, relay.contradiction_m, relay.contradiction_deg)
+        {
+            return None;
+        }
+        self.challenged_bar = None;
+        self.discredited.push(bar.challenger);
+        if self.discredited.len() > MAX_WITHDRAWN {
+            self.discredited.remove(0);
+        }
+        let at = self.withdrawn.iter().rposition(|t| *t == bar.barred)?;
         self.withdrawn.remove(at);
-        Some(lifted)
+        Some(bar.barred)
+    }
+
+    /// Whether `transform` agrees with a challenger whose round was refuted.
+    pub(super) fn discredited_near(&self, transform: &Pose3, relay: &crate::config::RelaySection) -> bool {
+        sgm_model::matching::relay::barred(&self.discredited, transform, relay.contradiction_m, relay.contradiction_deg)
     }
 
     /// Whether `transform` agrees with one of our alignments withdrawn (within the
@@ -275,7 +302,18 @@ pub struct NeighbourMemory {
     /// What a match that puts the neighbour elsewhere must beat (`relay.rematch`).
     pub aligned_significance: Option<f64>,
     /// A bar that stands on a stronger match's word, until its round is judged.
-    pub challenged_bar: Option<Pose3>,
+    pub challenged_bar: Option<ChallengedBar>,
+    /// Challengers whose rounds were refuted.
+    pub discredited: Vec<Pose3>,
+}
+
+/// Our alignment withdrawn on a stronger match's word, and that match.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ChallengedBar {
+    /// Our withdrawn alignment.
+    pub barred: Pose3,
+    /// The stronger match's transform.
+    pub challenger: Pose3,
 }
 
 /// Withdrawn alignments barred per neighbour, at most (the oldest is forgotten beyond it). A
@@ -304,27 +342,35 @@ mod tests {
     use nalgebra::Matrix6;
 
     #[test]
-    fn a_bar_on_a_challengers_word_is_lifted_alone_and_only_once() {
+    fn a_bar_on_a_challengers_word_is_lifted_by_the_challengers_refutation_alone() {
         let at = |x: f64| Pose3::translation(x, 0.0, 0.0);
+        let relay = crate::config::RelaySection::default();
+        let challenged = |barred, challenger| Some(ChallengedBar { barred, challenger });
         let mut entry = NeighbourEntry::discovered(RobotId(2), 0.0);
         // Nothing on a challenger's word: nothing to lift.
         entry.bar(at(1.0));
-        assert_eq!(entry.lift_challenged_bar(), None);
+        assert_eq!(entry.lift_challenged_bar(&at(40.0), &relay), None);
         assert_eq!(entry.withdrawn, [at(1.0)]);
-        // A cycle's bar, then one on a challenger's word: only the latter is lifted.
+        // A cycle's bar, then one on a challenger's word (at 40 m).
         entry.bar(at(2.0));
-        entry.challenged_bar = Some(at(2.0));
-        assert_eq!(entry.lift_challenged_bar(), Some(at(2.0)));
+        entry.challenged_bar = challenged(at(2.0), at(40.0));
+        // Another match's refuted round lifts nothing: the challenger is still untested.
+        assert_eq!(entry.lift_challenged_bar(&at(70.0), &relay), None);
+        assert_eq!(entry.withdrawn, [at(1.0), at(2.0)]);
+        // The challenger's round, refuted (within the tolerance of it): only its bar is lifted,
+        // and the challenger is discredited.
+        assert_eq!(entry.lift_challenged_bar(&at(40.5), &relay), Some(at(2.0)));
         assert_eq!(entry.withdrawn, [at(1.0)]);
-        assert_eq!(entry.lift_challenged_bar(), None);
+        assert!(entry.discredited_near(&at(40.2), &relay) && !entry.discredited_near(&at(2.0), &relay));
+        assert_eq!(entry.lift_challenged_bar(&at(40.0), &relay), None);
         // The oldest bar goes beyond the cap; a challenged bar forgotten that way lifts nothing.
-        entry.challenged_bar = Some(at(1.0));
+        entry.challenged_bar = challenged(at(1.0), at(50.0));
         for k in 0..MAX_WITHDRAWN {
             entry.bar(at(10.0 + k as f64));
         }
         assert_eq!(entry.withdrawn.len(), MAX_WITHDRAWN);
         assert!(!entry.withdrawn.contains(&at(1.0)));
-        assert_eq!(entry.lift_challenged_bar(), None);
+        assert_eq!(entry.lift_challenged_bar(&at(50.0), &relay), None);
         assert_eq!(entry.withdrawn.len(), MAX_WITHDRAWN);
     }
 

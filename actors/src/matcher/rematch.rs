@@ -21,8 +21,10 @@
 //!
 //! The withdrawn transform is barred (as a match and as a hint: else the robots it was chained
 //! to hand it back), but on the challenger's word only: once another alignment stands the bar
-//! stays for good, and if a round of a graph match is refuted first, the bar is lifted, so a
-//! stronger match that does not hold up on the scans cannot bar a right alignment for good.
+//! stays for good, and if the challenger's own round is refuted first, the bar is lifted and
+//! the challenger withdraws nothing again. So a stronger match that does not hold up on the
+//! scans cannot bar a right alignment here for good (a neighbour that withdrew an alignment
+//! relayed through ours meanwhile keeps its own bar: `settle.rs`).
 
 use super::association::graph_objects;
 use super::*;
@@ -73,6 +75,7 @@ impl Matcher {
                     && a.matches.len() >= self.config.min_matched_objects
                     && !agree(&current, &a.local_from_remote, tolerance_m, tolerance_deg)
                     && !entry.withdrawn_near(&a.local_from_remote, relay)
+                    && !entry.discredited_near(&a.local_from_remote, relay)
                     && !refuted_recently(&entry.refuted, &a.local_from_remote, now) =>
             {
                 Some((a.local_from_remote, a.significance))
@@ -105,7 +108,7 @@ impl Matcher {
         // graph match lifts it (`rounds.rs`).
         if let Some(entry) = self.neighbours.get_mut(&robot) {
             if entry.withdrawn.last() == Some(&current) {
-                entry.challenged_bar = Some(current);
+                entry.challenged_bar = Some(ChallengedBar { barred: current, challenger: transform });
             }
         }
     }

@@ -219,7 +219,8 @@ impl Matcher {
                     None => {
                         entry.refuted.push((n.state.local_from_remote, now));
                         // The stronger match that withdrew our alignment did not hold up.
-                        if let Some(lifted) = entry.lift_challenged_bar() {
+                        if let Some(lifted) = entry.lift_challenged_bar(&n.state.local_from_remote, &self.config.relay)
+                        {
                             tracing::info!(robot = %self.robot, neighbour = %robot, local_from_remote = %Brief(&lifted),
                                 "the bar on our withdrawn alignment lifted: the match that withdrew it was refuted");
                             if let Some(why) = &mut entry.last_withdrawal {

@@ -9,8 +9,9 @@
 //! another robot named wrong is left to that robot, which holds the same evidence.
 //!
 //! Before any cycle is scored, an alignment of ours that was relayed by a robot whose
-//! alignments now contradict it is withdrawn: it was made from that robot's
-//! alignments (and ours of that robot, when chained), and they no longer say it. On
+//! alignments now put the neighbour beyond twice the contradiction tolerance is withdrawn, one
+//! at a time: it was made from that robot's alignments (and ours of that robot, when chained),
+//! and they no longer say it. On
 //! `handheld_indoor` seed 6 with `world.ceiling` bravo's wrong alignment of alpha, withdrawn
 //! on a stronger match (`rematch.rs`), had been chained into alignments of charlie by both.
 

@@ -1,9 +1,9 @@
 //! The neighbours this robot holds suspect (`sgm_model::matching::suspect`), judged at each
 //! status from the Matcher's and the Optimiser's counts: in the status JSON
-//! (`neighbours[].suspect`), and in the log when a neighbour's findings change.
+//! (`neighbours[].suspect`), and in the log when the kinds of a neighbour's findings change.
 
 use sgm_actors::matcher::NeighbourStatus;
-use sgm_model::matching::suspect::{suspicions, Evidence};
+use sgm_model::matching::suspect::{findings, Evidence, Finding};
 use sgm_model::optim::keyframe_graph::KeyframeGraphStatus;
 use sgm_model::scene_graph::RobotId;
 use std::collections::BTreeMap;
@@ -11,12 +11,13 @@ use std::collections::BTreeMap;
 /// The findings last logged, per neighbour.
 #[derive(Default)]
 pub(super) struct Suspects {
-    logged: BTreeMap<RobotId, Vec<String>>,
+    logged: BTreeMap<RobotId, Vec<Finding>>,
 }
 
 impl Suspects {
-    /// Each neighbour's findings now (empty: nothing stands out); a warning when a neighbour's
-    /// findings change to some, a note when they clear.
+    /// Each neighbour's findings now, one line each (empty: nothing stands out); a warning when
+    /// a neighbour's kinds of finding change to some (not at each new count), a note when they
+    /// clear.
     pub(super) fn judge(
         &mut self,
         robot: &str,
@@ -29,19 +30,21 @@ impl Suspects {
             let evidence = Evidence {
                 factors: held.map_or(0, |h| h.factors),
                 inconsistent: held.map_or(0, |h| h.inconsistent),
-                rounds_refuted: n.match_attempts.rounds_refuted,
+                rounds_refuted: n.graph_rounds_refuted,
             };
-            let found = suspicions(&evidence);
+            let found = findings(&evidence);
             let before = self.logged.get(&n.robot).map_or(&[][..], |v| &v[..]);
-            if found != before {
+            let same = found.len() == before.len() && found.iter().zip(before).all(|(a, b)| a.same_kind(b));
+            if !same {
                 if found.is_empty() {
                     tracing::info!(robot, neighbour = %n.robot, "the neighbour is no longer held suspect");
                 } else {
-                    tracing::warn!(robot, neighbour = %n.robot, why = %found.join("; "), "the neighbour is held suspect");
+                    let why = found.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ");
+                    tracing::warn!(robot, neighbour = %n.robot, %why, "the neighbour is held suspect");
                 }
                 self.logged.insert(n.robot, found.clone());
             }
-            now.insert(n.robot, found);
+            now.insert(n.robot, found.iter().map(ToString::to_string).collect());
         }
         now
     }

@@ -26,8 +26,9 @@ pub struct Evidence {
     pub factors: usize,
     /// Of those, outside the largest mutually consistent set at the last solve (PCM).
     pub inconsistent: usize,
-    /// Rounds of its keyframes that refuted a match of its object graph.
-    pub rounds_refuted: u32,
+    /// Rounds of its keyframes that refuted one of our matches of its object graph (rounds
+    /// from relayed hints not counted: a third robot's word, not its graph).
+    pub rounds_refuted: usize,
 }
 
 /// Factors outside the consistent set, at least, for a finding.
@@ -35,33 +36,64 @@ pub const MIN_INCONSISTENT: usize = 3;
 /// ... and at least this share of all its factors.
 pub const INCONSISTENT_SHARE: f64 = 0.25;
 /// Refuted rounds, at least, for a finding.
-pub const MIN_ROUNDS_REFUTED: u32 = 4;
+pub const MIN_ROUNDS_REFUTED: usize = 4;
 
-/// Why the neighbour is suspect, one line per finding; empty when nothing stands out.
-pub fn suspicions(e: &Evidence) -> Vec<String> {
+/// One reason to hold a neighbour suspect.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Finding {
+    /// Many of its inter-robot factors outside the consistent set.
+    InconsistentFactors { inconsistent: usize, factors: usize },
+    /// Matches of its object graph refuted by its keyframes, again and again.
+    RefutedMatches { rounds: usize },
+}
+
+impl Finding {
+    /// Whether `other` is the same finding, whatever its counts (a log line per change of kind,
+    /// not per count).
+    pub fn same_kind(&self, other: &Finding) -> bool {
+        std::mem::discriminant(self) == std::mem::discriminant(other)
+    }
+}
+
+impl std::fmt::Display for Finding {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Finding::InconsistentFactors { inconsistent, factors } => write!(
+                f,
+                "{inconsistent} of its {factors} inter-robot factors disagree with the largest mutually consistent \
+                 set (PCM): its map, calibration or clock is off, or it lies"
+            ),
+            Finding::RefutedMatches { rounds } => write!(
+                f,
+                "{rounds} matches of its object graph refuted by its own keyframes: its objects do not fit its \
+                 scans, or its place repeats ours"
+            ),
+        }
+    }
+}
+
+/// Why the neighbour is suspect; empty when nothing stands out.
+pub fn findings(e: &Evidence) -> Vec<Finding> {
     let mut found = Vec::new();
     if e.inconsistent >= MIN_INCONSISTENT && e.inconsistent as f64 >= INCONSISTENT_SHARE * e.factors as f64 {
-        found.push(format!(
-            "{} of its {} inter-robot factors disagree with the largest mutually consistent set (PCM): its map, \
-             calibration or clock is off, or it lies",
-            e.inconsistent, e.factors
-        ));
+        found.push(Finding::InconsistentFactors { inconsistent: e.inconsistent, factors: e.factors });
     }
     if e.rounds_refuted >= MIN_ROUNDS_REFUTED {
-        found.push(format!(
-            "{} matches of its object graph refuted by its own keyframes: its objects do not fit its scans, or its \
-             place repeats ours",
-            e.rounds_refuted
-        ));
+        found.push(Finding::RefutedMatches { rounds: e.rounds_refuted });
     }
     found
+}
+
+/// [`findings`], one line each.
+pub fn suspicions(e: &Evidence) -> Vec<String> {
+    findings(e).iter().map(ToString::to_string).collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn evidence(factors: usize, inconsistent: usize, rounds_refuted: u32) -> Evidence {
+    fn evidence(factors: usize, inconsistent: usize, rounds_refuted: usize) -> Evidence {
         Evidence { factors, inconsistent, rounds_refuted }
     }
 
@@ -96,5 +128,12 @@ mod tests {
         assert_eq!(found.len(), 1);
         assert!(found[0].starts_with("4 matches of its object graph refuted"), "{found:?}");
         assert_eq!(suspicions(&evidence(15, 5, 6)).len(), 2);
+    }
+
+    #[test]
+    fn a_finding_keeps_its_kind_as_its_counts_grow() {
+        let (a, b) = (findings(&evidence(15, 5, 0)), findings(&evidence(20, 6, 0)));
+        assert!(a[0].same_kind(&b[0]) && a[0] != b[0]);
+        assert!(!a[0].same_kind(&findings(&evidence(0, 0, 4))[0]));
     }
 }

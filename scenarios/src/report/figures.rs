@@ -424,7 +424,7 @@ pub fn compute(record: &RunRecord) -> Report {
                 suspect: suspicions(&Evidence {
                     factors: held.map_or(0, |h| h.factors),
                     inconsistent: held.map_or(0, |h| h.inconsistent),
-                    rounds_refuted: n.match_attempts.rounds_refuted,
+                    rounds_refuted: n.graph_rounds_refuted,
                 }),
                 match_attempts: n.match_attempts.clone(),
             });
