@@ -2,6 +2,8 @@
 //! in progress and the refuted transforms; what a snapshot keeps of it; what status reports.
 
 use super::*;
+use sgm_model::matching::suspect::Evidence;
+use sgm_model::optim::keyframe_graph::InterRobotCounts;
 
 /// The protocol state and alignment of every neighbour.
 #[derive(Message)]
@@ -40,6 +42,19 @@ pub struct NeighbourStatus {
     /// Rounds of its keyframes that refuted one of our own matches with it (not those of
     /// relayed hints), over the mission (kept in snapshots).
     pub graph_rounds_refuted: usize,
+}
+
+impl NeighbourStatus {
+    /// What this robot holds against the neighbour (`model::matching::suspect`), with `held`
+    /// the pose graph's counts of its inter-robot factors: one source for the report and the
+    /// ROS status.
+    pub fn suspect_evidence(&self, held: Option<&InterRobotCounts>) -> Evidence {
+        Evidence {
+            factors: held.map_or(0, |h| h.factors),
+            inconsistent: held.map_or(0, |h| h.inconsistent),
+            rounds_refuted: self.graph_rounds_refuted,
+        }
+    }
 }
 
 /// The object-graph matches made against one neighbour, and why the latest started no
@@ -202,10 +217,7 @@ impl NeighbourEntry {
     /// Bars `transform` as a match and as a hint (the oldest bar forgotten beyond
     /// [`MAX_WITHDRAWN`]).
     pub(super) fn bar(&mut self, transform: Pose3) {
-        self.withdrawn.push(transform);
-        if self.withdrawn.len() > MAX_WITHDRAWN {
-            self.withdrawn.remove(0);
-        }
+        push_capped(&mut self.withdrawn, transform);
     }
 
     /// A round of a graph match at `refuted` was refuted: if it was the challenger's that barred
@@ -222,10 +234,7 @@ impl NeighbourEntry {
             return None;
         }
         self.challenged_bar = None;
-        self.discredited.push(bar.challenger);
-        if self.discredited.len() > MAX_WITHDRAWN {
-            self.discredited.remove(0);
-        }
+        push_capped(&mut self.discredited, bar.challenger);
         let at = self.withdrawn.iter().rposition(|t| *t == bar.barred)?;
         self.withdrawn.remove(at);
         Some(bar.barred)
@@ -320,6 +329,14 @@ pub struct ChallengedBar {
 /// pair is withdrawn when a cycle names it wrong, a stronger match puts the neighbour
 /// elsewhere, or the robot it was relayed by contradicts it; once per wrong transform.
 pub(super) const MAX_WITHDRAWN: usize = 8;
+
+/// Appends `transform` to a list of at most [`MAX_WITHDRAWN`], forgetting the oldest beyond it.
+fn push_capped(list: &mut Vec<Pose3>, transform: Pose3) {
+    list.push(transform);
+    if list.len() > MAX_WITHDRAWN {
+        list.remove(0);
+    }
+}
 
 /// Drops held neighbour keyframes outside `round`, lowest ids first, until at most `cap` are
 /// held; the ids dropped.

@@ -3,7 +3,7 @@
 //! (`neighbours[].suspect`), and in the log when the kinds of a neighbour's findings change.
 
 use sgm_actors::matcher::NeighbourStatus;
-use sgm_model::matching::suspect::{findings, Evidence, Finding};
+use sgm_model::matching::suspect::{findings, Finding};
 use sgm_model::optim::keyframe_graph::KeyframeGraphStatus;
 use sgm_model::scene_graph::RobotId;
 use std::collections::BTreeMap;
@@ -26,13 +26,7 @@ impl Suspects {
     ) -> BTreeMap<RobotId, Vec<String>> {
         let mut now = BTreeMap::new();
         for n in neighbours {
-            let held = graph.inter_robot.iter().find(|c| c.robot == n.robot);
-            let evidence = Evidence {
-                factors: held.map_or(0, |h| h.factors),
-                inconsistent: held.map_or(0, |h| h.inconsistent),
-                rounds_refuted: n.graph_rounds_refuted,
-            };
-            let found = findings(&evidence);
+            let found = findings(&n.suspect_evidence(graph.inter_robot.iter().find(|c| c.robot == n.robot)));
             let before = self.logged.get(&n.robot).map_or(&[][..], |v| &v[..]);
             let same = found.len() == before.len() && found.iter().zip(before).all(|(a, b)| a.same_kind(b));
             if !same {

@@ -13,7 +13,7 @@ use serde::Serialize;
 use sgm_actors::protocol::ProtocolStage;
 use sgm_model::eval::ate::ate;
 use sgm_model::geometry::{pose_error, Pose3};
-use sgm_model::matching::suspect::{suspicions, Evidence};
+use sgm_model::matching::suspect::suspicions;
 use sgm_model::scene_graph::RobotId;
 use sgm_model::wire::{MessageKind, TrafficAccount};
 use std::collections::BTreeMap;
@@ -421,11 +421,7 @@ pub fn compute(record: &RunRecord) -> Report {
                     .collect(),
                 withdrawals: n.withdrawals,
                 last_withdrawal: n.last_withdrawal.clone(),
-                suspect: suspicions(&Evidence {
-                    factors: held.map_or(0, |h| h.factors),
-                    inconsistent: held.map_or(0, |h| h.inconsistent),
-                    rounds_refuted: n.graph_rounds_refuted,
-                }),
+                suspect: suspicions(&n.suspect_evidence(held)),
                 match_attempts: n.match_attempts.clone(),
             });
         }
