@@ -389,6 +389,7 @@ mod tests {
                 keyframes: vec![keyframe(1), keyframe(2)],
                 first_aligned: None,
                 refuted: Vec::new(),
+                graph_rounds_refuted: 0,
                 closures: Default::default(),
                 aligned_via: None,
                 withdrawn: Vec::new(),

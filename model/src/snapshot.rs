@@ -37,8 +37,9 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// (glimpses' spacing). Version 11: the pose graph keeps the σ of each own keyframe's up when
 /// its odometry measured one. Version 12: the Matcher keeps, per neighbour, why its alignment
 /// was last withdrawn, the significance of the match its alignment came from, and a bar that
-/// stands on a stronger match's word (`relay.rematch`).
-pub const FORMAT_VERSION: u32 = 12;
+/// stands on a stronger match's word (`relay.rematch`). Version 13: the Matcher counts, per
+/// neighbour, the refuted rounds of its own graph matches (it keeps only the recent ones).
+pub const FORMAT_VERSION: u32 = 13;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).

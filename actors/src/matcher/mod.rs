@@ -54,7 +54,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
 use association::same_objects;
-use neighbour::{hold_at_most, LastMatch, NeighbourEntry};
+use neighbour::{hold_at_most, push_recent, LastMatch, NeighbourEntry};
 
 /// Where the Matcher sends what it produces.
 #[derive(Clone)]
@@ -143,6 +143,7 @@ impl Matcher {
                 aligned_significance: e.aligned_significance,
                 challenged_bar: e.challenged_bar,
                 discredited: e.discredited.clone(),
+                graph_rounds_refuted: e.graph_rounds_refuted,
             })
             .collect();
         MatcherState { neighbours }
@@ -166,6 +167,7 @@ impl Matcher {
             entry.aligned_significance = memory.aligned_significance;
             entry.challenged_bar = memory.challenged_bar;
             entry.discredited = memory.discredited;
+            entry.graph_rounds_refuted = memory.graph_rounds_refuted;
             entry.match_again = true;
         }
         self
@@ -427,7 +429,7 @@ impl Handler<GetNeighbours> for Matcher {
                     keyframes_held: e.keyframes.len(),
                     objects_revision: e.objects.as_ref().map(|d| d.revision),
                     match_attempts: e.attempts.clone(),
-                    graph_rounds_refuted: e.refuted.len(),
+                    graph_rounds_refuted: e.graph_rounds_refuted as usize,
                     withdrawals: e.withdrawals,
                     last_withdrawal: e.last_withdrawal.clone(),
                 })

@@ -113,8 +113,12 @@ pub(super) struct NeighbourEntry {
     /// Remote object → keyframes that observed it (from the object-cloud response).
     pub(super) observed_in: BTreeMap<ObjectId, Vec<KeyframeId>>,
     /// Transforms refuted by keyframe registration, and when: a match landing near one of them
-    /// within [`REFUTED_FOR_S`] is not pursued again.
+    /// within [`REFUTED_FOR_S`] is not pursued again. Only those of that window are kept, at
+    /// most [`MAX_REFUTED`] ([`push_recent`]).
     pub(super) refuted: Vec<(Pose3, Stamp)>,
+    /// Rounds of our own graph matches refuted by keyframe registration, over the mission
+    /// (the suspect rule's count; `refuted` forgets).
+    pub(super) graph_rounds_refuted: u32,
     /// The neighbour keyframes of the current alignment round (requested or already held).
     pub(super) round: BTreeSet<KeyframeId>,
     /// When matching against this neighbour was last tried.
@@ -189,6 +193,7 @@ impl NeighbourEntry {
             first_aligned: None,
             observed_in: BTreeMap::new(),
             refuted: Vec::new(),
+            graph_rounds_refuted: 0,
             round: BTreeSet::new(),
             last_attempt: None,
             places: PlaceCandidates::default(),
@@ -220,24 +225,31 @@ impl NeighbourEntry {
         push_capped(&mut self.withdrawn, transform);
     }
 
-    /// A round of a graph match at `refuted` was refuted: if it was the challenger's that barred
-    /// our withdrawn alignment ([`Self::challenged_bar`], within the contradiction tolerance of
-    /// `relay`), the bar is lifted and the challenger discredited. The transform lifted.
-    pub(super) fn lift_challenged_bar(
+    /// A round of our own graph match at `transform` was refuted at `now`: remembered for
+    /// [`REFUTED_FOR_S`] and counted; if it was the challenger's round that barred our withdrawn
+    /// alignment ([`Self::challenged_bar`], within the contradiction tolerance of `relay`), the
+    /// challenger is discredited and its bar lifted. What was lifted, if anything.
+    pub(super) fn graph_round_refuted(
         &mut self,
-        refuted: &Pose3,
+        transform: &Pose3,
+        now: Stamp,
         relay: &crate::config::RelaySection,
-    ) -> Option<Pose3> {
+    ) -> Option<Lifted> {
+        push_recent(&mut self.refuted, *transform, now);
+        self.graph_rounds_refuted = self.graph_rounds_refuted.saturating_add(1);
         let bar = self.challenged_bar?;
-        if !sgm_model::matching::relay::agree(&bar.challenger, refuted, relay.contradiction_m, relay.contradiction_deg)
-        {
+        if !sgm_model::matching::relay::agree(
+            &bar.challenger,
+            transform,
+            relay.contradiction_m,
+            relay.contradiction_deg,
+        ) {
             return None;
         }
         self.challenged_bar = None;
         push_capped(&mut self.discredited, bar.challenger);
-        let at = self.withdrawn.iter().rposition(|t| *t == bar.barred)?;
-        self.withdrawn.remove(at);
-        Some(bar.barred)
+        let barred = self.withdrawn.iter().rposition(|t| *t == bar.barred).map(|at| self.withdrawn.remove(at));
+        Some(Lifted { challenger: bar.challenger, barred })
     }
 
     /// Whether `transform` agrees with a challenger whose round was refuted.
@@ -314,6 +326,16 @@ pub struct NeighbourMemory {
     pub challenged_bar: Option<ChallengedBar>,
     /// Challengers whose rounds were refuted.
     pub discredited: Vec<Pose3>,
+    /// Rounds of our own graph matches refuted, over the mission.
+    pub graph_rounds_refuted: u32,
+}
+
+/// A challenger discredited by its refuted round, and the bar on our withdrawn alignment it
+/// lifted (`None`: that bar had already been forgotten, beyond [`MAX_WITHDRAWN`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Lifted {
+    pub(super) challenger: Pose3,
+    pub(super) barred: Option<Pose3>,
 }
 
 /// Our alignment withdrawn on a stronger match's word, and that match.
@@ -329,6 +351,21 @@ pub struct ChallengedBar {
 /// pair is withdrawn when a cycle names it wrong, a stronger match puts the neighbour
 /// elsewhere, or the robot it was relayed by contradicts it; once per wrong transform.
 pub(super) const MAX_WITHDRAWN: usize = 8;
+
+/// Refuted transforms kept per neighbour and list, at most: rounds fetch keyframes, so a few a
+/// minute is what a busy pair makes; a neighbour sending graph after graph that our matches
+/// find and its scans refute cannot grow the lists beyond this.
+pub(super) const MAX_REFUTED: usize = 32;
+
+/// Appends `transform`, refuted at `now`, to `list`, after forgetting those refuted
+/// [`REFUTED_FOR_S`] or longer ago, and the oldest beyond [`MAX_REFUTED`].
+pub(super) fn push_recent(list: &mut Vec<(Pose3, Stamp)>, transform: Pose3, now: Stamp) {
+    list.retain(|(_, t)| now - t < REFUTED_FOR_S);
+    list.push((transform, now));
+    if list.len() > MAX_REFUTED {
+        list.drain(..list.len() - MAX_REFUTED);
+    }
+}
 
 /// Appends `transform` to a list of at most [`MAX_WITHDRAWN`], forgetting the oldest beyond it.
 fn push_capped(list: &mut Vec<Pose3>, transform: Pose3) {
@@ -363,32 +400,58 @@ mod tests {
         let at = |x: f64| Pose3::translation(x, 0.0, 0.0);
         let relay = crate::config::RelaySection::default();
         let challenged = |barred, challenger| Some(ChallengedBar { barred, challenger });
+        let lifted = |challenger, barred| Some(Lifted { challenger, barred });
         let mut entry = NeighbourEntry::discovered(RobotId(2), 0.0);
         // Nothing on a challenger's word: nothing to lift.
         entry.bar(at(1.0));
-        assert_eq!(entry.lift_challenged_bar(&at(40.0), &relay), None);
+        assert_eq!(entry.graph_round_refuted(&at(40.0), 1.0, &relay), None);
         assert_eq!(entry.withdrawn, [at(1.0)]);
         // A cycle's bar, then one on a challenger's word (at 40 m).
         entry.bar(at(2.0));
         entry.challenged_bar = challenged(at(2.0), at(40.0));
         // Another match's refuted round lifts nothing: the challenger is still untested.
-        assert_eq!(entry.lift_challenged_bar(&at(70.0), &relay), None);
+        assert_eq!(entry.graph_round_refuted(&at(70.0), 2.0, &relay), None);
         assert_eq!(entry.withdrawn, [at(1.0), at(2.0)]);
         // The challenger's round, refuted (within the tolerance of it): only its bar is lifted,
         // and the challenger is discredited.
-        assert_eq!(entry.lift_challenged_bar(&at(40.5), &relay), Some(at(2.0)));
+        assert_eq!(entry.graph_round_refuted(&at(40.5), 3.0, &relay), lifted(at(40.0), Some(at(2.0))));
         assert_eq!(entry.withdrawn, [at(1.0)]);
         assert!(entry.discredited_near(&at(40.2), &relay) && !entry.discredited_near(&at(2.0), &relay));
-        assert_eq!(entry.lift_challenged_bar(&at(40.0), &relay), None);
-        // The oldest bar goes beyond the cap; a challenged bar forgotten that way lifts nothing.
+        assert_eq!(entry.graph_round_refuted(&at(40.0), 4.0, &relay), None);
+        // The oldest bar goes beyond the cap; a challenged bar forgotten that way lifts nothing,
+        // but its challenger is still discredited (and the caller says so).
         entry.challenged_bar = challenged(at(1.0), at(50.0));
         for k in 0..MAX_WITHDRAWN {
             entry.bar(at(10.0 + k as f64));
         }
         assert_eq!(entry.withdrawn.len(), MAX_WITHDRAWN);
         assert!(!entry.withdrawn.contains(&at(1.0)));
-        assert_eq!(entry.lift_challenged_bar(&at(50.0), &relay), None);
+        assert_eq!(entry.graph_round_refuted(&at(50.0), 5.0, &relay), lifted(at(50.0), None));
         assert_eq!(entry.withdrawn.len(), MAX_WITHDRAWN);
+        assert!(entry.discredited_near(&at(50.0), &relay));
+        // Every refuted round is counted.
+        assert_eq!(entry.graph_rounds_refuted, 5);
+    }
+
+    #[test]
+    fn refuted_rounds_are_counted_for_good_but_kept_only_while_they_bar() {
+        let relay = crate::config::RelaySection::default();
+        let mut entry = NeighbourEntry::discovered(RobotId(2), 0.0);
+        // A neighbour whose every graph our matches find and its scans refute, one a second for
+        // ten minutes: the list stays within its window and its cap, the count is whole.
+        for k in 0..600 {
+            entry.graph_round_refuted(&Pose3::translation(k as f64 * 7.0, 0.0, 0.0), k as f64, &relay);
+            assert!(entry.refuted.len() <= MAX_REFUTED);
+        }
+        assert_eq!(entry.graph_rounds_refuted, 600);
+        assert_eq!(entry.refuted.len(), MAX_REFUTED);
+        // The newest are kept, oldest first, and still bar a match near them.
+        assert_eq!(entry.refuted.first().map(|(_, t)| *t), Some(600.0 - MAX_REFUTED as f64));
+        assert!(refuted_recently(&entry.refuted, &Pose3::translation(599.0 * 7.0, 0.0, 0.0), 600.0));
+        // Beyond the window they are forgotten at the next push; the count stays.
+        let mut list = vec![(Pose3::identity(), 0.0), (Pose3::identity(), 100.0)];
+        push_recent(&mut list, Pose3::identity(), REFUTED_FOR_S + 50.0);
+        assert_eq!(list.iter().map(|(_, t)| *t).collect::<Vec<_>>(), [100.0, REFUTED_FOR_S + 50.0]);
     }
 
     #[test]

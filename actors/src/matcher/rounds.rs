@@ -217,23 +217,30 @@ impl Matcher {
                 entry.attempts.rounds_refuted += 1;
                 match entry.round_via {
                     None => {
-                        entry.refuted.push((n.state.local_from_remote, now));
                         // The stronger match that withdrew our alignment did not hold up.
-                        if let Some(lifted) = entry.lift_challenged_bar(&n.state.local_from_remote, &self.config.relay)
+                        if let Some(lifted) =
+                            entry.graph_round_refuted(&n.state.local_from_remote, now, &self.config.relay)
                         {
-                            tracing::info!(robot = %self.robot, neighbour = %robot, local_from_remote = %Brief(&lifted),
-                                "the bar on our withdrawn alignment lifted: the match that withdrew it was refuted");
-                            if let Some(why) = &mut entry.last_withdrawal {
-                                why.push_str(&format!(
-                                    "; the bar lifted at {now:.1} s: that match was refuted by keyframe registration"
-                                ));
+                            match lifted.barred {
+                                Some(barred) => {
+                                    tracing::info!(robot = %self.robot, neighbour = %robot,
+                                        local_from_remote = %Brief(&barred),
+                                        "the bar on our withdrawn alignment lifted: the match that withdrew it was refuted");
+                                    if let Some(why) = &mut entry.last_withdrawal {
+                                        why.push_str(&format!(
+                                            "; the bar lifted at {now:.1} s: that match was refuted by keyframe registration"
+                                        ));
+                                    }
+                                }
+                                None => tracing::info!(robot = %self.robot, neighbour = %robot,
+                                    challenger = %Brief(&lifted.challenger),
+                                    "the match that withdrew our alignment was refuted; its bar had already been forgotten among newer ones"),
                             }
                         }
                     }
                     Some(_) => {
                         let list = if few { &mut entry.refuted_few } else { &mut entry.refuted_hints };
-                        list.retain(|(_, t)| now - t < REFUTED_FOR_S);
-                        list.push((n.state.local_from_remote, now));
+                        push_recent(list, n.state.local_from_remote, now);
                     }
                 }
                 if let Some(Protocol::KeyframesRequested(n)) = entry.protocol.take() {
