@@ -29,7 +29,8 @@
 use super::association::graph_objects;
 use super::*;
 use sgm_model::geometry::Brief;
-use sgm_model::matching::relay::agree;
+use sgm_model::matching::relay::{agree, agree_where_matched};
+use sgm_model::matching::{GraphObject, VerifiedMatch};
 
 impl Matcher {
     /// Matches `robot`'s latest object data against ours again while we are aligned with it;
@@ -73,7 +74,13 @@ impl Matcher {
             MatchOutcome::Aligned(a)
                 if a.significance >= needed
                     && a.matches.len() >= self.config.min_matched_objects
-                    && !agree(&current, &a.local_from_remote, tolerance_m, tolerance_deg)
+                    && !agree_where_matched(
+                        &current,
+                        &a.local_from_remote,
+                        matched_centroids(&remote, &a.matches),
+                        tolerance_m,
+                        tolerance_deg,
+                    )
                     && !entry.withdrawn_near(&a.local_from_remote, relay)
                     && !entry.discredited_near(&a.local_from_remote, relay)
                     && !refuted_recently(&entry.refuted, &a.local_from_remote, now) =>
@@ -112,4 +119,13 @@ impl Matcher {
             }
         }
     }
+}
+
+/// The remote centroids of a match's pairs, as the remote graph holds them.
+fn matched_centroids<'a>(
+    remote: &'a ObjectGraph,
+    matches: &'a [VerifiedMatch],
+) -> impl Iterator<Item = nalgebra::Point3<f64>> + 'a {
+    let centroid = |id| remote.objects().iter().find(|o: &&GraphObject| o.id == id).map(|o| o.centroid);
+    matches.iter().filter_map(move |m| centroid(m.remote))
 }

@@ -27,6 +27,7 @@ use super::closure::{next_round, pairs_through, ClosurePair, ClosurePlan};
 use super::{GraphObject, LabelSimilarity};
 use crate::geometry::{pose_error, Pose3};
 use crate::scene_graph::RobotId;
+use nalgebra::Point3;
 use std::collections::BTreeMap;
 
 /// A first estimate of `local_from_remote` that a neighbour's alignment implies.
@@ -106,6 +107,38 @@ pub fn agree(a: &Pose3, b: &Pose3, tolerance_m: f64, tolerance_deg: f64) -> bool
     let e = pose_error(a, b);
     let turn_deg = a.rotation.angle_to(&b.rotation).to_degrees();
     e.translation_m <= tolerance_m && turn_deg <= tolerance_deg
+}
+
+/// Whether a graph match's `challenger` agrees with our alignment `current` where the match
+/// stands: each of `matched` (the remote centroids it paired) is placed by the two within
+/// `tolerance_m` of each other, and the whole rotation between them is within `tolerance_deg`.
+///
+/// ```text
+/// agree ⇔ max_q ‖current·q − challenger·q‖ ≤ tolerance_m  ∧  ∠(R_current, R_challenger) ≤ tolerance_deg
+/// ```
+///
+/// Not [`agree`]'s remote origin: a graph match refitted in 6-DoF (`matching.max_tilt_deg`)
+/// may carry a tilt of a few degrees, within the angle's tolerance, which moves an origin 45 m
+/// from the objects by 2 m while it places every matched object where ours does (on
+/// `team_of_eight` two right alignments were withdrawn so, 2.6–2.8° and 2 m at the origin,
+/// within 0.5 m at every matched object). With no matched centroid nothing is placed
+/// elsewhere: it agrees.
+pub fn agree_where_matched(
+    current: &Pose3,
+    challenger: &Pose3,
+    matched: impl IntoIterator<Item = Point3<f64>>,
+    tolerance_m: f64,
+    tolerance_deg: f64,
+) -> bool {
+    let turn_deg = current.rotation.angle_to(&challenger.rotation).to_degrees();
+    let apart = matched.into_iter().map(|q| ((current * q) - (challenger * q)).norm()).fold(0.0, |most: f64, d| {
+        if d > most || d.is_nan() {
+            d
+        } else {
+            most
+        }
+    });
+    apart <= tolerance_m && turn_deg <= tolerance_deg
 }
 
 /// Whether `transform` agrees with any of `barred` (our alignments of the same robot withdrawn
@@ -303,5 +336,68 @@ mod tests {
         assert_eq!(spread.iter().map(|p| p.local.0).collect::<Vec<_>>(), (0..6).collect::<Vec<_>>());
         let seven = ClosurePlan { min_pairs: 7, ..narrow };
         assert!(hinted_round(&local, &remote, &right, &labels, &seven, Reach::WholeMap).is_none());
+    }
+
+    #[test]
+    fn a_challenger_is_judged_where_its_objects_are() {
+        // Our alignment, and the remote's matched objects 180 m from its origin (a lawnmower's
+        // far end), around (180, 0, 1).
+        let current = pose(std::f64::consts::PI, 136.0, 136.0);
+        let objects: Vec<Point3<f64>> =
+            (0..8).map(|k| Point3::new(180.0 + (k % 4) as f64 * 6.0, (k / 4) as f64 * 8.0 - 4.0, 1.0)).collect();
+        let (m, deg) = (2.0, 5.0);
+        // A 1° tilt about a horizontal axis through the objects' middle: every object stays
+        // within 0.2 m, while the remote origin moves by 3 m, a contradiction at the origin.
+        let pivot = Point3::new(189.0, 0.0, 1.0);
+        let tilt = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 1f64.to_radians());
+        let about_pivot = Pose3::from_parts(nalgebra::Translation3::from(pivot.coords - tilt * pivot.coords), tilt);
+        let tilted = current * about_pivot;
+        assert!((tilted.translation.vector - current.translation.vector).z.abs() > 3.0);
+        assert!(!agree(&current, &tilted, m, deg));
+        assert!(agree_where_matched(&current, &tilted, objects.iter().copied(), m, deg));
+        // The same tilt about the remote origin lifts the far objects by 3 m (a floor up):
+        // elsewhere.
+        let lifted = current * Pose3::from_parts(nalgebra::Translation3::identity(), tilt);
+        assert!(!agree_where_matched(&current, &lifted, objects.iter().copied(), m, deg));
+        // A shift by a period (12 m), a half turn about the objects, or a turn beyond the
+        // tolerance put it elsewhere.
+        let shifted = Pose3::translation(12.0, 0.0, 0.0) * current;
+        assert!(!agree_where_matched(&current, &shifted, objects.iter().copied(), m, deg));
+        let half = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI);
+        let turned =
+            current * Pose3::from_parts(nalgebra::Translation3::from(pivot.coords - half * pivot.coords), half);
+        assert!(!agree_where_matched(&current, &turned, objects.iter().copied(), m, deg));
+        let yawed = current * pose(6f64.to_radians(), 0.0, 0.0);
+        assert!(!agree_where_matched(&current, &yawed, std::iter::empty(), m, deg));
+        // Just within the tolerance at the farthest object, and just beyond it.
+        let nudged = |dx: f64| Pose3::translation(dx, 0.0, 0.0) * current;
+        assert!(agree_where_matched(&current, &nudged(1.99), objects.iter().copied(), m, deg));
+        assert!(!agree_where_matched(&current, &nudged(2.01), objects.iter().copied(), m, deg));
+        // NaN never agrees; no matched object places nothing elsewhere.
+        let nan = Pose3::from_parts(nalgebra::Translation3::new(f64::NAN, 0.0, 0.0), current.rotation);
+        assert!(!agree_where_matched(&current, &nan, objects.iter().copied(), m, deg));
+        assert!(agree_where_matched(&current, &shifted, std::iter::empty(), m, deg));
+    }
+
+    proptest::proptest! {
+        /// Which of the two is ours does not matter, nor where the local world is put (a yaw
+        /// and a shift keep distances and turns).
+        #[test]
+        fn agreement_where_matched_is_symmetric_and_frame_free(
+            a in (-3.2f64..3.2, -200.0f64..200.0, -200.0f64..200.0),
+            b in (-3.2f64..3.2, -200.0f64..200.0, -200.0f64..200.0),
+            level in (-3.2f64..3.2, -50.0f64..50.0, -50.0f64..50.0),
+            points in proptest::collection::vec((-100.0f64..100.0, -100.0f64..100.0, -3.0f64..3.0), 0..6),
+            tolerance_m in 0.5f64..30.0,
+        ) {
+            let (current, challenger, frame) = (pose(a.0, a.1, a.2), pose(b.0, b.1, b.2), pose(level.0, level.1, level.2));
+            let points: Vec<Point3<f64>> = points.into_iter().map(|(x, y, z)| Point3::new(x, y, z)).collect();
+            let here = agree_where_matched(&current, &challenger, points.iter().copied(), tolerance_m, 5.0);
+            let swapped = agree_where_matched(&challenger, &current, points.iter().copied(), tolerance_m, 5.0);
+            let moved =
+                agree_where_matched(&(frame * current), &(frame * challenger), points.iter().copied(), tolerance_m, 5.0);
+            proptest::prop_assert_eq!(here, swapped);
+            proptest::prop_assert_eq!(here, moved);
+        }
     }
 }
