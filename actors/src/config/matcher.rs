@@ -112,7 +112,9 @@ pub struct RelaySection {
     pub min_relayed_pairs: usize,
     /// A neighbour's alignments contradict ours of a robot when the transform they imply
     /// (`model::matching::relay::contradicting`) places that robot's origin this far from ours,
-    /// m (the status and the report then name them: `contradicted_by`). Default 2.0.
+    /// m (the status and the report then name them: `contradicted_by`); a stronger match
+    /// (`rematch`) contradicts ours when it places one of the objects it paired this far from
+    /// where ours does (`model::matching::relay::agree_where_matched`). Default 2.0.
     pub contradiction_m: f64,
     /// ... or turns it by this much (the angle of the rotation between the two), degrees.
     /// Default 5.0. Without relaying nothing is heard, so nothing is flagged.

@@ -5,7 +5,10 @@
 //! alpha half a turn off, 32 m, from a match of −log₁₀ NFA 1.23). On no closed cycle nothing
 //! contradicts it, and robots that take it as a hint pass it on. The maps keep growing, and so
 //! does the evidence: at new object data, ours or its (at most every `match_interval_s`), the graphs are
-//! matched again, and a match that puts the neighbour elsewhere
+//! matched again, and a match that puts the neighbour elsewhere (one of the objects it paired
+//! beyond `relay.contradiction_m` from where ours places it, or turned beyond
+//! `contradiction_deg`: `relay::agree_where_matched`, not at the neighbour's origin, which a
+//! tilt within the tolerance moves by metres)
 //!
 //! ```text
 //! s' ≥ max(s + rematch_margin, rematch_min_significance)
