@@ -124,8 +124,8 @@ impl AlignmentReport {
         }
         match self.withdrawals {
             0 => {}
-            1 => note += ", 1 wrong alignment withdrawn",
-            n => note += &format!(", {n} wrong alignments withdrawn"),
+            1 => note += ", 1 alignment withdrawn",
+            n => note += &format!(", {n} alignments withdrawn"),
         }
         note
     }
