@@ -131,14 +131,8 @@ pub fn agree_where_matched(
     tolerance_deg: f64,
 ) -> bool {
     let turn_deg = current.rotation.angle_to(&challenger.rotation).to_degrees();
-    let apart = matched.into_iter().map(|q| ((current * q) - (challenger * q)).norm()).fold(0.0, |most: f64, d| {
-        if d > most || d.is_nan() {
-            d
-        } else {
-            most
-        }
-    });
-    apart <= tolerance_m && turn_deg <= tolerance_deg
+    // `<=` is false for NaN: a NaN placement never agrees.
+    turn_deg <= tolerance_deg && matched.into_iter().all(|q| ((current * q) - (challenger * q)).norm() <= tolerance_m)
 }
 
 /// Whether `transform` agrees with any of `barred` (our alignments of the same robot withdrawn
