@@ -62,6 +62,12 @@ const SUPPORT_RADII: f64 = 2.0;
 /// A significant runner-up whose agreement index ω comes within this of the best's makes a
 /// repeated layout: refused.
 const AGREEMENT_MARGIN: f64 = 0.05;
+/// In a repeated layout, a runner-up whose ω is within this many standard errors of the
+/// difference below the best's is as consistent (when that is wider than `AGREEMENT_MARGIN`):
+/// the best was picked among many period copies of nearly equal ω, and between two different
+/// parking lots of one layout it won by 0.05–0.11 (11 of 1000 pairs), within two standard
+/// errors (`overlap::Agreement`).
+const AGREEMENT_STANDARD_ERRORS: f64 = 2.0;
 
 /// Matches `remote`'s object graph against `local`'s. Never panics on any valid graphs.
 pub fn match_graphs(
@@ -244,8 +250,15 @@ pub fn match_graphs(
         let runner_up_agreement = overlap.agreement(&runner_up);
         let as_good = score_ratio >= config.ambiguity_ratio;
         // As consistent, on comparable support: a runner-up laying a corner of one map on a
-        // corner of the other is trivially consistent (nothing lands on mapped ground).
-        let as_consistent = runner_up_agreement + AGREEMENT_MARGIN >= agreement && score_ratio >= MIN_RUNNER_UP_SUPPORT;
+        // corner of the other is trivially consistent (nothing lands on mapped ground). In a
+        // repeated layout, "as consistent" is "not worse beyond the sampling noise of ω".
+        let margin = if shifted.is_empty() {
+            AGREEMENT_MARGIN
+        } else {
+            AGREEMENT_MARGIN.max(AGREEMENT_STANDARD_ERRORS * agreement.difference_error(&runner_up_agreement))
+        };
+        let as_consistent =
+            runner_up_agreement.index + margin >= agreement.index && score_ratio >= MIN_RUNNER_UP_SUPPORT;
         if !(as_good || as_consistent) {
             continue;
         }
@@ -257,7 +270,11 @@ pub fn match_graphs(
         let reason = if as_good && !period {
             RefusalReason::Ambiguous { runner_up_displacement_m: displacement, score_ratio }
         } else {
-            RefusalReason::Repeated { runner_up_displacement_m: displacement, agreement, runner_up_agreement }
+            RefusalReason::Repeated {
+                runner_up_displacement_m: displacement,
+                agreement: agreement.index,
+                runner_up_agreement: runner_up_agreement.index,
+            }
         };
         return MatchReport { spectral_matches, ..refuse(reason) };
     }

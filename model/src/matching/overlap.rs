@@ -15,6 +15,38 @@
 //!
 //! is what the true transform keeps high — only missed detections and label changes lower it —
 //! and what a shifted copy of a layout cannot (every bay it lays onto an empty one).
+//!
+//! ω is a proportion of the N = 2A + D objects on shared ground, so it carries sampling noise:
+//! read as a binomial proportion, its standard error is
+//!
+//!   se(ω) = √(ω (1 − ω) / N),
+//!
+//! and two transforms' indices differ by more than chance only beyond a few
+//! √(se₁² + se₂²) ([`Agreement::difference_error`]).
+
+/// The agreement index of one transform and the objects it was counted over.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Agreement {
+    /// ω = 2A / (2A + D), in [0, 1]; 0 when nothing lands on shared ground.
+    pub index: f64,
+    /// N = 2A + D: the objects of either graph on shared ground.
+    pub on_shared_ground: usize,
+}
+
+impl Agreement {
+    /// se(ω) = √(ω (1 − ω) / N); 0 when N = 0.
+    pub fn standard_error(&self) -> f64 {
+        if self.on_shared_ground == 0 {
+            return 0.0;
+        }
+        (self.index * (1.0 - self.index) / self.on_shared_ground as f64).sqrt()
+    }
+
+    /// The standard error of ω₁ − ω₂ for two transforms counted apart: √(se₁² + se₂²).
+    pub fn difference_error(&self, other: &Agreement) -> f64 {
+        self.standard_error().hypot(other.standard_error())
+    }
+}
 
 use super::object_grid::Grid;
 use super::verification::Evaluation;
@@ -43,8 +75,8 @@ impl<'a> Overlap<'a> {
         }
     }
 
-    /// ω of an evaluated transform, in [0, 1]; 0 when nothing lands on shared ground.
-    pub fn agreement(&self, e: &Evaluation) -> f64 {
+    /// ω of an evaluated transform, with the number of objects it was counted over.
+    pub fn agreement(&self, e: &Evaluation) -> Agreement {
         let mut matched_local = vec![false; self.local.len()];
         let mut matched_remote = vec![false; self.remote.len()];
         for i in &e.inliers {
@@ -61,13 +93,10 @@ impl<'a> Overlap<'a> {
             &self.remote_grid,
             self.remote,
         );
-        let agreements = 2.0 * e.inliers.len() as f64;
-        let total = agreements + (disagreements_remote + disagreements_local) as f64;
-        if total == 0.0 {
-            0.0
-        } else {
-            agreements / total
-        }
+        let agreements = 2 * e.inliers.len();
+        let total = agreements + disagreements_remote + disagreements_local;
+        let index = if total == 0 { 0.0 } else { agreements as f64 / total as f64 };
+        Agreement { index, on_shared_ground: total }
     }
 
     /// Objects of `from` without a partner that `other_from_this` lays within the support radius
@@ -132,14 +161,33 @@ mod tests {
         let remote = graph(&[(0.0, 0.0), (6.0, 0.0), (12.0, 0.0)]);
         let overlap = Overlap::new(&local, &remote, 4.0);
         let truth = evaluation(Pose3::identity(), &[(0, 0), (1, 1), (2, 2)]);
-        assert_eq!(overlap.agreement(&truth), 1.0);
+        assert_eq!(overlap.agreement(&truth).index, 1.0);
         // Shifted by one occupied period: two pairs, and one object each side on mapped ground.
         let shifted = evaluation(pose_from_yaw_translation(0.0, Vector3::new(6.0, 0.0, 0.0)), &[(1, 0), (2, 1)]);
         // Remote 2 lands at 18 m: 6 m from local 2, beyond support. Local 0 lands at −6 m: beyond.
-        assert_eq!(overlap.agreement(&shifted), 1.0);
+        assert_eq!(overlap.agreement(&shifted).index, 1.0);
         let tight = Overlap::new(&local, &remote, 7.0);
         // With a 7 m support both unmatched objects land on mapped ground: ω = 4 / (4 + 2).
-        assert!((tight.agreement(&shifted) - 4.0 / 6.0).abs() < 1e-12);
+        assert!((tight.agreement(&shifted).index - 4.0 / 6.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_agreement_index_carries_a_binomial_standard_error() {
+        // Two pairs and two unmatched objects on mapped ground: ω = 4 / 6 over N = 6 objects.
+        let local = graph(&[(0.0, 0.0), (6.0, 0.0), (12.0, 0.0)]);
+        let remote = graph(&[(0.0, 0.0), (6.0, 0.0), (12.0, 0.0)]);
+        let shifted = evaluation(pose_from_yaw_translation(0.0, Vector3::new(6.0, 0.0, 0.0)), &[(1, 0), (2, 1)]);
+        let a = Overlap::new(&local, &remote, 7.0).agreement(&shifted);
+        assert_eq!(a.on_shared_ground, 6);
+        let se = (4.0 / 6.0 * (2.0 / 6.0) / 6.0_f64).sqrt();
+        assert!((a.standard_error() - se).abs() < 1e-12);
+        // The difference of two independent indices: √(se₁² + se₂²); perfect agreement has none.
+        let perfect = Agreement { index: 1.0, on_shared_ground: 40 };
+        assert_eq!(perfect.standard_error(), 0.0);
+        assert!((a.difference_error(&a) - se * 2.0_f64.sqrt()).abs() < 1e-12);
+        assert!((a.difference_error(&perfect) - se).abs() < 1e-12);
+        // Nothing on shared ground: no sampling, no error (and no division by zero).
+        assert_eq!(Agreement { index: 0.0, on_shared_ground: 0 }.standard_error(), 0.0);
     }
 
     #[test]
@@ -147,6 +195,6 @@ mod tests {
         let local = graph(&[(0.0, 0.0)]);
         let remote = graph(&[(100.0, 0.0)]);
         let overlap = Overlap::new(&local, &remote, 5.0);
-        assert_eq!(overlap.agreement(&evaluation(Pose3::identity(), &[])), 0.0);
+        assert_eq!(overlap.agreement(&evaluation(Pose3::identity(), &[])).index, 0.0);
     }
 }
