@@ -24,6 +24,11 @@
 //! and two transforms' indices differ by more than chance only beyond a few
 //! √(se₁² + se₂²) ([`Agreement::difference_error`]).
 
+use super::object_grid::Grid;
+use super::verification::Evaluation;
+use super::ObjectGraph;
+use nalgebra::Point3;
+
 /// The agreement index of one transform and the objects it was counted over.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Agreement {
@@ -47,11 +52,6 @@ impl Agreement {
         self.standard_error().hypot(other.standard_error())
     }
 }
-
-use super::object_grid::Grid;
-use super::verification::Evaluation;
-use super::ObjectGraph;
-use nalgebra::Point3;
 
 /// Agreement of transforms between two graphs.
 pub struct Overlap<'a> {
