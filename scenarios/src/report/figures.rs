@@ -268,7 +268,9 @@ fn pair_errors(observation: &Observation, robots: &[RobotTruth]) -> Vec<PairErro
     let mut out = Vec::new();
     for (k, local) in robots.iter().enumerate() {
         let Some(Some((_, neighbours, _))) = observation.maps.get(k) else { continue };
-        for n in neighbours {
+        // Only what the robot has accepted: a claim still being verified carries a transform
+        // too, and plotting it would read as an alignment that never was.
+        for n in neighbours.iter().filter(|n| n.state == Some(ProtocolStage::Aligned)) {
             let Some(r) = n.robot.index() else { continue };
             let (Some(remote), Some(estimate)) = (robots.get(r), n.local_from_remote) else { continue };
             let Some(truth) = true_local_from_remote(&fits, robots, k, r) else { continue };
@@ -461,5 +463,76 @@ pub fn compute(record: &RunRecord) -> Report {
         series,
         ledger: super::ledger::compute(record, last),
         back_end: super::back_end::compute(record),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::TruthTrack;
+    use nalgebra::Vector3;
+    use sgm_actors::comms::CommsStatus;
+    use sgm_actors::matcher::NeighbourStatus;
+    use sgm_actors::tracker::MapSummary;
+    use sgm_model::geometry::pose_from_yaw_translation;
+
+    fn neighbour(index: usize, state: ProtocolStage, local_from_remote: Pose3) -> NeighbourStatus {
+        NeighbourStatus {
+            robot: RobotId::from_index(index),
+            state: Some(state),
+            local_from_remote: Some(local_from_remote),
+            first_aligned: None,
+            closures: Default::default(),
+            aligned_via: None,
+            keyframes_held: 0,
+            objects_revision: None,
+            contradicted_by: Vec::new(),
+            withdrawals: 0,
+            last_withdrawal: None,
+            match_attempts: Default::default(),
+            graph_rounds_refuted: 0,
+        }
+    }
+
+    fn robot(name: &str, truth_from_world: Pose3) -> RobotTruth {
+        RobotTruth {
+            name: name.into(),
+            truth: TruthTrack::Samples(vec![(0.0, truth_from_world)]),
+            truth_from_world,
+            frames: 1,
+            raw_bytes: 0,
+            raw_max_bytes: 0,
+        }
+    }
+
+    /// A claim still being verified carries a transform, 40 m off here; the series must not
+    /// plot it as an alignment. The accepted direction is there, and exact.
+    #[test]
+    fn the_series_holds_only_accepted_alignments() {
+        let alpha_world = Pose3::identity();
+        let bravo_world = pose_from_yaw_translation(0.5, Vector3::new(10.0, -4.0, 0.0));
+        let robots = [robot("alpha", alpha_world), robot("bravo", bravo_world)];
+        let truth = alpha_world.inverse() * bravo_world;
+        let claim = pose_from_yaw_translation(0.1, Vector3::new(40.0, 0.0, 0.0));
+        let observation = Observation {
+            t: 30.0,
+            maps: vec![
+                Some((
+                    MapSummary::default(),
+                    vec![neighbour(1, ProtocolStage::KeyframesRequested, claim)],
+                    CommsStatus::default(),
+                )),
+                Some((
+                    MapSummary::default(),
+                    vec![neighbour(0, ProtocolStage::Aligned, truth.inverse())],
+                    CommsStatus::default(),
+                )),
+            ],
+        };
+        let point = series_point(&observation, &robots);
+        assert_eq!(point.alignments.len(), 1, "{:?}", point.alignments);
+        let pair = &point.alignments[0];
+        assert_eq!((pair.local.as_str(), pair.remote.as_str()), ("bravo", "alpha"));
+        assert!(pair.translation_error_m < 1e-9 && pair.rotation_error_deg < 1e-9, "{pair:?}");
     }
 }

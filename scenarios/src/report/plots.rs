@@ -5,7 +5,7 @@
 //! (`fonts-dejavu-core`); without it the plots are drawn without text.
 
 use super::Report;
-use crate::record::RunOutcome;
+use crate::record::{RunOutcome, SeriesPoint};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -182,17 +182,13 @@ fn ate(report: &Report, path: &Path, text: bool) -> Result<(), PlotError> {
     }
     for (k, (local, remote)) in pairs.iter().enumerate() {
         let c = ROBOT_COLOURS[k % ROBOT_COLOURS.len()];
-        let points = report.series.iter().filter_map(|p| {
-            p.alignments
-                .iter()
-                .find(|a| &a.local == local && &a.remote == remote)
-                .map(|a| (p.t, a.translation_error_m.min(y_max)))
-        });
-        let series = chart.draw_series(LineSeries::new(points, c.stroke_width(1))).map_err(err(path))?;
-        if text {
-            series
-                .label(format!("{local} ← {remote}"))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(1)));
+        for (run, points) in aligned_runs(&report.series, local, remote, y_max).into_iter().enumerate() {
+            let series = chart.draw_series(LineSeries::new(points, c.stroke_width(1))).map_err(err(path))?;
+            if text && run == 0 {
+                series
+                    .label(format!("{local} ← {remote}"))
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(1)));
+            }
         }
     }
     if text {
@@ -204,6 +200,27 @@ fn ate(report: &Report, path: &Path, text: bool) -> Result<(), PlotError> {
             .map_err(err(path))?;
     }
     root.present().map_err(err(path))
+}
+
+/// One pair's translation error (clipped at `y_max`) over the stretches it was aligned: a
+/// withdrawn alignment leaves a gap, not a line drawn across it.
+fn aligned_runs(series: &[SeriesPoint], local: &str, remote: &str, y_max: f64) -> Vec<Vec<(f64, f64)>> {
+    let mut runs: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut open = false;
+    for p in series {
+        match p.alignments.iter().find(|a| a.local == local && a.remote == remote) {
+            Some(a) => {
+                let point = (p.t, a.translation_error_m.min(y_max));
+                match runs.last_mut() {
+                    Some(run) if open => run.push(point),
+                    _ => runs.push(vec![point]),
+                }
+                open = true;
+            }
+            None => open = false,
+        }
+    }
+    runs
 }
 
 /// The time axis: the mission, widened to every sample (a sample off the axis would overflow
@@ -331,6 +348,7 @@ pub fn lines(path: &Path, x_desc: &str, y_desc: &str, series: &[Series], log_y: 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::record::PairError;
 
     #[test]
     fn a_plot_that_cannot_be_written_names_its_file() {
@@ -343,5 +361,31 @@ mod tests {
         let written = dir.path().join("sweep.png");
         lines(&written, "x", "y", &series, true).expect("a writable file");
         assert!(std::fs::metadata(&written).is_ok_and(|m| m.len() > 0));
+    }
+
+    fn point(t: f64, error: Option<f64>) -> SeriesPoint {
+        let pair = |e| PairError {
+            local: "alpha".into(),
+            remote: "bravo".into(),
+            translation_error_m: e,
+            rotation_error_deg: 0.0,
+        };
+        SeriesPoint {
+            t,
+            team_ate_rmse_m: None,
+            bytes_total: 0,
+            cloud_bytes: 0,
+            alignments: error.map(pair).into_iter().collect(),
+        }
+    }
+
+    /// Aligned, withdrawn, aligned again: two lines with a gap, not one drawn across it.
+    #[test]
+    fn a_withdrawn_alignment_leaves_a_gap_in_its_line() {
+        let errors = [None, Some(0.2), Some(0.3), None, None, Some(9.0), Some(0.1)];
+        let series: Vec<_> = errors.iter().enumerate().map(|(k, e)| point(10.0 * k as f64, *e)).collect();
+        let runs = aligned_runs(&series, "alpha", "bravo", 5.0);
+        assert_eq!(runs, vec![vec![(10.0, 0.2), (20.0, 0.3)], vec![(50.0, 5.0), (60.0, 0.1)]]);
+        assert!(aligned_runs(&series, "bravo", "alpha", 5.0).is_empty());
     }
 }
