@@ -390,6 +390,7 @@ pub async fn replay_with(
         final_keyframes: maps.iter().map(|m| m.keyframes().map(|k| k.id).collect()).collect(),
         false_factors: Vec::new(),
         optimisers: team.optimiser_statuses().await?,
+        pose_graphs: team.pose_graphs().await?,
         deskew: team.deskew_counts().await?,
         odometry,
     };

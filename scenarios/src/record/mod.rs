@@ -62,6 +62,8 @@ pub struct RunRecord {
     pub false_factors: Vec<InjectedFactor>,
     /// Each robot's pose graph at the end (`None`: not running).
     pub optimisers: Vec<Option<OptimiserStatus>>,
+    /// Each robot's pose graph at the end, for the team-graph reference (`None`: not running).
+    pub pose_graphs: Vec<Option<sgm_actors::optimiser::OptimiserState>>,
     /// Each robot's scans deskewed and used as they came (`None`: not running).
     pub deskew: Vec<Option<DeskewCounts>>,
     /// Each robot's internal odometry (`None`: external, or not running).

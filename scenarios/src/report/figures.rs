@@ -14,7 +14,7 @@ use sgm_actors::protocol::ProtocolStage;
 use sgm_model::eval::ate::ate;
 use sgm_model::geometry::{pose_error, Pose3};
 use sgm_model::matching::suspect::suspicions;
-use sgm_model::scene_graph::RobotId;
+use sgm_model::scene_graph::{KeyframeId, RobotId};
 use sgm_model::wire::{MessageKind, TrafficAccount};
 use std::collections::BTreeMap;
 
@@ -155,6 +155,11 @@ pub struct Report {
     /// (each map placed on the truth by its best fit): what a central optimiser holding every
     /// raw scan with a perfect association reaches without re-optimising the maps, m.
     pub team_ate_oracle_join_m: Option<f64>,
+    /// Team ATE of every robot the reference has aligned, each robot's keyframes where one
+    /// graph of the team puts them: every robot's own odometry, loop and inter-robot factors
+    /// solved together ([`super::team_graph`]). What a back end whose robots shared their
+    /// factors would reach with the same measurements: a reference, not what the robots hold, m.
+    pub team_ate_team_graph_m: Option<f64>,
     pub robots: Vec<RobotReport>,
     pub alignments: Vec<AlignmentReport>,
     /// Sent by the whole team, per message type (paper Table 4).
@@ -261,6 +266,25 @@ fn team_ate_placed(
         names.push(robot.name.clone());
     }
     (ate(&estimate, &truth).map(|a| a.rmse_m), names)
+}
+
+/// Team ATE of keyframe poses already in the reference's world (robots without any skipped).
+fn team_ate_solved(
+    observation: &Observation,
+    robots: &[RobotTruth],
+    solved: &[Vec<(KeyframeId, Pose3)>],
+) -> Option<f64> {
+    let (mut estimate, mut truth) = (Vec::new(), Vec::new());
+    for (k, (robot, poses)) in robots.iter().zip(solved).enumerate() {
+        let Some(Some((map, _, _))) = observation.maps.get(k) else { continue };
+        let stamps: BTreeMap<KeyframeId, f64> = map.keyframes.iter().map(|f| (f.id, f.stamp)).collect();
+        for (id, pose) in poses {
+            let Some(t) = stamps.get(id).and_then(|s| robot.truth.pose_at(*s)) else { continue };
+            estimate.push(Point3::from(pose.translation.vector));
+            truth.push(Point3::from(t.translation.vector));
+        }
+    }
+    ate(&estimate, &truth).map(|a| a.rmse_m)
 }
 
 fn pair_errors(observation: &Observation, robots: &[RobotTruth]) -> Vec<PairError> {
@@ -444,6 +468,8 @@ pub fn compute(record: &RunRecord) -> Report {
     let team_ate_all_start_guess_m = team_ate_placed(last, &record.robots, start_guess).0;
     let oracle = |k| true_local_from_remote(&fits, &record.robots, 0, k);
     let team_ate_oracle_join_m = team_ate_placed(last, &record.robots, oracle).0;
+    let team_ate_team_graph_m = super::team_graph::solve(&record.pose_graphs, |k| reference_from(last, k))
+        .and_then(|solved| team_ate_solved(last, &record.robots, &solved));
     let series = record.series.clone();
     Report {
         scenario: record.scenario.clone(),
@@ -453,6 +479,7 @@ pub fn compute(record: &RunRecord) -> Report {
         team_ate_robots,
         team_ate_all_start_guess_m,
         team_ate_oracle_join_m,
+        team_ate_team_graph_m,
         robots,
         alignments,
         messages,

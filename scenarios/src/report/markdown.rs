@@ -158,10 +158,13 @@ pub fn render(report: &Report, timing: &Timing) -> String {
     );
     let _ = writeln!(
         s,
-        "**Team ATE RMSE: {} m** over {} (SE(3)-aligned, merged in {}'s world).\n",
+        "**Team ATE RMSE: {} m** over {} (SE(3)-aligned, merged in {}'s world). References: each map \
+         joined by the true transform {} m; one graph of the team, every robot's factors solved together, {} m.\n",
         metres(report.team_ate_rmse_m),
         if report.team_ate_robots.is_empty() { "no robot".into() } else { report.team_ate_robots.join(", ") },
-        report.team_ate_robots.first().map_or("—", String::as_str)
+        report.team_ate_robots.first().map_or("—", String::as_str),
+        metres(report.team_ate_oracle_join_m),
+        metres(report.team_ate_team_graph_m)
     );
     let _ = writeln!(s, "## Robots\n\n| robot | ATE RMSE (m) | keyframes | objects (confirmed, moving) | merged, expired | glimpses | distance (m) | frames |\n|---|---|---|---|---|---|---|---|");
     for r in &report.robots {

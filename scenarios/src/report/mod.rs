@@ -8,6 +8,7 @@ pub mod ledger;
 mod map_cloud;
 pub mod markdown;
 pub mod plots;
+pub mod team_graph;
 pub mod tum;
 
 pub(crate) use figures::reference_from;

@@ -271,6 +271,7 @@ pub async fn run_with(
         final_keyframes: maps.iter().map(|m| m.keyframes().map(|k| k.id).collect()).collect(),
         false_factors: false_factors.injected,
         optimisers,
+        pose_graphs: team.pose_graphs().await?,
         deskew,
         odometry: team.odometry_statuses().await?,
     };

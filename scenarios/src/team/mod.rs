@@ -23,9 +23,10 @@ use sgm_actors::comms::GetCommsStatus;
 use sgm_actors::config::{PersistenceConfig, RobotConfig};
 use sgm_actors::fusion::GetFusionStatus;
 use sgm_actors::matcher::GetNeighbours;
+use sgm_actors::messages::Freeze;
 use sgm_actors::messages::{InterRobotConstraints, SensorFrame, Tick};
 use sgm_actors::odometry::{GetOdometryStatus, OdometryStatus};
-use sgm_actors::optimiser::{GetOptimiserStatus, OptimiserStatus};
+use sgm_actors::optimiser::{GetOptimiserStatus, OptimiserState, OptimiserStatus};
 use sgm_actors::quiescence::until_quiet;
 use sgm_actors::snapshot::SnapshotStore;
 use sgm_actors::supervisor::{start_robot_restored, RobotHandle};
@@ -370,6 +371,20 @@ impl Team {
         for member in &self.members {
             out.push(match &member.handle {
                 Some(handle) => Some(handle.optimiser.send(GetOptimiserStatus).await.map_err(mailbox)?),
+                None => None,
+            });
+        }
+        Ok(out)
+    }
+
+    /// Each robot's pose graph as its Optimiser holds it (`None`: not running).
+    pub async fn pose_graphs(&self) -> Result<Vec<Option<OptimiserState>>, RunError> {
+        let mut out = Vec::new();
+        for member in &self.members {
+            out.push(match &member.handle {
+                Some(handle) => {
+                    Some(handle.optimiser.send(Freeze::<OptimiserState>::default()).await.map_err(mailbox)?)
+                }
                 None => None,
             });
         }
