@@ -48,6 +48,8 @@ pub fn solve(
     if team.values.is_empty() {
         return None;
     }
+    // The robot whose world the team graph is solved in: the first one placed.
+    let reference = members.iter().position(Option::is_some)?;
     for (k, graph) in graphs.iter().enumerate() {
         let (Some(graph), Some(_)) = (graph, members[k]) else { continue };
         // This robot's variable → the team's; anchors and unknown robots map to nothing.
@@ -70,7 +72,7 @@ pub fn solve(
                 team.betweens.push(sgm_model::optim::factors::Between { from, to, ..between.clone() });
             }
         }
-        if k == reference(&members)? {
+        if k == reference {
             for prior in &graph.graph.priors {
                 if let Some(&v) = of.get(&prior.variable) {
                     team.priors.push(sgm_model::optim::factors::Prior { variable: v, ..prior.clone() });
@@ -84,11 +86,6 @@ pub fn solve(
         out[k].push((id, team.values[v]));
     }
     Some(out)
-}
-
-/// The robot whose world the team graph is solved in: the first one placed.
-fn reference(members: &[Option<Pose3>]) -> Option<usize> {
-    members.iter().position(Option::is_some)
 }
 
 #[cfg(test)]
