@@ -80,7 +80,10 @@ pub fn solve(
             }
         }
     }
-    optimize(&mut team, &LmParams::default()).ok()?;
+    if let Err(e) = optimize(&mut team, &LmParams::default()) {
+        tracing::warn!("team graph not solved: {e} (report team_ate_team_graph_m left empty)");
+        return None;
+    }
     let mut out = vec![Vec::new(); graphs.len()];
     for ((k, id), v) in variable {
         out[k].push((id, team.values[v]));
