@@ -39,7 +39,9 @@ pub const MAGIC: [u8; 8] = *b"SGMSNAP\0";
 /// was last withdrawn, the significance of the match its alignment came from, and a bar that
 /// stands on a stronger match's word (`relay.rematch`). Version 13: the Matcher counts, per
 /// neighbour, the refuted rounds of its own graph matches (it keeps only the recent ones).
-pub const FORMAT_VERSION: u32 = 13;
+/// Version 14: the pose graph keeps its factor log and the neighbours' chains it holds
+/// (`optimiser.share_factors`).
+pub const FORMAT_VERSION: u32 = 14;
 pub const HEADER_LEN: usize = 56;
 
 /// Why bytes are not a snapshot (or not the one expected).

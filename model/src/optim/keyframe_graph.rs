@@ -35,6 +35,14 @@
 //! ([`super::robust::optimize_gnc_incremental_with`]): the previous decision is kept while it
 //! still holds, and made again from scratch when it does not. Rejected factors stay in the
 //! graph with weight 0 and add no information to the marginals.
+//!
+//! With `optimiser.share_factors`, every local keyframe and factor of our own measurements goes
+//! into a log ([`super::shared_factors`]) that neighbours read, and each aligned neighbour's own
+//! log comes into the graph as its chain ([`chains`]): its keyframes and factors in place of
+//! the ties, so that the graph is the pair's whole graph.
+
+mod chains;
+pub use chains::{ChainAdded, ChainCounts, NeighbourChain, DEFAULT_CHAIN_ITEMS};
 
 use super::consistency::{largest_consistent_set, Consistency, ImpliedClosure};
 use super::factors::{Between, Prior};
@@ -42,6 +50,7 @@ use super::graph::{Graph3, GTSAM_PRIOR_SIGMAS_3D};
 use super::gravity::{gravity_priors, unit_up, up_in_body, yaw_only, MeasuredUp};
 use super::marginals::marginal_covariances_with;
 use super::robust::{optimize_gnc_incremental_with, rejection_weights, weighted};
+use super::shared_factors::FactorLog;
 use super::solver::{least_squares, optimize_with, LmParams, SolveError, Structure};
 use crate::geometry::{levelled, medoid, pose_error, Pose3};
 use crate::scene_graph::{Keyframe, KeyframeEdge, KeyframeEdgeKind, KeyframeId, KeyframeRef, RobotId};
@@ -75,6 +84,10 @@ pub struct KeyframeGraphState {
     pub frame_attitudes: Vec<(KeyframeId, UnitQuaternion<f64>)>,
     /// The latest up in that frame, and its σ, rad.
     pub frame_up: Option<(Vector3<f64>, f64)>,
+    /// Our own keyframes and factors, as neighbours read them ([`super::shared_factors`]).
+    pub log: FactorLog,
+    /// Neighbours' own chains held ([`chains`]).
+    pub chains: Vec<(RobotId, NeighbourChain)>,
 }
 
 /// What a solve gives: every local keyframe's pose, the newest ones' marginal covariances, and
@@ -102,6 +115,9 @@ pub struct KeyframeGraphStatus {
     /// Per neighbour: inter-robot factors held, and those outside the largest mutually
     /// consistent set (rejected by PCM before the solve).
     pub inter_robot: Vec<InterRobotCounts>,
+    /// Per neighbour whose own factors we hold (`optimiser.share_factors`): its chain.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub chains: Vec<ChainCounts>,
 }
 
 /// One neighbour's inter-robot factors in the pose graph.
@@ -160,6 +176,13 @@ pub struct KeyframeGraph {
     /// While a solve holds anchors in yaw and position only ([`KeyframeGraph::free_anchor_tilts`]):
     /// those priors whole, by index, put back as `transient_from`'s priors are taken away.
     transient_anchors: Vec<(usize, Prior<Pose3, 6>)>,
+    /// Our own keyframes and factors, as neighbours read them.
+    log: FactorLog,
+    /// Neighbours' own chains ([`chains`]).
+    chains: BTreeMap<RobotId, NeighbourChain>,
+    /// Keyframes and factors one chain may hold; `None`: [`DEFAULT_CHAIN_ITEMS`]. Set by the
+    /// owner, not frozen.
+    chain_bound: Option<usize>,
 }
 
 /// Pose updates held per neighbour for keyframes not yet in the graph, at most. A keyframe
@@ -233,6 +256,8 @@ impl KeyframeGraph {
             tilts: self.tilts.iter().map(|(k, u)| (*k, *u)).collect(),
             frame_attitudes: self.frame_attitudes.iter().map(|(k, r)| (*k, *r)).collect(),
             frame_up: self.frame_up,
+            log: self.log.clone(),
+            chains: self.chains.iter().map(|(r, c)| (*r, c.clone())).collect(),
         }
     }
 
@@ -297,6 +322,9 @@ impl KeyframeGraph {
             gravity_sigma_rad: None,
             transient_from: None,
             transient_anchors: Vec::new(),
+            log: state.log,
+            chains: state.chains.into_iter().collect(),
+            chain_bound: None,
         })
     }
 
@@ -325,12 +353,16 @@ impl KeyframeGraph {
         let Some(s) = sqrt_information(&edge.information) else { return };
         self.graph.betweens.push(Between { from, to, measured: edge.from_from_to, sqrt_information: s });
         self.candidates.push(edge.kind != KeyframeEdgeKind::Odometry);
+        self.log.factor(edge);
     }
 
     /// Adds a local keyframe (the first is anchored by GTSAM's default prior) and its edges.
     /// Whether to solve now: after a loop closure at once, else every `every_keyframes`.
     pub fn add_keyframe(&mut self, keyframe: &Keyframe, edges: &[KeyframeEdge], every_keyframes: usize) -> bool {
         let first = self.index.is_empty();
+        if !self.index.contains_key(&KeyframeRef::Local(keyframe.id)) {
+            self.log.keyframe(keyframe.id);
+        }
         let i = self.variable(KeyframeRef::Local(keyframe.id), keyframe.world_from_body);
         if first {
             self.graph.add_prior_at_current(i, GTSAM_PRIOR_SIGMAS_3D);
@@ -377,7 +409,11 @@ impl KeyframeGraph {
         for (keyframe, pose_in_remote, covariance) in keyframes {
             let r = KeyframeRef::Remote { robot, keyframe: *keyframe };
             if let Some(&i) = self.index.get(&r) {
-                self.keep_more_informative(anchor, i, pose_in_remote, covariance);
+                // A keyframe the neighbour's chain holds: its information is in the chain's
+                // factors, and its tie stays without.
+                if !self.chain_covers(robot, *keyframe) {
+                    self.keep_more_informative(anchor, i, pose_in_remote, covariance);
+                }
                 continue;
             }
             // A pose update that came before the keyframe is newer than the pose it was served with.
@@ -458,6 +494,14 @@ impl KeyframeGraph {
     /// before the first alignment), up to [`MAX_DEFERRED_POSES`] per neighbour.
     pub fn refresh_neighbour(&mut self, robot: RobotId, poses: &[(KeyframeId, Pose3)]) -> Refreshed {
         let mut out = Refreshed::default();
+        // A chain's keyframes: the anchor's fit takes the neighbour's latest word on them.
+        if let Some(chain) = self.chains.get_mut(&robot) {
+            for (keyframe, pose) in poses {
+                if let Some(held) = chain.poses.get_mut(keyframe) {
+                    *held = *pose;
+                }
+            }
+        }
         let anchor = self.anchors.get(&robot).copied();
         for (keyframe, pose_in_remote) in poses {
             let held = self.index.get(&KeyframeRef::Remote { robot, keyframe: *keyframe }).copied();
@@ -499,6 +543,8 @@ impl KeyframeGraph {
         *self.withdrawals.entry(robot).or_default() += 1;
         let anchor = self.anchors.remove(&robot)?;
         self.deferred.remove(&robot);
+        self.chains.remove(&robot);
+        self.log.strike(robot);
         self.inconsistent.remove(&robot);
         let mut gone = vec![false; self.graph.values.len()];
         gone[anchor] = true;
@@ -624,7 +670,9 @@ impl KeyframeGraph {
         let Some(sigma) = self.gravity_sigma_rad else { return Vec::new() };
         let variable_of = |k| self.index.get(&KeyframeRef::Local(k)).copied();
         let (ups, up_sigmas) = self.measured_ups();
-        gravity_priors(&ups, &up_sigmas, variable_of, &self.graph.values, sigma)
+        let mut priors = gravity_priors(&ups, &up_sigmas, variable_of, &self.graph.values, sigma);
+        priors.extend(self.chain_gravity_priors(sigma));
+        priors
     }
 
     /// The measured up of each local keyframe an odometry that learns up measured
@@ -753,6 +801,7 @@ impl KeyframeGraph {
         let covariances = marginal_covariances_with(&self.graph, &structure, &variables, &weighted(&weights))
             .map(|c| latest.iter().map(|(k, _)| *k).zip(c).collect())
             .unwrap_or_default();
+        self.fit_chained_anchors();
         let anchors = self.anchors.iter().map(|(r, i)| (*r, self.graph.values[*i])).collect();
         Ok(Solved { poses, covariances, rejection_changed, anchors })
     }
@@ -844,10 +893,18 @@ impl KeyframeGraph {
                 remote.insert(b.to, (*robot, b.measured));
             }
         }
+        for (i, robot, pose) in self.chain_remote_poses() {
+            remote.insert(i, (robot, pose));
+        }
         let mut closures: BTreeMap<RobotId, Vec<(usize, ImpliedClosure)>> = BTreeMap::new();
         for (k, b) in self.graph.betweens.iter().enumerate() {
             let Some((robot, remote_pose)) = remote.get(&b.to) else { continue };
-            if !self.candidates.get(k).copied().unwrap_or(false) || robot_of_anchor.contains_key(&b.from) {
+            // Inter-robot factors only: from a local keyframe (not an anchor's tie, nor a
+            // neighbour's own loop closure within its chain).
+            if !self.candidates.get(k).copied().unwrap_or(false)
+                || robot_of_anchor.contains_key(&b.from)
+                || remote.contains_key(&b.from)
+            {
                 continue;
             }
             let implied = ImpliedClosure::new(&self.graph.values[b.from], &b.measured, remote_pose);
@@ -927,6 +984,7 @@ impl KeyframeGraph {
             candidate_factors: self.candidates.iter().filter(|c| **c).count(),
             rejected_factors: self.rejected.len(),
             rejected_inter_robot,
+            chains: self.chain_counts(),
         }
     }
 }

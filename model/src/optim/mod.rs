@@ -10,4 +10,5 @@ pub mod keyframe_graph;
 pub mod manifold;
 pub mod marginals;
 pub mod robust;
+pub mod shared_factors;
 pub mod solver;

@@ -140,6 +140,8 @@ fn check_limits(message: &Message, limits: &WireLimits) -> Result<(), WireError>
         Message::KeyframeDescriptors(m) => ("descriptors", m.descriptors.len(), limits.max_ids),
         Message::Alignments(m) => ("alignments", m.alignments.len(), limits.max_ids),
         Message::KeyframePoses(m) => ("keyframe poses", m.poses.len(), limits.max_ids),
+        Message::GraphFactorRequest(_) => ("requests", 1, 1),
+        Message::GraphFactors(m) => ("keyframes and factors", m.keyframes.len() + m.factors.len(), limits.max_ids),
     };
     if count > max {
         return Err(WireError::Limit { kind, what, count, max });
@@ -190,6 +192,9 @@ fn check_limits(message: &Message, limits: &WireLimits) -> Result<(), WireError>
                     d.sectors
                 )));
             }
+        }
+        Message::GraphFactors(m) if m.next < m.from => {
+            return Err(WireError::Malformed(format!("GraphFactors from {} to {}", m.from, m.next)));
         }
         _ => {}
     }

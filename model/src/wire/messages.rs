@@ -9,6 +9,8 @@
 //! | `KeyframeDescriptors` | new keyframes, with `matcher.association = "scan_context"` only | Scan Context descriptors and poses (the evaluation's Swarm-SC baseline) |
 //! | `Alignments` | an alignment made or moved, rate-limited | the sender's transform to each neighbour it is aligned with (hints, checked by the receiver) |
 //! | `KeyframePoses` | keyframes served earlier moved in the sender's solves, rate-limited | their new poses (the receiver's priors take them) |
+//! | `GraphFactorRequest` | with `optimiser.share_factors`, every `share_period_s` while aligned | the position in the sender's factor log to read from |
+//! | `GraphFactors` | in reply | that part of the sender's factor log: its keyframes and the factors of its own measurements |
 //!
 //! Centroids travel as integers in units of `resolution_mm` (zigzag varints under postcard: two
 //! bytes per axis within ±163 m at 2 cm), sizes as bytes in 5 cm steps: an object costs 9–13
@@ -32,10 +34,12 @@ pub enum MessageKind {
     KeyframeDescriptors,
     Alignments,
     KeyframePoses,
+    GraphFactorRequest,
+    GraphFactors,
 }
 
 impl MessageKind {
-    pub const ALL: [MessageKind; 9] = [
+    pub const ALL: [MessageKind; 11] = [
         MessageKind::ObjectData,
         MessageKind::ObjectCloudRequest,
         MessageKind::ObjectCloudResponse,
@@ -45,6 +49,8 @@ impl MessageKind {
         MessageKind::KeyframeDescriptors,
         MessageKind::Alignments,
         MessageKind::KeyframePoses,
+        MessageKind::GraphFactorRequest,
+        MessageKind::GraphFactors,
     ];
 
     pub fn name(self) -> &'static str {
@@ -58,6 +64,8 @@ impl MessageKind {
             MessageKind::KeyframeDescriptors => "KeyframeDescriptors",
             MessageKind::Alignments => "Alignments",
             MessageKind::KeyframePoses => "KeyframePoses",
+            MessageKind::GraphFactorRequest => "GraphFactorRequest",
+            MessageKind::GraphFactors => "GraphFactors",
         }
     }
 }
@@ -74,6 +82,8 @@ pub enum Message {
     KeyframeDescriptors(KeyframeDescriptors),
     Alignments(Alignments),
     KeyframePoses(KeyframePoses),
+    GraphFactorRequest(GraphFactorRequest),
+    GraphFactors(GraphFactors),
 }
 
 impl Message {
@@ -88,6 +98,8 @@ impl Message {
             Message::KeyframeDescriptors(_) => MessageKind::KeyframeDescriptors,
             Message::Alignments(_) => MessageKind::Alignments,
             Message::KeyframePoses(_) => MessageKind::KeyframePoses,
+            Message::GraphFactorRequest(_) => MessageKind::GraphFactorRequest,
+            Message::GraphFactors(_) => MessageKind::GraphFactors,
         }
     }
 }
@@ -312,6 +324,87 @@ impl WireKeyframePose {
     }
 }
 
+/// Ask a neighbour for the factors of its own pose graph from position `from` of its factor
+/// log on (`optim::shared_factors`). The receiver of the reply asks again from the reply's
+/// `next`: a request or reply lost on the radio is asked again at the next period, so nothing
+/// is missed and nothing is sent twice but for a retry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GraphFactorRequest {
+    pub from: u32,
+}
+
+/// Part of the sender's factor log, from position `from` up to `next` (where to ask next;
+/// `next == from`: nothing new): the sender's keyframes that entered its graph there, with
+/// their poses in its world now, and the factors of its own measurements — odometry, loop
+/// closures, and its inter-robot factors to the receiver (factors to third robots are not
+/// sent). The receiver's pose graph holds them as the sender's own chain of keyframes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GraphFactors {
+    pub from: u32,
+    pub next: u32,
+    pub keyframes: Vec<WireGraphKeyframe>,
+    pub factors: Vec<WireFactor>,
+}
+
+/// A keyframe of the sender's pose graph: its pose in the sender's world now, and, in
+/// gravity-aligned worlds, the world's up in its body as the sender's odometry measured it
+/// (unit vector; what the sender's gravity prior holds it to).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireGraphKeyframe {
+    pub pose: WireKeyframePose,
+    pub up: Option<[f32; 3]>,
+}
+
+/// What a shared factor measures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum WireFactorKind {
+    Odometry,
+    Loop,
+    /// To a keyframe of the receiver.
+    InterRobot,
+}
+
+/// One between factor of the sender's graph: `measured` = from_body_from_to_body, with its
+/// information matrix Ω (upper triangle, row-major, over (ω, v), as [`pack_covariance`] packs).
+/// `from` is the sender's keyframe; `to` the sender's too, or the receiver's for an
+/// inter-robot factor. 1 + two id varints + 24 + 84 bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireFactor {
+    pub kind: WireFactorKind,
+    pub from: KeyframeId,
+    pub to: KeyframeId,
+    pub translation: [f32; 3],
+    pub rotation: [f32; 3],
+    pub information: [f32; 21],
+}
+
+impl WireFactor {
+    pub fn new(
+        kind: WireFactorKind,
+        from: KeyframeId,
+        to: KeyframeId,
+        measured: &Pose3,
+        information: &Matrix6<f64>,
+    ) -> Self {
+        let p = WireKeyframePose::new(to, measured);
+        Self {
+            kind,
+            from,
+            to,
+            translation: p.translation,
+            rotation: p.rotation,
+            information: pack_covariance(information),
+        }
+    }
+
+    /// (measured, information); `None` unless the pose is finite and the information symmetric
+    /// positive definite.
+    pub fn measurement(&self) -> Option<(Pose3, Matrix6<f64>)> {
+        let pose = WireKeyframePose { keyframe: self.to, translation: self.translation, rotation: self.rotation };
+        Some((pose.to_pose()?, unpack_covariance(&self.information)?))
+    }
+}
+
 /// A pose as translation and unit quaternion (x, y, z, w).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WirePose {
@@ -368,7 +461,8 @@ pub fn expand_covariance(packed: &[f32; 21]) -> Matrix6<f64> {
     m
 }
 
-/// Unpacks [`pack_covariance`] from outside; `None` unless finite, symmetric positive definite.
+/// Unpacks [`pack_covariance`] from outside; `None` unless finite, symmetric positive definite
+/// (also an information matrix, which [`WireFactor`] packs the same way).
 pub fn unpack_covariance(packed: &[f32; 21]) -> Option<Matrix6<f64>> {
     let m = expand_covariance(packed);
     (m.iter().all(|v| v.is_finite()) && m.cholesky().is_some()).then_some(m)
