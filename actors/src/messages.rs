@@ -150,6 +150,15 @@ pub struct NeighbourKeyframePoses {
     pub poses: Vec<(KeyframeId, Pose3)>,
 }
 
+/// Comms → Optimiser (`optimiser.share_factors`): a neighbour asks for our factor log from a
+/// position on, or sends part of its own.
+#[derive(Message, Clone, Debug, PartialEq)]
+#[rtype(result = "()")]
+pub enum NeighbourGraph {
+    Request { robot: RobotId, from: u32 },
+    Slice { robot: RobotId, slice: sgm_model::optim::shared_factors::LogSlice },
+}
+
 /// Optimiser → Matcher: each aligned neighbour's local_from_remote as the last solve of the
 /// pose graph estimates it (its anchor), from every inter-robot factor so far, and the
 /// withdrawals of that neighbour the graph had handled ([`NeighbourWithdrawn`]): an estimate

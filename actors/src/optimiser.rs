@@ -18,13 +18,22 @@
 //! holds — one solve — and made again from scratch when it does not. Rejected factors stay in
 //! the graph with weight 0 (a later solve may take them back) and add no information to the
 //! marginals.
+//!
+//! With `optimiser.share_factors`, every `share_period_s` each aligned neighbour is asked (a
+//! `GraphFactorRequest` through Comms) for its factor log from where its chain ends, and asked
+//! again at once after a full reply (more may be waiting); a neighbour's request is answered from our
+//! log (`KeyframeGraph::factor_slice`, at most `comms.limits.max_ids` keyframes and factors).
+//! A slice received goes into the graph as the neighbour's chain and is solved at the next
+//! tick.
 
 use crate::config::OptimiserConfig;
 use crate::containment::contained;
 use crate::messages::*;
 use actix::{Actor, Context, Handler, Recipient, Supervised};
-use sgm_model::optim::keyframe_graph::{KeyframeGraph, KeyframeGraphState, KeyframeGraphStatus};
-use sgm_model::scene_graph::RobotId;
+use sgm_model::optim::keyframe_graph::{ChainAdded, KeyframeGraph, KeyframeGraphState, KeyframeGraphStatus};
+use sgm_model::scene_graph::{RobotId, Stamp};
+use sgm_model::wire::messages::{GraphFactorRequest, GraphFactors};
+use sgm_model::wire::Message as WireMessage;
 
 /// Where optimised poses go (the Tracker applies them to the map and shares the map).
 #[derive(Clone)]
@@ -32,6 +41,8 @@ pub struct OptimiserLinks {
     pub tracker: Recipient<PosesOptimised>,
     /// Each solve's estimate of every aligned neighbour's transform.
     pub matcher: Recipient<NeighbourTransforms>,
+    /// Factor-log requests and slices for neighbours (`optimiser.share_factors`).
+    pub comms: Recipient<Outgoing>,
 }
 
 /// Most keyframes whose marginal covariance is computed after each optimisation (the latest).
@@ -49,6 +60,12 @@ pub struct Optimiser {
     /// Solve our own poses for what neighbours are told (`comms.pose_updates.own_estimates`).
     own_estimates: bool,
     failures: SolveFailures,
+    /// When each neighbour was last asked for its log (`share_factors`).
+    asked_at: std::collections::BTreeMap<RobotId, Stamp>,
+    /// The latest tick's time.
+    now: Stamp,
+    /// Most keyframes and factors in one slice we send (the wire's `limits.max_ids`).
+    slice_items: usize,
 }
 
 /// Solves that failed since the Optimiser started (each is also logged at warn; a thawed
@@ -94,7 +111,23 @@ impl Optimiser {
             level_anchors: false,
             own_estimates: false,
             failures: SolveFailures::default(),
+            asked_at: Default::default(),
+            now: 0.0,
+            slice_items: sgm_model::wire::WireLimits::default().max_ids,
         }
+        .with_chain_bound()
+    }
+
+    fn with_chain_bound(mut self) -> Self {
+        self.graph.set_chain_bound(self.config.max_chain_items);
+        self
+    }
+
+    /// The most keyframes and factors one slice of our log may carry: the wire's
+    /// `comms.limits.max_ids`, which a receiver enforces.
+    pub fn with_slice_items(mut self, max_ids: usize) -> Self {
+        self.slice_items = max_ids.max(1);
+        self
     }
 
     /// Neighbours are told our own measurements' estimate of our keyframes
@@ -122,7 +155,10 @@ impl Optimiser {
     /// build would have failed its checksum or decode first) leaves the optimiser empty.
     pub fn thawed(mut self, state: OptimiserState) -> Self {
         match KeyframeGraph::thaw(state) {
-            Some(graph) => self.graph = graph,
+            Some(graph) => {
+                self.graph = graph;
+                self.graph.set_chain_bound(self.config.max_chain_items);
+            }
             None => {
                 tracing::error!(robot = %self.robot, "snapshot pose graph is inconsistent: starting the optimiser empty")
             }
@@ -265,12 +301,82 @@ impl Handler<NeighbourKeyframePoses> for Optimiser {
 
 impl Handler<Tick> for Optimiser {
     type Result = ();
-    fn handle(&mut self, _: Tick, ctx: &mut Context<Self>) {
+    fn handle(&mut self, msg: Tick, ctx: &mut Context<Self>) {
         contained(ctx, "optimiser", || {
+            self.ask_neighbours(msg.now);
             if self.refreshed_since_solve {
                 self.solve_and_publish();
             }
         });
+    }
+}
+
+impl Optimiser {
+    /// Asks `robot` for its log from `from` on.
+    fn ask(&mut self, robot: RobotId, from: u32) {
+        self.asked_at.insert(robot, self.now);
+        if let Some(links) = &self.links {
+            let message = WireMessage::GraphFactorRequest(GraphFactorRequest { from });
+            links.comms.do_send(Outgoing { to: robot, message });
+        }
+    }
+
+    /// Each aligned neighbour whose chain is not full and that was not asked within
+    /// `share_period_s` is asked.
+    fn ask_neighbours(&mut self, now: Stamp) {
+        self.now = now;
+        if !self.config.share_factors {
+            return;
+        }
+        for (robot, from) in self.graph.chain_requests() {
+            if self.asked_at.get(&robot).is_none_or(|t| now - t >= self.config.share_period_s) {
+                self.ask(robot, from);
+            }
+        }
+    }
+
+    fn neighbour_graph(&mut self, msg: NeighbourGraph) {
+        if !self.config.share_factors {
+            return;
+        }
+        match msg {
+            NeighbourGraph::Request { robot, from } => {
+                let slice = self.graph.factor_slice(robot, from, self.slice_items);
+                if let Some(links) = &self.links {
+                    let message = WireMessage::GraphFactors(GraphFactors::from_slice(&slice));
+                    links.comms.do_send(Outgoing { to: robot, message });
+                }
+            }
+            NeighbourGraph::Slice { robot, slice } => match self.graph.add_chain(robot, &slice) {
+                ChainAdded::Added { keyframes, factors, dropped } => {
+                    if dropped > 0 {
+                        tracing::warn!(robot = %self.robot, neighbour = %robot, dropped,
+                            "neighbour factors to keyframes we do not hold, or not positive definite: left out (optimiser status chains)");
+                    }
+                    if keyframes + factors > 0 {
+                        self.refreshed_since_solve = true;
+                    }
+                    // A full slice: more may be waiting, ask on at once.
+                    if slice.next > slice.from && slice.items() >= self.slice_items {
+                        self.ask(robot, slice.next);
+                    }
+                }
+                ChainAdded::Full => {
+                    tracing::warn!(robot = %self.robot, neighbour = %robot, bound = self.config.max_chain_items,
+                        "neighbour's chain full: its further factors are not held (optimiser.max_chain_items)");
+                }
+                ChainAdded::NotAligned | ChainAdded::Stale => {
+                    tracing::debug!(robot = %self.robot, neighbour = %robot, from = slice.from, "neighbour factor slice not taken");
+                }
+            },
+        }
+    }
+}
+
+impl Handler<NeighbourGraph> for Optimiser {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourGraph, ctx: &mut Context<Self>) {
+        contained(ctx, "optimiser", || self.neighbour_graph(msg));
     }
 }
 

@@ -225,6 +225,20 @@ mod tests {
                 tilts: vec![(KeyframeId(0), nalgebra::Vector3::new(0.01, -0.02, 1.0).normalize())],
                 frame_attitudes: vec![(KeyframeId(1), nalgebra::UnitQuaternion::from_euler_angles(0.01, 0.0, 1.0))],
                 frame_up: Some((nalgebra::Vector3::new(0.0, 0.01, 1.0).normalize(), 0.003)),
+                log: {
+                    let mut log = sgm_model::optim::shared_factors::FactorLog::default();
+                    log.keyframe(KeyframeId(0));
+                    log
+                },
+                chains: vec![(
+                    RobotId(2),
+                    sgm_model::optim::keyframe_graph::NeighbourChain {
+                        next: 3,
+                        poses: [(KeyframeId(5), Pose3::translation(5.0, 1.0, 0.0))].into(),
+                        factors: 1,
+                        ..Default::default()
+                    },
+                )],
             },
             comms: CommsState {
                 sequence: 99,

@@ -186,9 +186,12 @@ pub fn start_robot_restored(
     // `matcher.max_tilt_deg = 0` declares the robots' worlds gravity-aligned: anchors are level.
     let level_anchors = config.matcher.matching.max_tilt_deg == 0.0;
     let own_estimates = config.comms.pose_updates.own_estimates;
+    let slice_items = config.comms.limits.max_ids;
     let optimiser = Supervisor::start(move |_| {
-        let optimiser =
-            Optimiser::new(robot, optimiser_config).with_level_anchors(level_anchors).with_own_estimates(own_estimates);
+        let optimiser = Optimiser::new(robot, optimiser_config)
+            .with_level_anchors(level_anchors)
+            .with_own_estimates(own_estimates)
+            .with_slice_items(slice_items);
         match optimiser_state {
             Some(state) => optimiser.thawed(state),
             None => optimiser,
@@ -226,6 +229,7 @@ pub fn start_robot_restored(
         serve: tracker.clone().recipient(),
         link: matcher.clone().recipient(),
         keyframe_poses: optimiser.clone().recipient(),
+        graph: optimiser.clone().recipient(),
     }));
     tracker.do_send(Connect(TrackerLinks {
         optimiser: optimiser.clone().recipient(),
@@ -245,6 +249,7 @@ pub fn start_robot_restored(
     optimiser.do_send(Connect(OptimiserLinks {
         tracker: tracker.clone().recipient(),
         matcher: matcher.clone().recipient(),
+        comms: comms.clone().recipient(),
     }));
     attach(robot, comms.clone());
     if restored {

@@ -63,6 +63,8 @@ struct Heard {
     links: Vec<LinkChanged>,
     /// Pose updates delivered: (sender, keyframe poses).
     poses: Vec<NeighbourKeyframePoses>,
+    /// Factor-log requests and slices delivered.
+    graph: Vec<NeighbourGraph>,
 }
 
 struct Recorder(Arc<Mutex<Heard>>);
@@ -105,6 +107,12 @@ impl Handler<NeighbourKeyframePoses> for Recorder {
     type Result = ();
     fn handle(&mut self, msg: NeighbourKeyframePoses, _: &mut Context<Self>) {
         self.0.lock().unwrap().poses.push(msg);
+    }
+}
+impl Handler<NeighbourGraph> for Recorder {
+    type Result = ();
+    fn handle(&mut self, msg: NeighbourGraph, _: &mut Context<Self>) {
+        self.0.lock().unwrap().graph.push(msg);
     }
 }
 impl Handler<NeighbourAlignments> for Recorder {
@@ -194,6 +202,7 @@ fn pair(model: Box<dyn RadioModel>, config: &CommsConfig) -> Pair {
         serve,
         link: recorder.clone().recipient(),
         keyframe_poses: recorder.clone().recipient(),
+        graph: recorder.clone().recipient(),
     };
     requester.do_send(Connect(links(recorder.clone().recipient())));
     server.do_send(Connect(links(map.recipient())));
@@ -368,6 +377,7 @@ async fn descriptors_are_batched_broadcast_and_delivered() {
             serve: recorder.clone().recipient(),
             link: recorder.clone().recipient(),
             keyframe_poses: recorder.clone().recipient(),
+            graph: recorder.clone().recipient(),
         }));
         robots.push(comms);
     }

@@ -14,9 +14,10 @@ use sgm_actors::protocol::RetryConfig;
 use sgm_model::scene_graph::{KeyframeId, LabelId, ObjectId, RobotId};
 use sgm_model::wire::cloud_codec::{self, CodecError};
 use sgm_model::wire::messages::{
-    Alignments, KeyframeDescriptors, KeyframePoses, KeyframeRefusal, KeyframeRefusalReason, KeyframeRequest,
-    KeyframeResponse, ObjectCloudRequest, ObjectCloudResponse, ObjectData, WireAlignment, WireDescriptor,
-    WireKeyframePose, WireObject, WirePose, DESCRIPTOR_HEIGHT_STEP_M, SIZE_STEP_M,
+    Alignments, GraphFactorRequest, GraphFactors, KeyframeDescriptors, KeyframePoses, KeyframeRefusal,
+    KeyframeRefusalReason, KeyframeRequest, KeyframeResponse, ObjectCloudRequest, ObjectCloudResponse, ObjectData,
+    WireAlignment, WireDescriptor, WireFactor, WireFactorKind, WireInformation, WireKeyframePose, WireObject, WirePose,
+    DESCRIPTOR_HEIGHT_STEP_M, SIZE_STEP_M,
 };
 use sgm_model::wire::team_key::{KDF_LANES, KDF_MEMORY_KIB, KDF_PASSES};
 use sgm_model::wire::{
@@ -156,6 +157,10 @@ fn sample(kind: MessageKind) -> Message {
         MessageKind::KeyframeDescriptors => Message::KeyframeDescriptors(KeyframeDescriptors { descriptors: vec![] }),
         MessageKind::Alignments => Message::Alignments(Alignments { alignments: vec![] }),
         MessageKind::KeyframePoses => Message::KeyframePoses(KeyframePoses { poses: vec![] }),
+        MessageKind::GraphFactorRequest => Message::GraphFactorRequest(GraphFactorRequest { from: 0 }),
+        MessageKind::GraphFactors => {
+            Message::GraphFactors(GraphFactors { from: 0, next: 0, keyframes: vec![], factors: vec![] })
+        }
     }
 }
 
@@ -197,6 +202,24 @@ fn largest(kind: MessageKind, limits: &WireLimits) -> Option<Envelope> {
         MessageKind::KeyframePoses => Message::KeyframePoses(KeyframePoses {
             poses: vec![
                 WireKeyframePose { keyframe: KeyframeId(u32::MAX), translation: [1.0; 3], rotation: [0.0; 3] };
+                limits.max_ids
+            ],
+        }),
+        MessageKind::GraphFactorRequest => Message::GraphFactorRequest(GraphFactorRequest { from: u32::MAX }),
+        // Factors are the larger items: a keyframe is at most 42 bytes, a factor 119.
+        MessageKind::GraphFactors => Message::GraphFactors(GraphFactors {
+            from: u32::MAX,
+            next: u32::MAX,
+            keyframes: vec![],
+            factors: vec![
+                WireFactor {
+                    kind: WireFactorKind::InterRobot,
+                    from: KeyframeId(u32::MAX),
+                    to: KeyframeId(u32::MAX),
+                    translation: [1.0; 3],
+                    rotation: [0.0; 3],
+                    information: WireInformation::Full([1.0; 21]),
+                };
                 limits.max_ids
             ],
         }),

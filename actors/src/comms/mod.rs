@@ -62,6 +62,9 @@ pub struct CommsLinks {
     pub link: Recipient<LinkChanged>,
     /// A neighbour's new estimates of keyframes it served us.
     pub keyframe_poses: Recipient<NeighbourKeyframePoses>,
+    /// A neighbour's requests for our factor log, and the slices of its own
+    /// (`optimiser.share_factors`).
+    pub graph: Recipient<NeighbourGraph>,
 }
 
 pub struct Comms {
@@ -331,6 +334,14 @@ impl Comms {
                 if !poses.is_empty() {
                     links.keyframe_poses.do_send(NeighbourKeyframePoses { robot: from, poses });
                 }
+            }
+            WireMessage::GraphFactorRequest(r) => {
+                links.graph.do_send(NeighbourGraph::Request { robot: from, from: r.from })
+            }
+            WireMessage::GraphFactors(m) => {
+                let (slice, malformed) = m.to_slice();
+                self.status.rejected.malformed += malformed as u64;
+                links.graph.do_send(NeighbourGraph::Slice { robot: from, slice });
             }
             WireMessage::ObjectCloudRequest(r) => {
                 links.serve.do_send(Serve::ObjectClouds { robot: from, objects: r.objects })

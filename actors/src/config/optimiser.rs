@@ -20,6 +20,18 @@ pub struct OptimiserConfig {
     /// to the tilt its odometry measured, σ per horizontal axis, degrees; 0: not held (the pose
     /// graph's between factors alone decide the tilt). Default 0.2 (an IMU's gravity estimate).
     pub gravity_sigma_deg: f64,
+    /// Share the pose graph's own factors with aligned neighbours and hold theirs
+    /// (`optim::shared_factors`): each robot then solves the pair's whole graph — its own
+    /// keyframes and the neighbour's chain, both robots' odometry, loop closures and inter-robot
+    /// factors — instead of holding the neighbour's keyframes by their marginals. Default false.
+    pub share_factors: bool,
+    /// With `share_factors`: how often each aligned neighbour is asked for its log's new
+    /// entries, s (a request or reply lost on the radio is made good at the next). Default 2.
+    pub share_period_s: f64,
+    /// With `share_factors`: most keyframes and factors held of one neighbour's chain; a reply
+    /// beyond it is refused and the neighbour no longer asked (status `chains[].full`).
+    /// Default 50 000.
+    pub max_chain_items: usize,
 }
 
 impl Default for OptimiserConfig {
@@ -29,6 +41,9 @@ impl Default for OptimiserConfig {
             every_keyframes: 10,
             reject_outliers: true,
             gravity_sigma_deg: 0.2,
+            share_factors: false,
+            share_period_s: 2.0,
+            max_chain_items: sgm_model::optim::keyframe_graph::DEFAULT_CHAIN_ITEMS,
         }
     }
 }
@@ -50,6 +65,8 @@ impl OptimiserConfig {
             o.gravity_sigma_deg,
             "0 (off) ≤ x ≤ 10°",
         )?;
+        check(positive(o.share_period_s), "optimiser.share_period_s", o.share_period_s, "> 0")?;
+        check(o.max_chain_items >= 1, "optimiser.max_chain_items", o.max_chain_items, "≥ 1")?;
         Ok(())
     }
 }

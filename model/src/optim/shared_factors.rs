@@ -32,7 +32,7 @@ pub enum LogEntry {
     /// A local keyframe entered the graph.
     Keyframe(KeyframeId),
     /// A between factor of our own measurements, from a local keyframe.
-    Factor(KeyframeEdge),
+    Factor(Box<KeyframeEdge>),
     /// An inter-robot factor of an alignment withdrawn since.
     Struck,
 }
@@ -98,6 +98,10 @@ impl FactorLog {
         self.entries.is_empty()
     }
 
+    pub fn entries(&self) -> &[LogEntry] {
+        &self.entries
+    }
+
     pub fn keyframe(&mut self, keyframe: KeyframeId) {
         self.entries.push(LogEntry::Keyframe(keyframe));
     }
@@ -110,7 +114,7 @@ impl FactorLog {
             KeyframeRef::Remote { .. } => edge.kind == KeyframeEdgeKind::InterRobot,
         };
         if shareable {
-            self.entries.push(LogEntry::Factor(edge.clone()));
+            self.entries.push(LogEntry::Factor(Box::new(edge.clone())));
         }
     }
 
@@ -118,7 +122,7 @@ impl FactorLog {
     pub fn strike(&mut self, robot: RobotId) -> usize {
         let mut struck = 0;
         for entry in &mut self.entries {
-            if matches!(entry, LogEntry::Factor(KeyframeEdge { to: KeyframeRef::Remote { robot: r, .. }, .. }) if *r == robot)
+            if matches!(entry, LogEntry::Factor(edge) if matches!(edge.to, KeyframeRef::Remote { robot: r, .. } if r == robot))
             {
                 *entry = LogEntry::Struck;
                 struck += 1;

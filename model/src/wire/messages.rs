@@ -365,9 +365,9 @@ pub enum WireFactorKind {
 }
 
 /// One between factor of the sender's graph: `measured` = from_body_from_to_body, with its
-/// information matrix Ω (upper triangle, row-major, over (ω, v), as [`pack_covariance`] packs).
-/// `from` is the sender's keyframe; `to` the sender's too, or the receiver's for an
-/// inter-robot factor. 1 + two id varints + 24 + 84 bytes.
+/// information matrix Ω. `from` is the sender's keyframe; `to` the sender's too, or the
+/// receiver's for an inter-robot factor. 1 + two id varints + 24 bytes + the information's
+/// 1, 25 or 85.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WireFactor {
     pub kind: WireFactorKind,
@@ -375,7 +375,50 @@ pub struct WireFactor {
     pub to: KeyframeId,
     pub translation: [f32; 3],
     pub rotation: [f32; 3],
-    pub information: [f32; 21],
+    pub information: WireInformation,
+}
+
+/// An information matrix Ω over (ω, v): odometry's is mostly the same diagonal from factor to
+/// factor, and costs a byte then.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum WireInformation {
+    /// The previous factor's of the same message.
+    Previous,
+    /// Diagonal.
+    Diagonal([f32; 6]),
+    /// Upper triangle, row-major, as [`pack_covariance`] packs.
+    Full([f32; 21]),
+}
+
+impl WireInformation {
+    /// Ω as compactly as it goes, given the previous factor's in the message.
+    pub fn pack(information: &Matrix6<f64>, previous: Option<&Matrix6<f64>>) -> Self {
+        if previous.is_some_and(|p| pack_covariance(p) == pack_covariance(information)) {
+            return Self::Previous;
+        }
+        if (0..6).all(|i| (0..6).all(|j| i == j || information[(i, j)] == 0.0)) {
+            return Self::Diagonal(std::array::from_fn(|i| information[(i, i)] as f32));
+        }
+        Self::Full(pack_covariance(information))
+    }
+
+    /// Ω (the previous factor's for `Previous`); `None` unless finite and symmetric positive
+    /// definite, or for `Previous` without a previous factor.
+    pub fn unpack(&self, previous: Option<&Matrix6<f64>>) -> Option<Matrix6<f64>> {
+        match self {
+            Self::Previous => previous.copied(),
+            Self::Diagonal(d) => {
+                let mut packed = [0f32; 21];
+                let mut k = 0;
+                for (i, v) in d.iter().enumerate() {
+                    packed[k] = *v;
+                    k += 6 - i;
+                }
+                unpack_covariance(&packed)
+            }
+            Self::Full(packed) => unpack_covariance(packed),
+        }
+    }
 }
 
 impl WireFactor {
@@ -384,24 +427,15 @@ impl WireFactor {
         from: KeyframeId,
         to: KeyframeId,
         measured: &Pose3,
-        information: &Matrix6<f64>,
+        information: WireInformation,
     ) -> Self {
         let p = WireKeyframePose::new(to, measured);
-        Self {
-            kind,
-            from,
-            to,
-            translation: p.translation,
-            rotation: p.rotation,
-            information: pack_covariance(information),
-        }
+        Self { kind, from, to, translation: p.translation, rotation: p.rotation, information }
     }
 
-    /// (measured, information); `None` unless the pose is finite and the information symmetric
-    /// positive definite.
-    pub fn measurement(&self) -> Option<(Pose3, Matrix6<f64>)> {
-        let pose = WireKeyframePose { keyframe: self.to, translation: self.translation, rotation: self.rotation };
-        Some((pose.to_pose()?, unpack_covariance(&self.information)?))
+    /// The measured pose; `None` unless finite.
+    pub fn measured(&self) -> Option<Pose3> {
+        WireKeyframePose { keyframe: self.to, translation: self.translation, rotation: self.rotation }.to_pose()
     }
 }
 

@@ -5,6 +5,7 @@
 pub mod accounting;
 pub mod cloud_codec;
 pub mod envelope;
+pub mod graph_factors;
 pub mod messages;
 pub mod replay;
 pub mod team_key;

@@ -16,12 +16,17 @@
 //! Robot k's keyframes start where the reference robot's estimate of its world puts them
 //! (`placed(k)`); a robot without one is left out, as the team ATE leaves it out. Both
 //! robots of a pair may register the same two keyframes; each registration is a factor.
+//! A robot that holds its neighbours' own chains (`optimiser.share_factors`) holds their
+//! factors too: of its graph only the factors of its own measurements are taken — those from
+//! its own keyframes, and of the inter-robot ones those its factor log holds (the others are a
+//! neighbour's, inverted), so that no measurement counts twice.
 
 use sgm_model::geometry::Pose3;
 use sgm_model::optim::graph::Graph3;
 use sgm_model::optim::keyframe_graph::KeyframeGraphState;
+use sgm_model::optim::shared_factors::LogEntry;
 use sgm_model::optim::solver::{optimize, LmParams};
-use sgm_model::scene_graph::{KeyframeId, KeyframeRef};
+use sgm_model::scene_graph::{KeyframeId, KeyframeRef, RobotId};
 use std::collections::BTreeMap;
 
 /// Each robot's keyframes as the team graph solves them, in the reference robot's world
@@ -64,9 +69,25 @@ pub fn solve(
                 Some((*v, *variable.get(&owner)?))
             })
             .collect();
+        let mut own = own_inter_robot(graph);
+        let keyframe_of: BTreeMap<usize, KeyframeRef> = graph.index.iter().map(|(r, v)| (*v, *r)).collect();
         for (f, between) in graph.graph.betweens.iter().enumerate() {
             if graph.rejected.contains(&f) {
                 continue;
+            }
+            // Its own measurements only: from its own keyframes, and to a neighbour's only as
+            // often as its log holds that factor.
+            match (keyframe_of.get(&between.from), keyframe_of.get(&between.to)) {
+                (Some(KeyframeRef::Local(_)), Some(KeyframeRef::Local(_))) => {}
+                (Some(KeyframeRef::Local(from)), Some(KeyframeRef::Remote { robot, keyframe })) => {
+                    if let Some(own) = own.as_mut() {
+                        match own.get_mut(&(*from, *robot, *keyframe)) {
+                            Some(n) if *n > 0 => *n -= 1,
+                            _ => continue,
+                        }
+                    }
+                }
+                _ => continue,
             }
             if let (Some(&from), Some(&to)) = (of.get(&between.from), of.get(&between.to)) {
                 team.betweens.push(sgm_model::optim::factors::Between { from, to, ..between.clone() });
@@ -89,6 +110,24 @@ pub fn solve(
         out[k].push((id, team.values[v]));
     }
     Some(out)
+}
+
+/// How many inter-robot factors of its own `graph` holds on each (own keyframe, neighbour,
+/// its keyframe), from its factor log; `None` for a graph without a log (every inter-robot
+/// factor it holds is then its own).
+fn own_inter_robot(graph: &KeyframeGraphState) -> Option<BTreeMap<(KeyframeId, RobotId, KeyframeId), usize>> {
+    if graph.log.is_empty() {
+        return None;
+    }
+    let mut own = BTreeMap::new();
+    for entry in graph.log.entries() {
+        if let LogEntry::Factor(edge) = entry {
+            if let KeyframeRef::Remote { robot, keyframe } = edge.to {
+                *own.entry((edge.from, robot, keyframe)).or_default() += 1;
+            }
+        }
+    }
+    Some(own)
 }
 
 #[cfg(test)]
@@ -230,5 +269,88 @@ mod tests {
         assert_eq!(solved[0].len(), N as usize);
         assert!(solved[1].is_empty());
         assert!(solve(&[None, None], |_| Some(Pose3::identity())).is_none());
+    }
+
+    /// Two robots' graphs built by their own API, each with an inter-robot factor of its own;
+    /// then each reads the other's whole factor log (`optimiser.share_factors`). The team graph
+    /// of the graphs after the exchange equals the one before (to 10⁻⁵ m, the solver's
+    /// tolerance): a neighbour's chain, and its
+    /// inter-robot factor held inverted, are not counted a second time. Counting them makes
+    /// the answer move, which the test checks too.
+    #[test]
+    fn a_neighbours_chain_held_by_a_robot_counts_once() {
+        use sgm_model::optim::keyframe_graph::KeyframeGraph;
+        use sgm_model::scene_graph::{Keyframe, KeyframeEdge, KeyframeEdgeKind};
+        let info = Matrix6::identity() * 100.0;
+        let build = |y: f64, bend: f64| {
+            let mut g = KeyframeGraph::default();
+            let mut pose = Pose3::translation(0.0, y, 0.0);
+            for k in 0..N {
+                let step = pose_from_yaw_translation(bend, Vector3::new(1.0, 0.0, 0.0));
+                let edges: Vec<KeyframeEdge> = (k > 0)
+                    .then(|| KeyframeEdge {
+                        kind: KeyframeEdgeKind::Odometry,
+                        from: KeyframeId(k - 1),
+                        to: KeyframeRef::Local(KeyframeId(k)),
+                        from_from_to: step,
+                        information: info,
+                    })
+                    .into_iter()
+                    .collect();
+                if k > 0 {
+                    pose *= step;
+                }
+                g.add_keyframe(
+                    &Keyframe { id: KeyframeId(k), stamp: f64::from(k), world_from_body: pose },
+                    &edges,
+                    100,
+                );
+            }
+            g
+        };
+        let (mut a, mut b) = (build(0.0, 0.02), build(2.0, -0.03));
+        let b_in_a = Pose3::identity();
+        let across = Pose3::translation(0.0, 2.0, 0.0);
+        a.add_neighbour(
+            RobotId(2),
+            &b_in_a,
+            &[(KeyframeId(4), Pose3::translation(4.0, 2.0, 0.0), Matrix6::identity())],
+            &[(KeyframeId(4), KeyframeId(4), across, info)],
+        );
+        b.add_neighbour(
+            RobotId(1),
+            &b_in_a,
+            &[(KeyframeId(1), Pose3::translation(1.0, 0.0, 0.0), Matrix6::identity())],
+            &[(KeyframeId(1), KeyframeId(1), across.inverse(), info)],
+        );
+        // Robot ids are 1-based: robot 1 is index 0.
+        let placed = |_: usize| Some(Pose3::identity());
+        let before = solve(&[Some(a.freeze()), Some(b.freeze())], placed).unwrap();
+        let (slice_of_b, slice_of_a) = (b.factor_slice(RobotId(1), 0, 1000), a.factor_slice(RobotId(2), 0, 1000));
+        let added = sgm_model::optim::keyframe_graph::ChainAdded::Added {
+            keyframes: N as usize,
+            factors: N as usize,
+            dropped: 0,
+        };
+        assert_eq!(a.add_chain(RobotId(2), &slice_of_b), added);
+        assert_eq!(b.add_chain(RobotId(1), &slice_of_a), added);
+        let (fa, fb) = (a.freeze(), b.freeze());
+        let after = solve(&[Some(fa.clone()), Some(fb.clone())], placed).unwrap();
+        let gap = |x: &[Vec<(KeyframeId, Pose3)>], y: &[Vec<(KeyframeId, Pose3)>]| {
+            x.iter()
+                .flatten()
+                .zip(y.iter().flatten())
+                .map(|((_, p), (_, q))| (p.translation.vector - q.translation.vector).norm())
+                .fold(0.0, f64::max)
+        };
+        assert!(gap(&before, &after) < 1e-5, "{}", gap(&before, &after));
+        // The inter-robot factors were used: the second robot moved from where it started.
+        assert!((before[1][4].1.translation.vector - Vector3::new(3.9937, 1.8202, 0.0)).norm() > 1e-3);
+        // Without its log, a graph's every inter-robot factor counts as its own: the inverted
+        // one counts twice, and the answer moves.
+        let mut no_log = fa.clone();
+        no_log.log = Default::default();
+        let twice = solve(&[Some(no_log), Some(fb)], placed).unwrap();
+        assert!(gap(&before, &twice) > 1e-3, "{}", gap(&before, &twice));
     }
 }

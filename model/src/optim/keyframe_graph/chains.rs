@@ -319,7 +319,7 @@ mod tests {
             let mut edges = Vec::new();
             if k > 0 {
                 let step = noisy_step(&truth, k, seed);
-                pose = pose * step;
+                pose *= step;
                 edges.push(KeyframeEdge {
                     kind: KeyframeEdgeKind::Odometry,
                     from: KeyframeId(k as u32 - 1),
