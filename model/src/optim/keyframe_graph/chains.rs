@@ -13,27 +13,33 @@
 //! A neighbour keyframe the chain holds is no longer tied to the anchor by its marginal (the
 //! tie's information becomes zero): the chain's factors carry that information already, and
 //! counting both would count it twice. The chain's first keyframe takes the anchor's weak
-//! prior, which holds the gauge while no inter-robot factor reaches the chain. After each
-//! solve the anchor is the rigid fit of the neighbour's own poses to our solve of them, over
-//! every neighbour keyframe we hold (each keyframe's origin and the tips of its unit axes):
+//! prior, which holds the gauge while no inter-robot factor reaches the chain.
+//!
+//! Both robots then solve the same graph, each in its own gauge: ours holds our first
+//! keyframe where our prior puts it, the neighbour's holds its first keyframe 0_r at T_r(0_r),
+//! where its own prior does. So after each solve the anchor is that gauge — the transform that
+//! carries the neighbour's solve into ours —
 //!
 //! ```text
-//! A_r = argmin_A Σ_j Σ_{p ∈ {0, e_x, e_y, e_z}} ‖A · T_r(j) · p − X_(r,j) · p‖²
+//! A_r = X_(r,0_r) · T_r(0_r)⁻¹
 //! ```
 //!
-//! — where the joint solve places the neighbour's whole map, not only where the paths crossed
-//! (levelled in gravity-aligned worlds). A neighbour's chain holds at most the configured number
+//! (levelled in gravity-aligned worlds), taken once the chain holds every neighbour keyframe
+//! still tied to the anchor (before, the chain is not yet joined to the keyframes our factors
+//! reach, and the solve's anchor stands). A fit of the neighbour's poses to our solve of them
+//! would average over poses it told us at different times, the older ones since moved by its
+//! later solves. A neighbour's chain holds at most the configured number
 //! of keyframes and factors ([`KeyframeGraph::set_chain_bound`]); a slice beyond it is refused
 //! and the status says so.
 
 use super::{KeyframeGraph, ANCHOR_PRIOR_SIGMAS};
-use crate::geometry::{fit_rigid, levelled, Correspondence, Pose3, RigidModel};
+use crate::geometry::{levelled, Pose3};
 use crate::optim::factors::{Between, Prior};
 use crate::optim::gravity::{gravity_priors, unit_up};
 use crate::optim::manifold::Manifold;
 use crate::optim::shared_factors::{LogSlice, SharedKind};
 use crate::scene_graph::{KeyframeId, KeyframeRef, RobotId};
-use nalgebra::{Matrix6, Point3, Vector3};
+use nalgebra::{Matrix6, Vector3};
 use std::collections::BTreeMap;
 
 /// Keyframes and factors one neighbour's chain holds at most, unless set otherwise: about
@@ -219,41 +225,27 @@ impl KeyframeGraph {
         out
     }
 
-    /// Each chained neighbour's anchor becomes the fit of its own poses to our solve of them
-    /// (see the module's documentation); neighbours without a chain keep the solve's anchor.
+    /// Each chained neighbour's anchor becomes the gauge between its graph and our solve of it
+    /// (see the module's documentation), once its chain holds every neighbour keyframe tied to
+    /// the anchor; until then the solve's anchor stands.
     pub(super) fn fit_chained_anchors(&mut self) {
         for (robot, chain) in &self.chains {
             let Some(&anchor) = self.anchors.get(robot) else { continue };
-            if chain.poses.is_empty() {
+            // Its first keyframe: the one its own prior holds.
+            let Some((first, pose_in_remote)) = chain.poses.first_key_value() else { continue };
+            let Some(&i) = self.index.get(&KeyframeRef::Remote { robot: *robot, keyframe: *first }) else { continue };
+            let keyframe_of = |v: usize| self.index.iter().find(|(_, i)| **i == v).map(|(r, _)| *r);
+            let uncovered = self.graph.betweens.iter().zip(&self.candidates).any(|(b, candidate)| {
+                !candidate
+                    && b.from == anchor
+                    && b.sqrt_information != Matrix6::zeros()
+                    && matches!(keyframe_of(b.to), Some(KeyframeRef::Remote { keyframe, .. }) if !chain.poses.contains_key(&keyframe))
+            });
+            if uncovered {
                 continue;
             }
-            let mut own: BTreeMap<usize, Pose3> = BTreeMap::new();
-            // Served keyframes the chain does not hold yet: their ties' means.
-            for (b, candidate) in self.graph.betweens.iter().zip(&self.candidates) {
-                if !candidate && b.from == anchor {
-                    own.insert(b.to, b.measured);
-                }
-            }
-            for (k, pose) in &chain.poses {
-                if let Some(&i) = self.index.get(&KeyframeRef::Remote { robot: *robot, keyframe: *k }) {
-                    own.insert(i, *pose);
-                }
-            }
-            let tips = [Vector3::zeros(), Vector3::x(), Vector3::y(), Vector3::z()];
-            let pairs: Vec<Correspondence> = own
-                .iter()
-                .flat_map(|(i, in_remote)| {
-                    let solved = self.graph.values[*i];
-                    tips.iter().map(move |p| Correspondence {
-                        in_local: solved * Point3::from(*p),
-                        in_remote: in_remote * Point3::from(*p),
-                        weight: 1.0,
-                    })
-                })
-                .collect();
-            if let Some(fit) = fit_rigid(&pairs, RigidModel::Full3d) {
-                self.graph.values[anchor] = if self.level { levelled(&fit) } else { fit };
-            }
+            let gauge = self.graph.values[i] * pose_in_remote.inverse();
+            self.graph.values[anchor] = if self.level { levelled(&gauge) } else { gauge };
         }
     }
 
@@ -459,28 +451,33 @@ mod tests {
         assert_eq!(tie.sqrt_information, Matrix6::zeros());
     }
 
-    /// A's anchor for B is where its solve put B's own map: the fit of B's poses (as B told
-    /// them) to A's solve of B's chain, within what the noise leaves.
+    /// A's anchor for B is the gauge between B's graph and A's solve of it: it carries B's
+    /// first keyframe, where B's own prior holds it, onto A's solve of that keyframe, and then
+    /// B's own solve of every keyframe onto A's (both solved the pair's whole graph), within the
+    /// solver's tolerance; until the chain holds the keyframe B served A, the tie's anchor stands.
     #[test]
-    fn the_anchor_is_the_fit_of_the_neighbours_poses_to_our_solve_of_them() {
+    fn the_anchor_is_the_gauge_between_the_neighbours_solve_and_ours() {
         let (mut a, mut b, b_in_a) = pair();
-        b.solve(false, 0).unwrap();
+        // A first slice without keyframe 2, which A holds by its tie: not joined yet.
+        let partial = b.factor_slice(A, 0, 3);
+        assert!(!partial.keyframes.iter().any(|k| k.keyframe == KeyframeId(2)));
+        a.add_chain(B, &partial);
+        let tied = a.solve(false, 0).unwrap().anchors[0].1;
+        let mut tie_only = pair().0;
+        let before = tie_only.solve(false, 0).unwrap().anchors[0].1;
+        assert!(close(&tied, &before, 1e-6), "the solve's anchor stands: {tied:?} vs {before:?}");
+        // Afresh: the whole log.
+        a = pair().0;
         exchange(&mut a, &mut b, 100);
-        let solved = a.solve(false, 0).unwrap();
-        let anchor = solved.anchors.iter().find(|(r, _)| *r == B).unwrap().1;
-        let own: Vec<Pose3> = (0..N).map(|k| b.graph.values[b.index[&KeyframeRef::Local(KeyframeId(k))]]).collect();
-        let chain: Vec<Pose3> = (0..N)
-            .map(|k| a.graph.values[a.index[&KeyframeRef::Remote { robot: B, keyframe: KeyframeId(k) }]])
-            .collect();
-        let rms = |t: &Pose3| {
-            let sum: f64 = own
-                .iter()
-                .zip(&chain)
-                .map(|(o, c)| ((t * o).translation.vector - c.translation.vector).norm_squared())
-                .sum();
-            (sum / f64::from(N)).sqrt()
-        };
-        assert!(rms(&anchor) <= rms(&b_in_a) + 1e-9, "{} vs the truth's {}", rms(&anchor), rms(&b_in_a));
+        let solved_b = b.solve(false, 0).unwrap();
+        let solved_a = a.solve(false, 0).unwrap();
+        let anchor = solved_a.anchors.iter().find(|(r, _)| *r == B).unwrap().1;
+        let chain = |k: u32| a.graph.values[a.index[&KeyframeRef::Remote { robot: B, keyframe: KeyframeId(k) }]];
+        let told_first = a.chains[&B].poses[&KeyframeId(0)];
+        assert!(close(&(anchor * told_first), &chain(0), 1e-9));
+        for (k, own) in &solved_b.poses {
+            assert!(close(&(anchor * own), &chain(k.0), 1e-4), "B{}: {:?} vs {:?}", k.0, anchor * own, chain(k.0));
+        }
         assert!(close(&anchor, &b_in_a, 0.2), "{anchor:?}");
     }
 
