@@ -503,6 +503,27 @@ mod tests {
         assert_eq!(c.status().chains[0].dropped, 1);
     }
 
+    /// In gravity-aligned worlds the ups a neighbour measured travel with its keyframes, and
+    /// each of its chain's keyframes takes a gravity prior from them, as its own graph does;
+    /// without gravity priors none.
+    #[test]
+    fn a_neighbours_measured_ups_hold_its_chain_to_gravity() {
+        let (mut a, mut b, _) = pair();
+        let tilted = nalgebra::UnitQuaternion::from_euler_angles(0.01, -0.02, 0.3);
+        for k in 0..N {
+            assert!(b.record_tilt(KeyframeId(k), &tilted));
+        }
+        exchange(&mut a, &mut b, 100);
+        assert_eq!(a.chains[&B].ups.len(), N as usize);
+        assert!((a.chains[&B].ups[&KeyframeId(3)] - tilted.inverse() * Vector3::z()).norm() < 1e-12);
+        assert!(a.gravity_priors().is_empty(), "no gravity priors unless set");
+        a.set_gravity_priors(Some(0.2_f64.to_radians()));
+        let held: Vec<usize> = a.gravity_priors().iter().map(|p| p.variable).collect();
+        let chain: Vec<usize> =
+            (0..N).map(|k| a.index[&KeyframeRef::Remote { robot: B, keyframe: KeyframeId(k) }]).collect();
+        assert_eq!(held, chain, "one prior on each of its keyframes, and none on ours (no tilt recorded)");
+    }
+
     #[test]
     fn a_withdrawn_neighbours_chain_goes_and_a_frozen_graph_keeps_its_chains() {
         let (mut a, mut b, _) = pair();
