@@ -64,6 +64,8 @@ pub struct Optimiser {
     asked_at: std::collections::BTreeMap<RobotId, Stamp>,
     /// The latest tick's time.
     now: Stamp,
+    /// Neighbours told (in the log) that we do not share, having asked for our log.
+    refused_logs: std::collections::BTreeSet<RobotId>,
     /// Most keyframes and factors in one slice we send (the wire's `limits.max_ids`).
     slice_items: usize,
 }
@@ -113,6 +115,7 @@ impl Optimiser {
             failures: SolveFailures::default(),
             asked_at: Default::default(),
             now: 0.0,
+            refused_logs: Default::default(),
             slice_items: sgm_model::wire::WireLimits::default().max_ids,
         }
         .with_chain_bound()
@@ -337,6 +340,13 @@ impl Optimiser {
 
     fn neighbour_graph(&mut self, msg: NeighbourGraph) {
         if !self.config.share_factors {
+            // Said once per neighbour: its chain of us stays empty, and it may not know why.
+            if let NeighbourGraph::Request { robot, .. } = msg {
+                if self.refused_logs.insert(robot) {
+                    tracing::warn!(robot = %self.robot, neighbour = %robot,
+                        "neighbour asks for our factor log, but optimiser.share_factors is off here: not answered");
+                }
+            }
             return;
         }
         match msg {

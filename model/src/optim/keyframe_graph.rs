@@ -801,7 +801,7 @@ impl KeyframeGraph {
         let covariances = marginal_covariances_with(&self.graph, &structure, &variables, &weighted(&weights))
             .map(|c| latest.iter().map(|(k, _)| *k).zip(c).collect())
             .unwrap_or_default();
-        self.fit_chained_anchors();
+        self.gauge_chained_anchors();
         let anchors = self.anchors.iter().map(|(r, i)| (*r, self.graph.values[*i])).collect();
         Ok(Solved { poses, covariances, rejection_changed, anchors })
     }

@@ -228,7 +228,7 @@ impl KeyframeGraph {
     /// Each chained neighbour's anchor becomes the gauge between its graph and our solve of it
     /// (see the module's documentation), once its chain holds every neighbour keyframe tied to
     /// the anchor; until then the solve's anchor stands.
-    pub(super) fn fit_chained_anchors(&mut self) {
+    pub(super) fn gauge_chained_anchors(&mut self) {
         for (robot, chain) in &self.chains {
             let Some(&anchor) = self.anchors.get(robot) else { continue };
             // Its first keyframe: the one its own prior holds.
